@@ -1,0 +1,89 @@
+//! The library's error type.
+//!
+//! Every variant names *what* went wrong and *where*: a file and line, a
+//! scenario key, or an element index. The binary adds context on top with
+//! `anyhow`; the library never panics on bad input.
+
+use std::path::PathBuf;
+
+/// Errors returned by the `skinpatch` library.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// An operating-system I/O failure on a named file.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file or folder being read or written.
+        path: PathBuf,
+        /// The underlying error.
+        #[source]
+        source: std::io::Error,
+    },
+
+    /// A malformed input file, with the 1-based line where the problem was found.
+    #[error("{path}:{line}: {message}")]
+    Parse {
+        /// The file being parsed.
+        path: PathBuf,
+        /// 1-based line number (0 when the whole file is at fault, e.g. it is empty).
+        line: usize,
+        /// What is wrong there.
+        message: String,
+    },
+
+    /// A scenario file that is not valid TOML or does not match the schema.
+    #[error("{path}: {message}")]
+    Scenario {
+        /// The scenario file.
+        path: PathBuf,
+        /// What is wrong, naming the key (and line where known).
+        message: String,
+    },
+
+    /// A parameter outside its valid range, named by its scenario key or flag.
+    #[error("{key} {reason}")]
+    Parameter {
+        /// Dotted scenario key, e.g. `mesh.top_layer_mm`.
+        key: String,
+        /// Why the value is rejected, e.g. `must be > 0, got -1`.
+        reason: String,
+    },
+
+    /// A mesh that is structurally unusable (bad indices, degenerate or inverted
+    /// tetrahedra, non-manifold surface, empty regions).
+    #[error("{origin}: {message}")]
+    InvalidMesh {
+        /// Where the mesh came from (a file path or `generated mesh`).
+        origin: String,
+        /// What is wrong, naming the tetrahedron, face or vertex.
+        message: String,
+    },
+
+    /// TetGen failed or produced a mesh that misses the requested quality.
+    #[error("mesh generation failed: {0}")]
+    MeshGeneration(String),
+
+    /// A feature needed for the request was disabled at build time.
+    #[error("{0}")]
+    FeatureDisabled(String),
+}
+
+/// Shorthand for results with the library error type.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+impl Error {
+    /// Wraps an I/O error with the path it concerns.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.into(),
+            source,
+        }
+    }
+
+    /// A range error for the scenario key `key`.
+    pub fn parameter(key: impl Into<String>, reason: impl Into<String>) -> Self {
+        Error::Parameter {
+            key: key.into(),
+            reason: reason.into(),
+        }
+    }
+}

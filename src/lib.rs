@@ -1,0 +1,22 @@
+//! # skinpatch
+//!
+//! Simulates a patch of human skin pressed and dragged by a rigid probe and
+//! renders its dynamic microstructure. This crate is the library behind the
+//! `skinpatch` command; see ARCHITECTURE.md for the pipeline.
+//!
+//! Stages, one module each:
+//!
+//! * [`scenario`]: TOML scenario → validated [`scenario::Setup`];
+//! * [`mesh`]: tetrahedral meshes — TetGen generation, file I/O, quality;
+//! * [`pipeline`]: runs a setup and writes its outputs.
+//!
+//! Units follow DESIGN §4: millimetres, newtons, MPa, tonnes/mm³ and seconds
+//! inside the simulation; configuration fields carry their unit in the name.
+//! The library never prints; it logs through `log` and returns [`Error`].
+
+pub mod error;
+pub mod mesh;
+pub mod pipeline;
+pub mod scenario;
+
+pub use error::{Error, Result};

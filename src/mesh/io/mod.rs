@@ -1,0 +1,58 @@
+//! Mesh files: TetGen `.node/.ele/.face`, Gmsh `.msh` 4.1, VTK `.vtu`.
+//!
+//! [`read_mesh`] picks the reader by extension. Every reader reports
+//! malformed input as [`Error::Parse`] with the file and 1-based line, and
+//! structural problems (bad indices, inverted tets, empty regions) through
+//! [`crate::mesh::TetMesh::from_raw`]. Writers replace files atomically, so
+//! an interrupted write never leaves a truncated file behind.
+
+mod gmsh;
+mod tetgen;
+pub(crate) mod text;
+pub mod vtu;
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+pub use gmsh::read_gmsh;
+pub use tetgen::{read_tetgen, tetgen_paths, write_tetgen};
+pub use vtu::{read_vtu, write_vtu, Field, Grid, Values};
+
+use crate::error::{Error, Result};
+use crate::mesh::TetMesh;
+
+/// Reads a mesh by extension: `.msh` (Gmsh 4.1 ASCII), or a TetGen mesh given
+/// as `base.node`, `base.ele` or the bare base name.
+pub fn read_mesh(path: &Path) -> Result<TetMesh> {
+    match path.extension().and_then(|e| e.to_str()) {
+        Some("msh") => read_gmsh(path),
+        Some("node" | "ele" | "face") => read_tetgen(&path.with_extension("")),
+        _ if tetgen_paths(path)[0].exists() => read_tetgen(path),
+        _ => Err(Error::parameter(
+            "mesh file",
+            format!(
+                "{}: unknown mesh format; expected .msh, .node/.ele, or a TetGen base name",
+                path.display()
+            ),
+        )),
+    }
+}
+
+/// Writes `bytes` to `path` through a temporary file in the same folder and
+/// a rename, so readers never see a partial file.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
+    let dir = path.parent().filter(|d| !d.as_os_str().is_empty());
+    let mut tmp_name = path.file_name().unwrap_or_default().to_os_string();
+    tmp_name.push(format!(".tmp{}", std::process::id()));
+    let tmp = dir.map_or_else(|| PathBuf::from(&tmp_name), |d| d.join(&tmp_name));
+    let result = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    result.map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        Error::io(path, e)
+    })
+}

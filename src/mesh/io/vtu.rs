@@ -1,0 +1,265 @@
+//! VTK XML unstructured grids (`.vtu`) through `vtkio`.
+//!
+//! Files are written with inline base64 ("binary") arrays, which ParaView and
+//! the Python package meshio read. The writer takes any points, tets and
+//! named point/cell arrays, so later stages (per-frame displacement, strains)
+//! export through the same function. The reader returns the raw arrays; it is
+//! used to check round trips.
+
+use std::path::Path;
+
+use vtkio::model::{
+    Attribute, Attributes, ByteOrder, CellType, Cells, DataArray, DataSet, ElementType, IOBuffer,
+    UnstructuredGridPiece, Version, VertexNumbers, Vtk,
+};
+
+use super::write_atomically;
+use crate::error::{Error, Result};
+use crate::mesh::{TetMesh, Vec3};
+
+/// Values of one named array.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Values {
+    /// Floating-point data.
+    F64(Vec<f64>),
+    /// Integer data (ids, markers, flags).
+    I32(Vec<i32>),
+}
+
+impl Values {
+    fn len(&self) -> usize {
+        match self {
+            Values::F64(v) => v.len(),
+            Values::I32(v) => v.len(),
+        }
+    }
+}
+
+/// A named point or cell array with `components` values per entry.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Field {
+    /// Array name as shown in ParaView.
+    pub name: String,
+    /// Components per point or cell (1 scalar, 3 vector, 9 tensor …).
+    pub components: usize,
+    /// `components × count` values, entry-major.
+    pub values: Values,
+}
+
+impl Field {
+    /// A float field.
+    pub fn f64(name: &str, components: usize, values: Vec<f64>) -> Field {
+        Field {
+            name: name.into(),
+            components,
+            values: Values::F64(values),
+        }
+    }
+
+    /// An integer field.
+    pub fn i32(name: &str, components: usize, values: Vec<i32>) -> Field {
+        Field {
+            name: name.into(),
+            components,
+            values: Values::I32(values),
+        }
+    }
+}
+
+/// An unstructured tetrahedral grid with point and cell data.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Grid {
+    /// Point positions.
+    pub points: Vec<Vec3>,
+    /// Tets as point indices.
+    pub tets: Vec<[usize; 4]>,
+    /// Arrays with one entry per point.
+    pub point_data: Vec<Field>,
+    /// Arrays with one entry per tet.
+    pub cell_data: Vec<Field>,
+}
+
+impl Grid {
+    /// The rest mesh with its region ids, tet volumes, top-surface flag and UVs
+    /// (−1 off the top surface).
+    pub fn from_mesh(mesh: &TetMesh) -> Grid {
+        let n = mesh.num_vertices();
+        let mut on_top = vec![0; n];
+        let mut uv = vec![-1.0; 2 * n];
+        for (s, &v) in mesh.top.vertices.iter().enumerate() {
+            on_top[v] = 1;
+            uv[2 * v..2 * v + 2].copy_from_slice(&mesh.top.uvs[s]);
+        }
+        Grid {
+            points: mesh.positions.clone(),
+            tets: mesh.tets.clone(),
+            point_data: vec![Field::i32("on_top", 1, on_top), Field::f64("uv", 2, uv)],
+            cell_data: vec![
+                Field::i32("region", 1, mesh.tet_region.clone()),
+                Field::f64(
+                    "volume_mm3",
+                    1,
+                    (0..mesh.num_tets()).map(|t| mesh.tet_volume(t)).collect(),
+                ),
+            ],
+        }
+    }
+
+    /// Checks that every array has `components × count` values.
+    fn check(&self) -> Result<()> {
+        for (fields, count, kind) in [
+            (&self.point_data, self.points.len(), "point"),
+            (&self.cell_data, self.tets.len(), "cell"),
+        ] {
+            for f in fields {
+                if f.values.len() != f.components * count {
+                    return Err(Error::parameter(
+                        format!("{kind} array '{}'", f.name),
+                        format!(
+                            "has {} values, expected {} × {count}",
+                            f.values.len(),
+                            f.components
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+fn attribute(f: &Field) -> Attribute {
+    let data = match &f.values {
+        Values::F64(v) => IOBuffer::F64(v.clone()),
+        Values::I32(v) => IOBuffer::I32(v.clone()),
+    };
+    Attribute::DataArray(DataArray {
+        name: f.name.clone(),
+        elem: ElementType::Generic(f.components as u32),
+        data,
+    })
+}
+
+/// Writes a `.vtu` file atomically (temporary file, then rename).
+pub fn write_vtu(path: &Path, grid: &Grid) -> Result<()> {
+    grid.check()?;
+    let points: Vec<f64> = grid.points.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
+    let connectivity = grid
+        .tets
+        .iter()
+        .flat_map(|t| t.map(|v| v as u64))
+        .collect();
+    let offsets = (1..=grid.tets.len() as u64).map(|k| 4 * k).collect();
+    let vtk = Vtk {
+        version: Version::new((1, 0)),
+        title: String::new(),
+        byte_order: ByteOrder::LittleEndian,
+        file_path: None,
+        data: DataSet::inline(UnstructuredGridPiece {
+            points: IOBuffer::F64(points),
+            cells: Cells {
+                cell_verts: VertexNumbers::XML {
+                    connectivity,
+                    offsets,
+                },
+                types: vec![CellType::Tetra; grid.tets.len()],
+            },
+            data: Attributes {
+                point: grid.point_data.iter().map(attribute).collect(),
+                cell: grid.cell_data.iter().map(attribute).collect(),
+            },
+        }),
+    };
+    let mut bytes = Vec::new();
+    vtk.write_xml(&mut bytes).map_err(|e| Error::Parse {
+        path: path.to_path_buf(),
+        line: 0,
+        message: format!("VTU encoding failed: {e}"),
+    })?;
+    write_atomically(path, &bytes)
+}
+
+/// Reads a `.vtu` file written by [`write_vtu`] (or any single-piece
+/// unstructured grid of tetrahedra).
+pub fn read_vtu(path: &Path) -> Result<Grid> {
+    let bad = |message: String| Error::Parse {
+        path: path.to_path_buf(),
+        line: 0,
+        message,
+    };
+    if !path.exists() {
+        return Err(Error::io(
+            path,
+            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
+        ));
+    }
+    let vtk = Vtk::import(path).map_err(|e| bad(format!("not a readable VTK file: {e}")))?;
+    let DataSet::UnstructuredGrid { pieces, .. } = vtk.data else {
+        return Err(bad("not an unstructured grid".into()));
+    };
+    let [piece] = &pieces[..] else {
+        return Err(bad(format!("expected one piece, found {}", pieces.len())));
+    };
+    let piece = piece
+        .load_piece_data(None)
+        .map_err(|e| bad(format!("cannot load piece: {e}")))?;
+    let coords: Vec<f64> = piece
+        .points
+        .cast_into()
+        .ok_or_else(|| bad("points are not numeric".into()))?;
+    let points = coords
+        .chunks_exact(3)
+        .map(|c| Vec3::new(c[0], c[1], c[2]))
+        .collect();
+    let (connectivity, offsets) = match piece.cells.cell_verts.clone() {
+        VertexNumbers::XML {
+            connectivity,
+            offsets,
+        } => (connectivity, offsets),
+        VertexNumbers::Legacy { .. } => return Err(bad("unexpected legacy cell layout".into())),
+    };
+    if piece.cells.types.iter().any(|&t| t != CellType::Tetra) {
+        return Err(bad("only tetrahedral cells are supported".into()));
+    }
+    let mut tets = Vec::with_capacity(offsets.len());
+    let mut start = 0usize;
+    for (k, &end) in offsets.iter().enumerate() {
+        let end = end as usize;
+        if end != start + 4 || end > connectivity.len() {
+            return Err(bad(format!("cell {k} is not a 4-node tetrahedron")));
+        }
+        tets.push(std::array::from_fn(|i| connectivity[start + i] as usize));
+        start = end;
+    }
+    let fields = |attrs: &[Attribute]| -> Result<Vec<Field>> {
+        attrs
+            .iter()
+            .map(|a| match a {
+                Attribute::DataArray(d) => {
+                    let components = d.elem.num_comp() as usize;
+                    let values = match &d.data {
+                        IOBuffer::I32(v) => Values::I32(v.clone()),
+                        other => Values::F64(
+                            other
+                                .clone()
+                                .cast_into()
+                                .ok_or_else(|| bad(format!("array {} is not numeric", d.name)))?,
+                        ),
+                    };
+                    Ok(Field {
+                        name: d.name.clone(),
+                        components,
+                        values,
+                    })
+                }
+                Attribute::Field { name, .. } => Err(bad(format!("unexpected field data {name}"))),
+            })
+            .collect()
+    };
+    Ok(Grid {
+        points,
+        tets,
+        point_data: fields(&piece.data.point)?,
+        cell_data: fields(&piece.data.cell)?,
+    })
+}
