@@ -7,7 +7,8 @@ use std::process::ExitCode;
 use anyhow::{bail, Context};
 use clap::{Args, Parser, Subcommand};
 use skinpatch::mesh::generate::{generate_scaled, poly_text};
-use skinpatch::mesh::{io, QualityReport, TetMesh};
+use skinpatch::mesh::quality::max_edge_within;
+use skinpatch::mesh::{io, QualityReport, TetMesh, Vec3};
 use skinpatch::scenario::{MeshSection, RefineSection, Scenario, Setup, ZoneKind};
 
 /// Simulates a deforming patch of human skin and renders its dynamic microstructure.
@@ -91,6 +92,9 @@ struct MeshArgs {
     /// Largest tet volume inside the refinement zone (mm³).
     #[arg(long)]
     refine_max_volume_mm3: Option<f64>,
+    /// Also report the longest edge of the tets within R of the point (X, Y, Z) (mm).
+    #[arg(long, value_delimiter = ',', value_name = "X,Y,Z,R")]
+    edges_within: Option<Vec<f64>>,
 }
 
 fn main() -> ExitCode {
@@ -202,6 +206,13 @@ fn mesh(args: MeshArgs) -> anyhow::Result<()> {
         (mesh, Some(poly_text(&spec, scale)))
     };
     print!("{}", QualityReport::of(&mesh));
+    if let Some(e) = &args.edges_within {
+        let [x, y, z, r] = e[..] else {
+            bail!("--edges-within takes X,Y,Z,R, got {e:?}");
+        };
+        let (longest, n) = max_edge_within(&mesh, &Vec3::new(x, y, z), r);
+        println!("within {r} mm of ({x}, {y}, {z}): {n} tets, longest edge {longest:.4} mm");
+    }
     if let Some(base) = &args.out {
         write_mesh_files(&mesh, base, poly.as_deref())?;
     }

@@ -203,3 +203,18 @@ mod tests {
         }
     }
 }
+
+/// Longest edge among the tets that have a vertex within `radius` of `centre`
+/// (mm), and how many such tets there are: a check of local resolution.
+pub fn max_edge_within(mesh: &TetMesh, centre: &Vec3, radius: f64) -> (f64, usize) {
+    let mut longest: f64 = 0.0;
+    let mut count = 0;
+    for t in 0..mesh.num_tets() {
+        let p = mesh.tet_points(t);
+        if p.iter().any(|q| (q - centre).norm() <= radius) {
+            count += 1;
+            longest = edge_lengths(&p).into_iter().fold(longest, f64::max);
+        }
+    }
+    (longest, count)
+}

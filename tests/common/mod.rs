@@ -1,0 +1,84 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+
+use skinpatch::mesh::generate::{LayerSpec, PatchSpec, RefineZone, ZoneShape};
+
+/// Folder of the crate, for shipped meshes and fixtures.
+pub fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A two-layer patch spec with small limits so tests stay fast.
+pub fn small_patch(refine: Option<RefineZone>) -> PatchSpec {
+    PatchSpec {
+        width_mm: 4.0,
+        depth_mm: 3.0,
+        layers: vec![
+            LayerSpec {
+                name: "dermis".into(),
+                id: 1,
+                thickness_mm: 1.0,
+                max_volume_mm3: 0.05,
+            },
+            LayerSpec {
+                name: "hypodermis".into(),
+                id: 2,
+                thickness_mm: 1.5,
+                max_volume_mm3: 0.2,
+            },
+        ],
+        refine,
+        radius_edge_max: 1.5,
+        min_dihedral_deg: 0.0,
+        target_tets: None,
+        target_tolerance: 0.05,
+    }
+}
+
+/// A refinement zone reaching through the layer interface.
+pub fn deep_zone() -> RefineZone {
+    RefineZone {
+        shape: ZoneShape::Box {
+            center_mm: [0.5, -0.25],
+            size_mm: [1.5, 1.0, 1.6],
+        },
+        max_volume_mm3: 0.005,
+    }
+}
+
+/// The unit cube as six positively oriented tets around the main diagonal, in
+/// TetGen text: (.node, .ele) with 1-based numbering and a region attribute.
+pub fn cube_tetgen() -> (String, String) {
+    let node = "\
+# unit cube
+8 3 0 0
+1 0 0 0
+2 1 0 0
+3 1 1 0
+4 0 1 0
+5 0 0 1
+6 1 0 1
+7 1 1 1
+8 0 1 1
+";
+    let ele = "\
+6 4 1
+1 1 2 3 7 5
+2 1 3 4 7 5
+3 1 4 8 7 5
+4 1 8 5 7 5
+5 1 5 6 7 5
+6 1 6 2 7 5
+";
+    (node.to_string(), ele.to_string())
+}
+
+/// Writes `base.node` and `base.ele` into `dir` and returns the base path.
+pub fn write_tetgen_text(dir: &Path, name: &str, node: &str, ele: &str) -> PathBuf {
+    let base = dir.join(name);
+    std::fs::write(dir.join(format!("{name}.node")), node).unwrap();
+    std::fs::write(dir.join(format!("{name}.ele")), ele).unwrap();
+    base
+}
