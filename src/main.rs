@@ -130,12 +130,11 @@ fn run(path: &Path, output: Option<PathBuf>) -> anyhow::Result<()> {
     }
     let summary = skinpatch::pipeline::run(&setup)
         .with_context(|| format!("running scenario {}", path.display()))?;
-    println!("scenario {}: mesh", setup.name);
-    print!("{}", summary.quality);
+    let mut report = format!("scenario {}: mesh\n{}", setup.name, summary.quality);
     for file in &summary.written {
-        println!("wrote {}", file.display());
+        report += &format!("wrote {}\n", file.display());
     }
-    Ok(())
+    print_stdout(&report)
 }
 
 impl MeshArgs {
@@ -205,35 +204,47 @@ fn mesh(args: MeshArgs) -> anyhow::Result<()> {
         let (mesh, scale) = generate_scaled(&spec)?;
         (mesh, Some(poly_text(&spec, scale)))
     };
-    print!("{}", QualityReport::of(&mesh));
+    let mut report = QualityReport::of(&mesh).to_string();
     if let Some(e) = &args.edges_within {
         let [x, y, z, r] = e[..] else {
             bail!("--edges-within takes X,Y,Z,R, got {e:?}");
         };
         let (longest, n) = max_edge_within(&mesh, &Vec3::new(x, y, z), r);
-        println!("within {r} mm of ({x}, {y}, {z}): {n} tets, longest edge {longest:.4} mm");
+        report += &format!("within {r} mm of ({x}, {y}, {z}): {n} tets, longest edge {longest:.4} mm\n");
     }
+    // Files first: a closed stdout must not cost the user their mesh.
     if let Some(base) = &args.out {
-        write_mesh_files(&mesh, base, poly.as_deref())?;
+        report += &write_mesh_files(&mesh, base, poly.as_deref())?;
     }
-    Ok(())
+    print_stdout(&report)
 }
 
-fn write_mesh_files(mesh: &TetMesh, base: &Path, poly: Option<&str>) -> anyhow::Result<()> {
+/// Prints to stdout; a reader that went away (broken pipe) is not an error.
+fn print_stdout(text: &str) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        other => Ok(other?),
+    }
+}
+
+fn write_mesh_files(mesh: &TetMesh, base: &Path, poly: Option<&str>) -> anyhow::Result<String> {
     if let Some(dir) = base.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
+    let mut written: Vec<PathBuf> = io::tetgen_paths(base).into();
     io::write_tetgen(mesh, base)?;
     let vtu = PathBuf::from(format!("{}.vtu", base.display()));
     io::write_vtu(&vtu, &io::Grid::from_mesh(mesh))?;
-    for p in io::tetgen_paths(base) {
-        println!("wrote {}", p.display());
-    }
-    println!("wrote {}", vtu.display());
+    written.push(vtu);
     if let Some(text) = poly {
         let path = PathBuf::from(format!("{}.poly", base.display()));
         io::write_atomically(&path, text.as_bytes())?;
-        println!("wrote {}", path.display());
+        written.push(path);
     }
-    Ok(())
+    Ok(written
+        .iter()
+        .map(|p| format!("wrote {}\n", p.display()))
+        .collect())
 }
