@@ -1,0 +1,222 @@
+//! Malformed meshes give an error naming the file and line (or the tet),
+//! never a panic. Each case edits a valid file and states the expected error.
+
+mod common;
+
+use std::path::Path;
+
+use common::{cube_tetgen, root, write_tetgen_text};
+use skinpatch::mesh::io;
+
+/// Reads a TetGen cube whose `.node`/`.ele` were edited, and checks the error.
+fn check_tetgen(node: &str, ele: &str, expected: &[&str]) {
+    let dir = tempfile::tempdir().unwrap();
+    let base = write_tetgen_text(dir.path(), "cube", node, ele);
+    let err = match io::read_tetgen(&base) {
+        Ok(_) => panic!("expected an error containing {expected:?}"),
+        Err(e) => e.to_string(),
+    };
+    for part in expected {
+        assert!(err.contains(part), "error {err:?} should contain {part:?}");
+    }
+}
+
+fn edit(text: &str, from: &str, to: &str) -> String {
+    assert!(text.contains(from), "fixture lacks {from:?}");
+    text.replacen(from, to, 1)
+}
+
+#[test]
+fn tetgen_node_errors() {
+    let (node, ele) = cube_tetgen();
+    let cases: Vec<(String, Vec<&str>)> = vec![
+        // Truncated: the header promises 8 points, the file ends after 5.
+        (node.lines().take(7).collect::<Vec<_>>().join("\n"), vec!["cube.node:7:", "file ends early: expected point 6 of 8"]),
+        (String::new(), vec!["cube.node:0:", "expected the .node header"]),
+        (edit(&node, "3 1 1 0", "3 1 one 0"), vec!["cube.node:5:", "y: cannot parse 'one'"]),
+        (edit(&node, "6 1 0 1", "6 1 0 nan"), vec!["cube.node:8:", "z is not finite"]),
+        (edit(&node, "6 1 0 1", "6 1 0 inf"), vec!["cube.node:8:", "z is not finite"]),
+        (edit(&node, "5 0 0 1", "4 0 0 1"), vec!["cube.node:7:", "point index 4 out of sequence: expected 5"]),
+        (edit(&node, "2 1 0 0", "2 1 0"), vec!["cube.node:4:", "needs 4 fields, found 3"]),
+        (edit(&node, "8 3 0 0", "7 3 0 0"), vec!["cube.node:10:", "unexpected data after the 7 points"]),
+        (edit(&node, "8 3 0 0", "8 2 0 0"), vec!["cube.node:2:", "dimension must be 3"]),
+        (edit(&node, "1 0 0 0\n", "3 0 0 0\n"), vec!["cube.node:3:", "first point must be numbered 0 or 1"]),
+        (edit(&node, "8 3 0 0", "-8 3 0 0"), vec!["cube.node:2:", "number of points: cannot parse '-8'"]),
+    ];
+    for (bad, expected) in cases {
+        check_tetgen(&bad, &ele, &expected);
+    }
+}
+
+#[test]
+fn tetgen_ele_errors() {
+    let (node, ele) = cube_tetgen();
+    let cases: Vec<(String, Vec<&str>)> = vec![
+        (edit(&ele, "6 4 1", "7 4 1"), vec!["cube.ele:7:", "file ends early: expected tetrahedron 7 of 7"]),
+        (edit(&ele, "6 4 1", "5 4 1"), vec!["cube.ele:7:", "unexpected data after the 5 tetrahedra"]),
+        (edit(&ele, "2 1 3 4 7 5", "2 1 3 x 7 5"), vec!["cube.ele:3:", "vertex index: cannot parse 'x'"]),
+        (edit(&ele, "2 1 3 4 7 5", "2 1 3 9 7 5"), vec!["cube.ele:3:", "vertex index 9 out of range"]),
+        (edit(&ele, "2 1 3 4 7 5", "2 1 3 0 7 5"), vec!["cube.ele:3:", "vertex index 0 out of range"]),
+        (edit(&ele, "2 1 3 4 7 5", "1 1 3 4 7 5"), vec!["cube.ele:3:", "tetrahedron index 1 out of sequence"]),
+        (edit(&ele, "2 1 3 4 7 5", "2 1 3 4 7 5.5"), vec!["cube.ele:3:", "region attribute must be an integer"]),
+        (edit(&ele, "6 4 1", "6 5 1"), vec!["cube.ele:1:", "nodes per tetrahedron must be 4 or 10"]),
+        // Structural errors name the tet (0-based index).
+        (edit(&ele, "2 1 3 4 7 5", "2 1 3 3 7 5"), vec!["cube.ele", "tet 1 repeats vertex 2"]),
+        (edit(&ele, "2 1 3 4 7 5", "2 1 7 4 3 5"), vec!["cube.ele", "tet 1 is inverted"]),
+        (edit(&ele, "2 1 3 4 7 5", "2 1 2 3 4 5"), vec!["cube.ele", "tet 1 is degenerate"]),
+        (format!("# region 9 skin\n{ele}"), vec!["cube.ele", "region 'skin' (id 9) has no tetrahedra"]),
+        // Two tets on the same face as a third: non-manifold.
+        (
+            edit(&ele, "6 4 1", "7 4 1") + "7 1 2 3 7 5\n",
+            vec!["cube.ele", "shared by more than two tets"],
+        ),
+    ];
+    for (bad, expected) in cases {
+        check_tetgen(&node, &bad, &expected);
+    }
+}
+
+#[test]
+fn tetgen_face_errors() {
+    let (node, ele) = cube_tetgen();
+    let dir = tempfile::tempdir().unwrap();
+    let base = write_tetgen_text(dir.path(), "cube", &node, &ele);
+    for (face, expected) in [
+        ("2 1\n1 5 6 7 2\n", "cube.face:2: file ends early: expected face 2 of 2"),
+        ("1 1\n1 5 6 99 2\n", "cube.face:2: vertex index 99 out of range"),
+        ("1 1\n1 5 6 7\n", "cube.face:2: a face line needs 5 fields, found 4"),
+        ("1 1\n1 5 5 7 2\n", "cube.face:2: face repeats a vertex"),
+        ("1 2\n", "cube.face:1: boundary marker flag must be 0 or 1, got '2'"),
+        ("2 1\n1 5 6 7 2\n2 7 6 5 2\n", "cube.face:3: the same face is listed twice"),
+    ] {
+        std::fs::write(dir.path().join("cube.face"), face).unwrap();
+        let err = io::read_tetgen(&base).unwrap_err().to_string();
+        assert!(err.contains(expected), "{err:?} should contain {expected:?}");
+    }
+}
+
+#[test]
+fn missing_and_unknown_files() {
+    let err = io::read_mesh(Path::new("/nonexistent/mesh.msh")).unwrap_err().to_string();
+    assert!(err.starts_with("/nonexistent/mesh.msh:"), "{err}");
+    let err = io::read_mesh(Path::new("/nonexistent/mesh.node")).unwrap_err().to_string();
+    assert!(err.starts_with("/nonexistent/mesh.node:"), "{err}");
+    let err = io::read_mesh(Path::new("mesh.stl")).unwrap_err().to_string();
+    assert!(err.contains("unknown mesh format"), "{err}");
+    let err = io::read_vtu(Path::new("/nonexistent/a.vtu")).unwrap_err().to_string();
+    assert!(err.starts_with("/nonexistent/a.vtu:"), "{err}");
+}
+
+#[test]
+fn binary_garbage_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("junk.msh");
+    std::fs::write(&path, [0u8, 159, 146, 150, 10, 255]).unwrap();
+    let err = io::read_mesh(&path).unwrap_err().to_string();
+    assert!(err.contains("junk.msh:1: not a text file"), "{err}");
+    let vtu = dir.path().join("junk.vtu");
+    std::fs::write(&vtu, "<VTKFile><nonsense").unwrap();
+    let err = io::read_vtu(&vtu).unwrap_err().to_string();
+    assert!(err.contains("junk.vtu"), "{err}");
+}
+
+/// Edits the Gmsh fixture and checks the error.
+fn check_gmsh(edit_fn: impl Fn(&str) -> String, expected: &[&str]) {
+    let text = std::fs::read_to_string(root().join("tests/fixtures/two_layer_box.msh")).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("box.msh");
+    std::fs::write(&path, edit_fn(&text)).unwrap();
+    let err = match io::read_mesh(&path) {
+        Ok(_) => panic!("expected an error containing {expected:?}"),
+        Err(e) => e.to_string(),
+    };
+    for part in expected {
+        assert!(err.contains(part), "error {err:?} should contain {part:?}");
+    }
+}
+
+/// 1-based line number of the first line equal to `line` in the fixture.
+fn fixture_line(line: &str) -> usize {
+    let text = std::fs::read_to_string(root().join("tests/fixtures/two_layer_box.msh")).unwrap();
+    1 + text.lines().position(|l| l.trim() == line).unwrap()
+}
+
+#[test]
+fn gmsh_errors() {
+    let nodes = fixture_line("$Nodes");
+    let elements = fixture_line("$Elements");
+    check_gmsh(
+        |t| t.lines().take(elements + 10).collect::<Vec<_>>().join("\n"),
+        &["box.msh:", "file ends early: expected an element line"],
+    );
+    check_gmsh(|_| String::new(), &["box.msh:0: empty file"]);
+    check_gmsh(|t| t.replacen("4.1 0 8", "2.2 0 8", 1), &["box.msh:2:", "MSH version 2.2 is not supported"]);
+    check_gmsh(|t| t.replacen("4.1 0 8", "4.1 1 8", 1), &["box.msh:2:", "binary MSH is not supported"]);
+    check_gmsh(|t| t.replacen("$MeshFormat", "$Mesh", 1), &["box.msh:1:", "must start with $MeshFormat"]);
+    check_gmsh(
+        |t| t.replacen("$EndNodes", "$EndNodez", 1),
+        &["expected $EndNodes, got '$EndNodez'"],
+    );
+    // The $Nodes header's node count.
+    let nodes_header = format!("{}:", nodes + 1);
+    check_gmsh(
+        |t| {
+            let mut lines: Vec<String> = t.lines().map(str::to_string).collect();
+            let f: Vec<&str> = lines[nodes].split_whitespace().collect();
+            let n: usize = f[1].parse().unwrap();
+            lines[nodes] = format!("{} {} {} {}", f[0], n + 1, f[2], f[3]);
+            lines.join("\n")
+        },
+        &[&nodes_header, "header announces"],
+    );
+    check_gmsh(
+        |t| {
+            let mut lines: Vec<String> = t.lines().map(str::to_string).collect();
+            let f: Vec<&str> = lines[elements].split_whitespace().collect();
+            let n: usize = f[1].parse().unwrap();
+            lines[elements] = format!("{} {} {} {}", f[0], n - 1, f[2], f[3]);
+            lines.join("\n")
+        },
+        &["header announces"],
+    );
+    // A non-numeric coordinate and a NaN, on the first coordinate line of block 1.
+    check_gmsh(|t| replace_coordinate(t, "abc"), &["x: cannot parse 'abc'"]);
+    check_gmsh(|t| replace_coordinate(t, "nan"), &["x is not finite"]);
+    // A tet referring to a node that does not exist, and a repeated node tag.
+    check_gmsh(
+        |t| replace_last_tet_node(t, "999999"),
+        &["element", "refers to node 999999, which is not defined"],
+    );
+    check_gmsh(
+        |t| t.replacen("3 1 \"dermis\"", "3 1 \"dermis\"\n3 7 \"skin\"", 1).replacen("\n2\n3 1", "\n3\n3 1", 1),
+        &["region 'skin' (id 7) has no tetrahedra"],
+    );
+}
+
+/// Replaces the x coordinate of the first node of the first non-empty node block.
+fn replace_coordinate(text: &str, value: &str) -> String {
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let start = lines.iter().position(|l| l == "$Nodes").unwrap() + 2;
+    let mut i = start;
+    loop {
+        let f: Vec<usize> = lines[i].split_whitespace().map(|s| s.parse().unwrap()).collect();
+        let n = f[3];
+        if n > 0 {
+            let coord = i + 1 + n;
+            let rest: Vec<String> = lines[coord].split_whitespace().skip(1).map(str::to_string).collect();
+            lines[coord] = format!("{value} {}", rest.join(" "));
+            return lines.join("\n");
+        }
+        i += 1;
+    }
+}
+
+/// Replaces the last node of the last tetrahedron.
+fn replace_last_tet_node(text: &str, tag: &str) -> String {
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let end = lines.iter().position(|l| l == "$EndElements").unwrap();
+    let mut f: Vec<String> = lines[end - 1].split_whitespace().map(str::to_string).collect();
+    *f.last_mut().unwrap() = tag.to_string();
+    lines[end - 1] = f.join(" ");
+    lines.join("\n")
+}
