@@ -42,7 +42,7 @@ enum Command {
     /// flags (flags win). With --out BASE it writes BASE.node/.ele/.face
     /// (TetGen), BASE.vtu and BASE.poly (the TetGen input that regenerates the
     /// mesh). It always prints the quality report.
-    Mesh(MeshArgs),
+    Mesh(Box<MeshArgs>),
 }
 
 #[derive(Args)]
@@ -84,7 +84,12 @@ struct MeshArgs {
     #[arg(long)]
     min_dihedral_deg: Option<f64>,
     /// Refine a hemisphere under the top surface: X,Y,RADIUS (mm).
-    #[arg(long, value_delimiter = ',', value_name = "X,Y,R", conflicts_with = "refine_box")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        value_name = "X,Y,R",
+        conflicts_with = "refine_box"
+    )]
     refine_sphere: Option<Vec<f64>>,
     /// Refine a box hanging from the top surface: X,Y,SIZE_X,SIZE_Y,DEPTH (mm).
     #[arg(long, value_delimiter = ',', value_name = "X,Y,SX,SY,D")]
@@ -110,7 +115,7 @@ fn main() -> ExitCode {
         .init();
     let result = match cli.command {
         Command::Run { scenario, output } => run(&scenario, output),
-        Command::Mesh(args) => mesh(args),
+        Command::Mesh(args) => mesh(*args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -182,7 +187,9 @@ impl MeshArgs {
         } else if let (Some(v), Some(r)) = (self.refine_max_volume_mm3, m.refine.as_mut()) {
             r.max_volume_mm3 = v;
         } else if self.refine_max_volume_mm3.is_some() {
-            bail!("--refine-max-volume-mm3 needs a refinement zone (--refine-sphere or --refine-box)");
+            bail!(
+                "--refine-max-volume-mm3 needs a refinement zone (--refine-sphere or --refine-box)"
+            );
         }
         Ok(m)
     }
@@ -210,7 +217,8 @@ fn mesh(args: MeshArgs) -> anyhow::Result<()> {
             bail!("--edges-within takes X,Y,Z,R, got {e:?}");
         };
         let (longest, n) = max_edge_within(&mesh, &Vec3::new(x, y, z), r);
-        report += &format!("within {r} mm of ({x}, {y}, {z}): {n} tets, longest edge {longest:.4} mm\n");
+        report +=
+            &format!("within {r} mm of ({x}, {y}, {z}): {n} tets, longest edge {longest:.4} mm\n");
     }
     // Files first: a closed stdout must not cost the user their mesh.
     if let Some(base) = &args.out {

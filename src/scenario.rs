@@ -159,7 +159,8 @@ impl Scenario {
             path: path.to_path_buf(),
             message,
         };
-        let de = toml::Deserializer::parse(text).map_err(|e| fail(describe_toml_error(&e, text)))?;
+        let de =
+            toml::Deserializer::parse(text).map_err(|e| fail(describe_toml_error(&e, text)))?;
         serde_path_to_error::deserialize(de).map_err(|e| {
             let key = e.path().to_string();
             fail(describe_schema_error(&key, e.inner(), text))
@@ -198,7 +199,11 @@ fn describe_schema_error(key: &str, e: &toml::de::Error, text: &str) -> String {
         } else {
             format!("{key}.{unknown}")
         };
-        let full = if full.is_empty() { unknown.clone() } else { full };
+        let full = if full.is_empty() {
+            unknown.clone()
+        } else {
+            full
+        };
         let hint = closest(&unknown, &expected)
             .map(|s| format!("; did you mean {s}?"))
             .unwrap_or_default();
@@ -287,7 +292,10 @@ impl MeshSection {
         check(self.top_region.is_some(), "top_region");
         check(self.bottom_region.is_some(), "bottom_region");
         check(self.top_max_volume_mm3.is_some(), "top_max_volume_mm3");
-        check(self.bottom_max_volume_mm3.is_some(), "bottom_max_volume_mm3");
+        check(
+            self.bottom_max_volume_mm3.is_some(),
+            "bottom_max_volume_mm3",
+        );
         check(self.target_tets.is_some(), "target_tets");
         check(self.target_tolerance.is_some(), "target_tolerance");
         check(self.radius_edge_max.is_some(), "radius_edge_max");
@@ -396,7 +404,10 @@ impl RefineSection {
                     ));
                 }
                 let r = self.radius_mm.ok_or_else(|| {
-                    Error::parameter(format!("{key}.radius_mm"), "is required for shape = \"sphere\"")
+                    Error::parameter(
+                        format!("{key}.radius_mm"),
+                        "is required for shape = \"sphere\"",
+                    )
                 })?;
                 ZoneShape::Sphere {
                     center_mm: self.center_mm,
@@ -474,7 +485,9 @@ mod tests {
 
     #[test]
     fn unknown_key_names_path_line_and_suggestion() {
-        let err = parse("[mesh]\nwidth_mm = 10\nwidht_mm = 12\n").unwrap_err().to_string();
+        let err = parse("[mesh]\nwidth_mm = 10\nwidht_mm = 12\n")
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("unknown key mesh.widht_mm"), "{err}");
         assert!(err.contains("did you mean width_mm?"), "{err}");
         assert!(err.contains("line 3"), "{err}");
@@ -489,7 +502,9 @@ mod tests {
 
     #[test]
     fn wrong_type_names_key() {
-        let err = parse("[mesh]\nwidth_mm = \"wide\"\n").unwrap_err().to_string();
+        let err = parse("[mesh]\nwidth_mm = \"wide\"\n")
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("mesh.width_mm"), "{err}");
         assert!(err.contains("line 2"), "{err}");
     }

@@ -31,17 +31,50 @@ fn tetgen_node_errors() {
     let (node, ele) = cube_tetgen();
     let cases: Vec<(String, Vec<&str>)> = vec![
         // Truncated: the header promises 8 points, the file ends after 5.
-        (node.lines().take(7).collect::<Vec<_>>().join("\n"), vec!["cube.node:7:", "file ends early: expected point 6 of 8"]),
-        (String::new(), vec!["cube.node:0:", "expected the .node header"]),
-        (edit(&node, "3 1 1 0", "3 1 one 0"), vec!["cube.node:5:", "y: cannot parse 'one'"]),
-        (edit(&node, "6 1 0 1", "6 1 0 nan"), vec!["cube.node:8:", "z is not finite"]),
-        (edit(&node, "6 1 0 1", "6 1 0 inf"), vec!["cube.node:8:", "z is not finite"]),
-        (edit(&node, "5 0 0 1", "4 0 0 1"), vec!["cube.node:7:", "point index 4 out of sequence: expected 5"]),
-        (edit(&node, "2 1 0 0", "2 1 0"), vec!["cube.node:4:", "needs 4 fields, found 3"]),
-        (edit(&node, "8 3 0 0", "7 3 0 0"), vec!["cube.node:10:", "unexpected data after the 7 points"]),
-        (edit(&node, "8 3 0 0", "8 2 0 0"), vec!["cube.node:2:", "dimension must be 3"]),
-        (edit(&node, "1 0 0 0\n", "3 0 0 0\n"), vec!["cube.node:3:", "first point must be numbered 0 or 1"]),
-        (edit(&node, "8 3 0 0", "-8 3 0 0"), vec!["cube.node:2:", "number of points: cannot parse '-8'"]),
+        (
+            node.lines().take(7).collect::<Vec<_>>().join("\n"),
+            vec!["cube.node:7:", "file ends early: expected point 6 of 8"],
+        ),
+        (
+            String::new(),
+            vec!["cube.node:0:", "expected the .node header"],
+        ),
+        (
+            edit(&node, "3 1 1 0", "3 1 one 0"),
+            vec!["cube.node:5:", "y: cannot parse 'one'"],
+        ),
+        (
+            edit(&node, "6 1 0 1", "6 1 0 nan"),
+            vec!["cube.node:8:", "z is not finite"],
+        ),
+        (
+            edit(&node, "6 1 0 1", "6 1 0 inf"),
+            vec!["cube.node:8:", "z is not finite"],
+        ),
+        (
+            edit(&node, "5 0 0 1", "4 0 0 1"),
+            vec!["cube.node:7:", "point index 4 out of sequence: expected 5"],
+        ),
+        (
+            edit(&node, "2 1 0 0", "2 1 0"),
+            vec!["cube.node:4:", "needs 4 fields, found 3"],
+        ),
+        (
+            edit(&node, "8 3 0 0", "7 3 0 0"),
+            vec!["cube.node:10:", "unexpected data after the 7 points"],
+        ),
+        (
+            edit(&node, "8 3 0 0", "8 2 0 0"),
+            vec!["cube.node:2:", "dimension must be 3"],
+        ),
+        (
+            edit(&node, "1 0 0 0\n", "3 0 0 0\n"),
+            vec!["cube.node:3:", "first point must be numbered 0 or 1"],
+        ),
+        (
+            edit(&node, "8 3 0 0", "-8 3 0 0"),
+            vec!["cube.node:2:", "number of points: cannot parse '-8'"],
+        ),
     ];
     for (bad, expected) in cases {
         check_tetgen(&bad, &ele, &expected);
@@ -52,19 +85,58 @@ fn tetgen_node_errors() {
 fn tetgen_ele_errors() {
     let (node, ele) = cube_tetgen();
     let cases: Vec<(String, Vec<&str>)> = vec![
-        (edit(&ele, "6 4 1", "7 4 1"), vec!["cube.ele:7:", "file ends early: expected tetrahedron 7 of 7"]),
-        (edit(&ele, "6 4 1", "5 4 1"), vec!["cube.ele:7:", "unexpected data after the 5 tetrahedra"]),
-        (edit(&ele, "2 1 3 4 7 5", "2 1 3 x 7 5"), vec!["cube.ele:3:", "vertex index: cannot parse 'x'"]),
-        (edit(&ele, "2 1 3 4 7 5", "2 1 3 9 7 5"), vec!["cube.ele:3:", "vertex index 9 out of range"]),
-        (edit(&ele, "2 1 3 4 7 5", "2 1 3 0 7 5"), vec!["cube.ele:3:", "vertex index 0 out of range"]),
-        (edit(&ele, "2 1 3 4 7 5", "1 1 3 4 7 5"), vec!["cube.ele:3:", "tetrahedron index 1 out of sequence"]),
-        (edit(&ele, "2 1 3 4 7 5", "2 1 3 4 7 5.5"), vec!["cube.ele:3:", "region attribute must be an integer"]),
-        (edit(&ele, "6 4 1", "6 5 1"), vec!["cube.ele:1:", "nodes per tetrahedron must be 4 or 10"]),
+        (
+            edit(&ele, "6 4 1", "7 4 1"),
+            vec![
+                "cube.ele:7:",
+                "file ends early: expected tetrahedron 7 of 7",
+            ],
+        ),
+        (
+            edit(&ele, "6 4 1", "5 4 1"),
+            vec!["cube.ele:7:", "unexpected data after the 5 tetrahedra"],
+        ),
+        (
+            edit(&ele, "2 1 3 4 7 5", "2 1 3 x 7 5"),
+            vec!["cube.ele:3:", "vertex index: cannot parse 'x'"],
+        ),
+        (
+            edit(&ele, "2 1 3 4 7 5", "2 1 3 9 7 5"),
+            vec!["cube.ele:3:", "vertex index 9 out of range"],
+        ),
+        (
+            edit(&ele, "2 1 3 4 7 5", "2 1 3 0 7 5"),
+            vec!["cube.ele:3:", "vertex index 0 out of range"],
+        ),
+        (
+            edit(&ele, "2 1 3 4 7 5", "1 1 3 4 7 5"),
+            vec!["cube.ele:3:", "tetrahedron index 1 out of sequence"],
+        ),
+        (
+            edit(&ele, "2 1 3 4 7 5", "2 1 3 4 7 5.5"),
+            vec!["cube.ele:3:", "region attribute must be an integer"],
+        ),
+        (
+            edit(&ele, "6 4 1", "6 5 1"),
+            vec!["cube.ele:1:", "nodes per tetrahedron must be 4 or 10"],
+        ),
         // Structural errors name the tet (0-based index).
-        (edit(&ele, "2 1 3 4 7 5", "2 1 3 3 7 5"), vec!["cube.ele", "tet 1 repeats vertex 2"]),
-        (edit(&ele, "2 1 3 4 7 5", "2 1 7 4 3 5"), vec!["cube.ele", "tet 1 is inverted"]),
-        (edit(&ele, "2 1 3 4 7 5", "2 1 2 3 4 5"), vec!["cube.ele", "tet 1 is degenerate"]),
-        (format!("# region 9 skin\n{ele}"), vec!["cube.ele", "region 'skin' (id 9) has no tetrahedra"]),
+        (
+            edit(&ele, "2 1 3 4 7 5", "2 1 3 3 7 5"),
+            vec!["cube.ele", "tet 1 repeats vertex 2"],
+        ),
+        (
+            edit(&ele, "2 1 3 4 7 5", "2 1 7 4 3 5"),
+            vec!["cube.ele", "tet 1 is inverted"],
+        ),
+        (
+            edit(&ele, "2 1 3 4 7 5", "2 1 2 3 4 5"),
+            vec!["cube.ele", "tet 1 is degenerate"],
+        ),
+        (
+            format!("# region 9 skin\n{ele}"),
+            vec!["cube.ele", "region 'skin' (id 9) has no tetrahedra"],
+        ),
         // Two tets on the same face as a third: non-manifold.
         (
             edit(&ele, "6 4 1", "7 4 1") + "7 1 2 3 7 5\n",
@@ -82,28 +154,54 @@ fn tetgen_face_errors() {
     let dir = tempfile::tempdir().unwrap();
     let base = write_tetgen_text(dir.path(), "cube", &node, &ele);
     for (face, expected) in [
-        ("2 1\n1 5 6 7 2\n", "cube.face:2: file ends early: expected face 2 of 2"),
-        ("1 1\n1 5 6 99 2\n", "cube.face:2: vertex index 99 out of range"),
-        ("1 1\n1 5 6 7\n", "cube.face:2: a face line needs 5 fields, found 4"),
+        (
+            "2 1\n1 5 6 7 2\n",
+            "cube.face:2: file ends early: expected face 2 of 2",
+        ),
+        (
+            "1 1\n1 5 6 99 2\n",
+            "cube.face:2: vertex index 99 out of range",
+        ),
+        (
+            "1 1\n1 5 6 7\n",
+            "cube.face:2: a face line needs 5 fields, found 4",
+        ),
         ("1 1\n1 5 5 7 2\n", "cube.face:2: face repeats a vertex"),
-        ("1 2\n", "cube.face:1: boundary marker flag must be 0 or 1, got '2'"),
-        ("2 1\n1 5 6 7 2\n2 7 6 5 2\n", "cube.face:3: the same face is listed twice"),
+        (
+            "1 2\n",
+            "cube.face:1: boundary marker flag must be 0 or 1, got '2'",
+        ),
+        (
+            "2 1\n1 5 6 7 2\n2 7 6 5 2\n",
+            "cube.face:3: the same face is listed twice",
+        ),
     ] {
         std::fs::write(dir.path().join("cube.face"), face).unwrap();
         let err = io::read_tetgen(&base).unwrap_err().to_string();
-        assert!(err.contains(expected), "{err:?} should contain {expected:?}");
+        assert!(
+            err.contains(expected),
+            "{err:?} should contain {expected:?}"
+        );
     }
 }
 
 #[test]
 fn missing_and_unknown_files() {
-    let err = io::read_mesh(Path::new("/nonexistent/mesh.msh")).unwrap_err().to_string();
+    let err = io::read_mesh(Path::new("/nonexistent/mesh.msh"))
+        .unwrap_err()
+        .to_string();
     assert!(err.starts_with("/nonexistent/mesh.msh:"), "{err}");
-    let err = io::read_mesh(Path::new("/nonexistent/mesh.node")).unwrap_err().to_string();
+    let err = io::read_mesh(Path::new("/nonexistent/mesh.node"))
+        .unwrap_err()
+        .to_string();
     assert!(err.starts_with("/nonexistent/mesh.node:"), "{err}");
-    let err = io::read_mesh(Path::new("mesh.stl")).unwrap_err().to_string();
+    let err = io::read_mesh(Path::new("mesh.stl"))
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("unknown mesh format"), "{err}");
-    let err = io::read_vtu(Path::new("/nonexistent/a.vtu")).unwrap_err().to_string();
+    let err = io::read_vtu(Path::new("/nonexistent/a.vtu"))
+        .unwrap_err()
+        .to_string();
     assert!(err.starts_with("/nonexistent/a.vtu:"), "{err}");
 }
 
@@ -150,9 +248,18 @@ fn gmsh_errors() {
         &["box.msh:", "file ends early: expected an element line"],
     );
     check_gmsh(|_| String::new(), &["box.msh:0: empty file"]);
-    check_gmsh(|t| t.replacen("4.1 0 8", "2.2 0 8", 1), &["box.msh:2:", "MSH version 2.2 is not supported"]);
-    check_gmsh(|t| t.replacen("4.1 0 8", "4.1 1 8", 1), &["box.msh:2:", "binary MSH is not supported"]);
-    check_gmsh(|t| t.replacen("$MeshFormat", "$Mesh", 1), &["box.msh:1:", "must start with $MeshFormat"]);
+    check_gmsh(
+        |t| t.replacen("4.1 0 8", "2.2 0 8", 1),
+        &["box.msh:2:", "MSH version 2.2 is not supported"],
+    );
+    check_gmsh(
+        |t| t.replacen("4.1 0 8", "4.1 1 8", 1),
+        &["box.msh:2:", "binary MSH is not supported"],
+    );
+    check_gmsh(
+        |t| t.replacen("$MeshFormat", "$Mesh", 1),
+        &["box.msh:1:", "must start with $MeshFormat"],
+    );
     check_gmsh(
         |t| t.replacen("$EndNodes", "$EndNodez", 1),
         &["expected $EndNodes, got '$EndNodez'"],
@@ -188,7 +295,10 @@ fn gmsh_errors() {
         &["element", "refers to node 999999, which is not defined"],
     );
     check_gmsh(
-        |t| t.replacen("3 1 \"dermis\"", "3 1 \"dermis\"\n3 7 \"skin\"", 1).replacen("\n2\n3 1", "\n3\n3 1", 1),
+        |t| {
+            t.replacen("3 1 \"dermis\"", "3 1 \"dermis\"\n3 7 \"skin\"", 1)
+                .replacen("\n2\n3 1", "\n3\n3 1", 1)
+        },
         &["region 'skin' (id 7) has no tetrahedra"],
     );
 }
@@ -199,11 +309,18 @@ fn replace_coordinate(text: &str, value: &str) -> String {
     let start = lines.iter().position(|l| l == "$Nodes").unwrap() + 2;
     let mut i = start;
     loop {
-        let f: Vec<usize> = lines[i].split_whitespace().map(|s| s.parse().unwrap()).collect();
+        let f: Vec<usize> = lines[i]
+            .split_whitespace()
+            .map(|s| s.parse().unwrap())
+            .collect();
         let n = f[3];
         if n > 0 {
             let coord = i + 1 + n;
-            let rest: Vec<String> = lines[coord].split_whitespace().skip(1).map(str::to_string).collect();
+            let rest: Vec<String> = lines[coord]
+                .split_whitespace()
+                .skip(1)
+                .map(str::to_string)
+                .collect();
             lines[coord] = format!("{value} {}", rest.join(" "));
             return lines.join("\n");
         }
@@ -215,7 +332,10 @@ fn replace_coordinate(text: &str, value: &str) -> String {
 fn replace_last_tet_node(text: &str, tag: &str) -> String {
     let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
     let end = lines.iter().position(|l| l == "$EndElements").unwrap();
-    let mut f: Vec<String> = lines[end - 1].split_whitespace().map(str::to_string).collect();
+    let mut f: Vec<String> = lines[end - 1]
+        .split_whitespace()
+        .map(str::to_string)
+        .collect();
     *f.last_mut().unwrap() = tag.to_string();
     lines[end - 1] = f.join(" ");
     lines.join("\n")

@@ -25,14 +25,25 @@ fn text(bytes: &[u8]) -> String {
 fn run_press_writes_the_mesh() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("press");
-    let o = skinpatch(&["run", "examples/press.toml", "--output", out.to_str().unwrap()]);
+    let o = skinpatch(&[
+        "run",
+        "examples/press.toml",
+        "--output",
+        out.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "stderr: {}", text(&o.stderr));
     let stdout = text(&o.stdout);
     assert!(stdout.contains("wrote"), "{stdout}");
     let grid = io::read_vtu(&out.join("mesh.vtu")).unwrap();
     let mesh = io::read_tetgen(&root().join("meshes/patch_25k")).unwrap();
-    assert_eq!((grid.points.len(), grid.tets.len()), (mesh.num_vertices(), mesh.num_tets()));
-    assert!(stdout.contains(&format!("tets {}", mesh.num_tets())), "{stdout}");
+    assert_eq!(
+        (grid.points.len(), grid.tets.len()),
+        (mesh.num_vertices(), mesh.num_tets())
+    );
+    assert!(
+        stdout.contains(&format!("tets {}", mesh.num_tets())),
+        "{stdout}"
+    );
     meshio_agrees(&out.join("mesh.vtu"), mesh.num_vertices(), mesh.num_tets());
 }
 
@@ -49,7 +60,11 @@ fn meshio_agrees(path: &Path, points: usize, tets: usize) {
         Ok(o) if o.status.success() => {
             assert_eq!(text(&o.stdout).trim(), format!("{points} {tets}"));
         }
-        other => assert!(!required, "meshio could not read {}: {other:?}", path.display()),
+        other => assert!(
+            !required,
+            "meshio could not read {}: {other:?}",
+            path.display()
+        ),
     }
 }
 
@@ -58,19 +73,40 @@ fn mesh_from_flags_writes_all_files() {
     let dir = tempfile::tempdir().unwrap();
     let base = dir.path().join("m/small");
     let o = skinpatch(&[
-        "mesh", "--width-mm", "3", "--depth-mm", "2", "--top-layer-mm", "0.5",
-        "--bottom-layer-mm", "1", "--top-max-volume-mm3", "0.02", "--bottom-max-volume-mm3",
-        "0.1", "--refine-sphere", "0,0,0.4", "--refine-max-volume-mm3", "0.001",
-        "--out", base.to_str().unwrap(),
+        "mesh",
+        "--width-mm",
+        "3",
+        "--depth-mm",
+        "2",
+        "--top-layer-mm",
+        "0.5",
+        "--bottom-layer-mm",
+        "1",
+        "--top-max-volume-mm3",
+        "0.02",
+        "--bottom-max-volume-mm3",
+        "0.1",
+        "--refine-sphere",
+        "0,0,0.4",
+        "--refine-max-volume-mm3",
+        "0.001",
+        "--out",
+        base.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "stderr: {}", text(&o.stderr));
     for ext in ["node", "ele", "face", "vtu", "poly"] {
-        assert!(dir.path().join(format!("m/small.{ext}")).exists(), "{ext} missing");
+        assert!(
+            dir.path().join(format!("m/small.{ext}")).exists(),
+            "{ext} missing"
+        );
     }
     let mesh = io::read_tetgen(&base).unwrap();
     assert!((mesh.total_volume() - 9.0).abs() < 1e-9, "3 × 2 × 1.5 mm");
     let stdout = text(&o.stdout);
-    assert!(stdout.contains(&format!("tets {}", mesh.num_tets())), "{stdout}");
+    assert!(
+        stdout.contains(&format!("tets {}", mesh.num_tets())),
+        "{stdout}"
+    );
     assert!(stdout.contains("dihedral angles: min"), "{stdout}");
 }
 
@@ -80,7 +116,10 @@ fn mesh_inspects_a_file() {
     assert!(o.status.success(), "stderr: {}", text(&o.stderr));
     let stdout = text(&o.stdout);
     assert!(stdout.contains("tets 1144  vertices 344"), "{stdout}");
-    assert!(stdout.contains("region hypodermis (id 2): 690 tets"), "{stdout}");
+    assert!(
+        stdout.contains("region hypodermis (id 2): 690 tets"),
+        "{stdout}"
+    );
 }
 
 #[test]
@@ -88,7 +127,13 @@ fn help_explains_the_commands() {
     let o = skinpatch(&["mesh", "--help"]);
     assert!(o.status.success());
     let help = text(&o.stdout);
-    for flag in ["--scenario", "--out", "--refine-sphere", "--target-tets", "--radius-edge-max"] {
+    for flag in [
+        "--scenario",
+        "--out",
+        "--refine-sphere",
+        "--target-tets",
+        "--radius-edge-max",
+    ] {
         assert!(help.contains(flag), "{flag} missing from:\n{help}");
     }
     let o = skinpatch(&["--help"]);
@@ -104,20 +149,35 @@ fn bad_scenarios_fail_cleanly() {
     std::fs::create_dir_all(&out).unwrap();
     std::fs::write(out.join("mesh.vtu"), "earlier result").unwrap();
     for (toml, expected) in [
-        ("[mesh]\nwidht_mm = 10\n", "unknown key mesh.widht_mm; did you mean width_mm?"),
-        ("[mesh]\ntop_layer_mm = -1\n", "mesh.top_layer_mm must be > 0, got -1"),
+        (
+            "[mesh]\nwidht_mm = 10\n",
+            "unknown key mesh.widht_mm; did you mean width_mm?",
+        ),
+        (
+            "[mesh]\ntop_layer_mm = -1\n",
+            "mesh.top_layer_mm must be > 0, got -1",
+        ),
         ("[mesh]\nfile = \"missing.msh\"\n", "missing.msh"),
         ("[mesh\n", "line 1"),
     ] {
         let scenario = dir.path().join("bad.toml");
-        std::fs::write(&scenario, format!("{toml}\n[output]\ndir = {:?}\n", out.to_str().unwrap()))
-            .unwrap();
+        std::fs::write(
+            &scenario,
+            format!("{toml}\n[output]\ndir = {:?}\n", out.to_str().unwrap()),
+        )
+        .unwrap();
         let o = skinpatch(&["run", scenario.to_str().unwrap()]);
         assert!(!o.status.success());
         let stderr = text(&o.stderr);
-        assert!(stderr.contains(expected), "{stderr:?} should contain {expected:?}");
+        assert!(
+            stderr.contains(expected),
+            "{stderr:?} should contain {expected:?}"
+        );
         assert!(!stderr.contains("panicked"), "{stderr}");
-        assert_eq!(std::fs::read_to_string(out.join("mesh.vtu")).unwrap(), "earlier result");
+        assert_eq!(
+            std::fs::read_to_string(out.join("mesh.vtu")).unwrap(),
+            "earlier result"
+        );
     }
     let o = skinpatch(&["run", "no/such/scenario.toml"]);
     assert!(text(&o.stderr).contains("no/such/scenario.toml"));

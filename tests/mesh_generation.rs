@@ -12,9 +12,17 @@ fn check_patch(spec: &PatchSpec, mesh: &TetMesh) {
     let rel = |a: f64, b: f64| (a - b).abs() / b;
 
     // Volume of the box to 1e-9, every tet positive.
-    assert!(rel(mesh.total_volume(), w * d * h) < 1e-9, "volume {}", mesh.total_volume());
+    assert!(
+        rel(mesh.total_volume(), w * d * h) < 1e-9,
+        "volume {}",
+        mesh.total_volume()
+    );
     for t in 0..mesh.num_tets() {
-        assert!(mesh.tet_volume(t) > 0.0, "tet {t} volume {}", mesh.tet_volume(t));
+        assert!(
+            mesh.tet_volume(t) > 0.0,
+            "tet {t} volume {}",
+            mesh.tet_volume(t)
+        );
     }
 
     // Closed, oriented 2-manifold boundary of genus 0.
@@ -70,13 +78,20 @@ fn check_patch(spec: &PatchSpec, mesh: &TetMesh) {
             0.5 * ((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
         })
         .sum();
-    assert!((uv_area - 1.0).abs() < 1e-9, "UV area {uv_area} (counter-clockwise tiles cover [0,1]²)");
+    assert!(
+        (uv_area - 1.0).abs() < 1e-9,
+        "UV area {uv_area} (counter-clockwise tiles cover [0,1]²)"
+    );
 
     // Region of each tet matches the layer of its centroid.
     let interface = -spec.layers[0].thickness_mm;
     for t in 0..mesh.num_tets() {
         let z = mesh.tet_centroid(t).z;
-        let expected = if spec.layers.len() == 1 || z > interface { 1 } else { 2 };
+        let expected = if spec.layers.len() == 1 || z > interface {
+            1
+        } else {
+            2
+        };
         assert_eq!(mesh.tet_region[t], expected, "tet {t} at z = {z}");
     }
     let names: Vec<&str> = mesh.regions.iter().map(|r| r.name.as_str()).collect();
@@ -144,7 +159,10 @@ fn generation_is_deterministic() {
     let (a, b) = (generate(&spec).unwrap(), generate(&spec).unwrap());
     assert_eq!(a.tets, b.tets);
     let bits = |m: &TetMesh| -> Vec<u64> {
-        m.positions.iter().flat_map(|p| p.iter().map(|c| c.to_bits()).collect::<Vec<_>>()).collect()
+        m.positions
+            .iter()
+            .flat_map(|p| p.iter().map(|c| c.to_bits()).collect::<Vec<_>>())
+            .collect()
     };
     assert_eq!(bits(&a), bits(&b));
 }
@@ -155,7 +173,9 @@ fn generation_is_safe_from_many_threads() {
     let spec = small_patch(None);
     let reference = generate(&spec).unwrap().tets;
     std::thread::scope(|s| {
-        let handles: Vec<_> = (0..4).map(|_| s.spawn(|| generate(&spec).unwrap().tets)).collect();
+        let handles: Vec<_> = (0..4)
+            .map(|_| s.spawn(|| generate(&spec).unwrap().tets))
+            .collect();
         for h in handles {
             assert_eq!(h.join().unwrap(), reference);
         }
@@ -172,14 +192,27 @@ fn min_dihedral_bound_is_enforced() {
 
 #[test]
 fn bad_specs_are_rejected_before_tetgen() {
-    let cases: Vec<(Box<dyn Fn(&mut PatchSpec)>, &str)> = vec![
-        (Box::new(|s| s.width_mm = -1.0), "mesh.width_mm must be > 0, got -1"),
-        (Box::new(|s| s.depth_mm = f64::NAN), "mesh.depth_mm must be > 0, got NaN"),
-        (Box::new(|s| s.radius_edge_max = 1.0), "mesh.radius_edge_max must be ≥ 1.1"),
+    type Edit = Box<dyn Fn(&mut PatchSpec)>;
+    let cases: Vec<(Edit, &str)> = vec![
+        (
+            Box::new(|s| s.width_mm = -1.0),
+            "mesh.width_mm must be > 0, got -1",
+        ),
+        (
+            Box::new(|s| s.depth_mm = f64::NAN),
+            "mesh.depth_mm must be > 0, got NaN",
+        ),
+        (
+            Box::new(|s| s.radius_edge_max = 1.0),
+            "mesh.radius_edge_max must be ≥ 1.1",
+        ),
         (
             Box::new(|s| {
                 s.refine = Some(RefineZone {
-                    shape: ZoneShape::Box { center_mm: [0.0, 0.0], size_mm: [1.0, 1.0, 1.0] },
+                    shape: ZoneShape::Box {
+                        center_mm: [0.0, 0.0],
+                        size_mm: [1.0, 1.0, 1.0],
+                    },
                     max_volume_mm3: 0.01,
                 })
             }),
@@ -188,7 +221,10 @@ fn bad_specs_are_rejected_before_tetgen() {
         (
             Box::new(|s| {
                 s.refine = Some(RefineZone {
-                    shape: ZoneShape::Sphere { center_mm: [0.0, 0.0], radius_mm: 3.0 },
+                    shape: ZoneShape::Sphere {
+                        center_mm: [0.0, 0.0],
+                        radius_mm: 3.0,
+                    },
                     max_volume_mm3: 0.01,
                 })
             }),

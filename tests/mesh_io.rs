@@ -55,7 +55,11 @@ fn tetgen_reader_handles_comments_one_based_and_markers() {
     assert_eq!(mesh.regions.len(), 1);
     assert_eq!(mesh.regions[0].name, "region_5");
     // Two marked top faces, ten unmarked sides; top surface from markers.
-    let top: Vec<_> = mesh.boundary.iter().filter(|f| f.marker == markers::TOP).collect();
+    let top: Vec<_> = mesh
+        .boundary
+        .iter()
+        .filter(|f| f.marker == markers::TOP)
+        .collect();
     assert_eq!((top.len(), mesh.boundary.len()), (2, 12));
     assert_eq!(mesh.top.triangles.len(), 2);
     assert!((mesh.top.area(&mesh.positions) - 1.0).abs() < 1e-15);
@@ -83,7 +87,11 @@ fn gmsh_fixture_reads_with_counts_and_regions() {
     let expected = fixture_counts();
     assert_eq!(mesh.num_vertices(), expected.0);
     assert_eq!(mesh.num_tets(), expected.1);
-    let names: Vec<(&str, i32)> = mesh.regions.iter().map(|r| (r.name.as_str(), r.id)).collect();
+    let names: Vec<(&str, i32)> = mesh
+        .regions
+        .iter()
+        .map(|r| (r.name.as_str(), r.id))
+        .collect();
     assert_eq!(names, vec![("dermis", 1), ("hypodermis", 2)]);
     // 2 × 2 × 1 mm box, top layer 0.3 mm: volumes by region and depth.
     assert!((mesh.total_volume() - 4.0).abs() < 1e-9);
@@ -98,7 +106,10 @@ fn gmsh_fixture_reads_with_counts_and_regions() {
 /// (vertices, tets) of the Gmsh fixture, from its README (counted by meshio).
 fn fixture_counts() -> (usize, usize) {
     let text = std::fs::read_to_string(root().join("tests/fixtures/README.md")).unwrap();
-    let line = text.lines().find(|l| l.starts_with("two_layer_box.msh:")).unwrap();
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("two_layer_box.msh:"))
+        .unwrap();
     let nums: Vec<usize> = line
         .split(|c: char| !c.is_ascii_digit())
         .filter(|s| !s.is_empty())
@@ -128,9 +139,12 @@ fn vtu_reads_back_with_same_counts_and_data() {
 fn vtu_rejects_mismatched_arrays() {
     let mesh = generate(&small_patch(None)).unwrap();
     let mut grid = io::Grid::from_mesh(&mesh);
-    grid.cell_data.push(io::Field::f64("short", 1, vec![1.0; 3]));
+    grid.cell_data
+        .push(io::Field::f64("short", 1, vec![1.0; 3]));
     let dir = tempfile::tempdir().unwrap();
-    let err = io::write_vtu(&dir.path().join("x.vtu"), &grid).unwrap_err().to_string();
+    let err = io::write_vtu(&dir.path().join("x.vtu"), &grid)
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("cell array 'short' has 3 values"), "{err}");
     assert!(!dir.path().join("x.vtu").exists());
 }
@@ -156,13 +170,22 @@ fn shipped_patch_3k() {
 fn shipped_patch_25k() {
     let mesh = regenerates("patch_25k");
     let n = mesh.num_tets();
-    assert!((22_500..=27_500).contains(&n), "{n} tets, want 25,000 ± 10%");
+    assert!(
+        (22_500..=27_500).contains(&n),
+        "{n} tets, want 25,000 ± 10%"
+    );
     let (lo, hi) = mesh.bounds();
-    assert_eq!((lo.x, lo.y, lo.z, hi.x, hi.y, hi.z), (-5.0, -5.0, -5.0, 5.0, 5.0, 0.0));
+    assert_eq!(
+        (lo.x, lo.y, lo.z, hi.x, hi.y, hi.z),
+        (-5.0, -5.0, -5.0, 5.0, 5.0, 0.0)
+    );
     // Refined under the centre: tets near the top centre are smaller than at the rim.
     let (centre_edge, _) = max_edge_within(&mesh, &Vec3::zeros(), 1.0);
     let (rim_edge, _) = max_edge_within(&mesh, &Vec3::new(4.5, 4.5, 0.0), 1.0);
-    assert!(centre_edge < 0.6 * rim_edge, "centre {centre_edge} rim {rim_edge}");
+    assert!(
+        centre_edge < 0.6 * rim_edge,
+        "centre {centre_edge} rim {rim_edge}"
+    );
 }
 
 #[test]

@@ -68,7 +68,7 @@ pub enum ZoneShape {
 
 impl ZoneShape {
     /// The box that is meshed: `([x0, y0], [x1, y1], depth)`.
-    pub fn meshed_box(&self) -> ([f64; 2], [f64; 2], f64) {
+    pub fn meshed_box(&self) -> ZoneBox {
         let (c, half, depth) = match *self {
             ZoneShape::Sphere {
                 center_mm,
@@ -85,6 +85,9 @@ impl ZoneShape {
         )
     }
 }
+
+/// A zone's meshed box: `([x0, y0], [x1, y1], depth below the top)` (mm).
+pub type ZoneBox = ([f64; 2], [f64; 2], f64);
 
 /// A region of smaller tets near the top surface.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -140,12 +143,18 @@ impl PatchSpec {
         }
         for l in &self.layers {
             positive(&format!("layer '{}' thickness_mm", l.name), l.thickness_mm)?;
-            positive(&format!("layer '{}' max_volume_mm3", l.name), l.max_volume_mm3)?;
+            positive(
+                &format!("layer '{}' max_volume_mm3", l.name),
+                l.max_volume_mm3,
+            )?;
         }
         if !(self.radius_edge_max >= 1.1 && self.radius_edge_max.is_finite()) {
             return Err(Error::parameter(
                 "mesh.radius_edge_max",
-                format!("must be ≥ 1.1 (TetGen may not terminate below), got {}", self.radius_edge_max),
+                format!(
+                    "must be ≥ 1.1 (TetGen may not terminate below), got {}",
+                    self.radius_edge_max
+                ),
             ));
         }
         if !(0.0..60.0).contains(&self.min_dihedral_deg) {
@@ -193,7 +202,9 @@ impl PatchSpec {
             if (zd - z).abs() < tol {
                 return Err(Error::parameter(
                     key,
-                    format!("zone depth {zd} mm coincides with the layer interface at {z} mm; move it"),
+                    format!(
+                        "zone depth {zd} mm coincides with the layer interface at {z} mm; move it"
+                    ),
                 ));
             }
         }
@@ -346,7 +357,12 @@ fn build_plc(spec: &PatchSpec, scale: f64) -> Plc {
         let split = (k + 1 < inner.len()).then(|| &inner[k]);
         plc.plane(ring, split, marker);
     }
-    let side_markers = [markers::Y_MIN, markers::X_MAX, markers::Y_MAX, markers::X_MIN];
+    let side_markers = [
+        markers::Y_MIN,
+        markers::X_MAX,
+        markers::Y_MAX,
+        markers::X_MIN,
+    ];
     for k in 0..last {
         plc.sides(&outer[k], &outer[k + 1], side_markers);
     }
@@ -364,7 +380,7 @@ fn add_regions(
     plc: &mut Plc,
     spec: &PatchSpec,
     levels: &[f64],
-    zone: Option<(RefineZone, ([f64; 2], [f64; 2], f64))>,
+    zone: Option<(RefineZone, ZoneBox)>,
     scale: f64,
 ) {
     let corner = [-spec.width_mm / 2.0, -spec.depth_mm / 2.0];
@@ -377,7 +393,8 @@ fn add_regions(
             None => 0.5 * spec.width_mm.min(spec.depth_mm),
         };
         let p = Vec3::new(corner[0] + margin, corner[1] + margin, 0.5 * (top + bottom));
-        plc.regions.push((layer.id, p, layer.max_volume_mm3 * scale));
+        plc.regions
+            .push((layer.id, p, layer.max_volume_mm3 * scale));
         if let Some((z, (lo, hi, zd))) = zone {
             let (a, b) = (top.min(0.0), bottom.max(-zd));
             if a > b {

@@ -161,7 +161,10 @@ impl TetMesh {
                 tets.len()
             )));
         }
-        if let Some(i) = positions.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+        if let Some(i) = positions
+            .iter()
+            .position(|p| !p.iter().all(|c| c.is_finite()))
+        {
             return Err(bad(format!(
                 "vertex {i} has a non-finite coordinate {:?}",
                 positions[i].as_slice()
@@ -170,7 +173,8 @@ impl TetMesh {
         check_indices(&tets, positions.len()).map_err(bad)?;
         orient(&positions, &mut tets).map_err(bad)?;
         let regions = collect_regions(&tet_region, region_names).map_err(bad)?;
-        let (positions, tets, face_markers) = drop_unused_vertices(positions, tets, face_markers);
+        let (mut positions, mut face_markers) = (positions, face_markers);
+        drop_unused_vertices(&mut positions, &mut tets, &mut face_markers);
         let boundary = surface::boundary_faces(&tets, &face_markers).map_err(bad)?;
         let top = TopSurface::extract(&positions, &boundary).map_err(bad)?;
         Ok(TetMesh {
@@ -286,7 +290,7 @@ fn orient(positions: &[Vec3], tets: &mut [[usize; 4]]) -> std::result::Result<()
             .iter()
             .map(|e| e.norm())
             .fold(0.0, f64::max);
-        if !(v6.abs() > 1e-10 * longest.powi(3)) {
+        if v6.is_nan() || v6.abs() <= 1e-10 * longest.powi(3) {
             return Err(format!(
                 "tet {t} is degenerate (volume {:.3e} mm³, longest edge {longest:.3e} mm)",
                 v6 / 6.0
@@ -344,36 +348,37 @@ fn collect_regions(
 
 /// Removes vertices that no tet uses and renumbers the rest in order.
 fn drop_unused_vertices(
-    positions: Vec<Vec3>,
-    mut tets: Vec<[usize; 4]>,
-    face_markers: HashMap<[usize; 3], i32>,
-) -> (Vec<Vec3>, Vec<[usize; 4]>, HashMap<[usize; 3], i32>) {
+    positions: &mut Vec<Vec3>,
+    tets: &mut [[usize; 4]],
+    face_markers: &mut HashMap<[usize; 3], i32>,
+) {
     let mut used = vec![false; positions.len()];
-    for tet in &tets {
+    for tet in tets.iter() {
         for &v in tet {
             used[v] = true;
         }
     }
     let unused = used.iter().filter(|&&u| !u).count();
     if unused == 0 {
-        return (positions, tets, face_markers);
+        return;
     }
     log::warn!("dropping {unused} vertices that belong to no tetrahedron");
     let mut new_index = vec![usize::MAX; positions.len()];
-    let mut kept = Vec::with_capacity(positions.len() - unused);
-    for (i, p) in positions.into_iter().enumerate() {
-        if used[i] {
-            new_index[i] = kept.len();
-            kept.push(p);
+    let mut kept = 0;
+    for (i, &u) in used.iter().enumerate() {
+        if u {
+            new_index[i] = kept;
+            positions[kept] = positions[i];
+            kept += 1;
         }
     }
-    for tet in &mut tets {
+    positions.truncate(kept);
+    for tet in tets.iter_mut() {
         *tet = tet.map(|v| new_index[v]);
     }
-    let markers = face_markers
+    *face_markers = std::mem::take(face_markers)
         .into_iter()
         .filter(|(k, _)| k.iter().all(|&v| v < used.len() && used[v]))
         .map(|(k, m)| (face_key(k.map(|v| new_index[v])), m))
         .collect();
-    (kept, tets, markers)
 }

@@ -162,6 +162,21 @@ impl fmt::Display for QualityReport {
     }
 }
 
+/// Longest edge among the tets that have a vertex within `radius` of `centre`
+/// (mm), and how many such tets there are: a check of local resolution.
+pub fn max_edge_within(mesh: &TetMesh, centre: &Vec3, radius: f64) -> (f64, usize) {
+    let mut longest: f64 = 0.0;
+    let mut count = 0;
+    for t in 0..mesh.num_tets() {
+        let p = mesh.tet_points(t);
+        if p.iter().any(|q| (q - centre).norm() <= radius) {
+            count += 1;
+            longest = edge_lengths(&p).into_iter().fold(longest, f64::max);
+        }
+    }
+    (longest, count)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -188,12 +203,7 @@ mod tests {
 
     #[test]
     fn right_corner_tet_has_right_dihedral_angles() {
-        let p = [
-            Vec3::zeros(),
-            Vec3::x(),
-            Vec3::y(),
-            Vec3::z(),
-        ];
+        let p = [Vec3::zeros(), Vec3::x(), Vec3::y(), Vec3::z()];
         let mut a = dihedral_angles(&p).map(f64::to_degrees);
         a.sort_by(f64::total_cmp);
         // Three 90° angles at the corner edges, three of atan(√2) at the slanted face.
@@ -202,19 +212,4 @@ mod tests {
             assert!((got - want).abs() < 1e-9, "{got} vs {want}");
         }
     }
-}
-
-/// Longest edge among the tets that have a vertex within `radius` of `centre`
-/// (mm), and how many such tets there are: a check of local resolution.
-pub fn max_edge_within(mesh: &TetMesh, centre: &Vec3, radius: f64) -> (f64, usize) {
-    let mut longest: f64 = 0.0;
-    let mut count = 0;
-    for t in 0..mesh.num_tets() {
-        let p = mesh.tet_points(t);
-        if p.iter().any(|q| (q - centre).norm() <= radius) {
-            count += 1;
-            longest = edge_lengths(&p).into_iter().fold(longest, f64::max);
-        }
-    }
-    (longest, count)
 }

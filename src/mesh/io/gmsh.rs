@@ -30,7 +30,9 @@ pub fn read_gmsh(path: &Path) -> Result<TetMesh> {
     while let Some(r) = lines.next() {
         let section = r.fields[0];
         let Some(name) = section.strip_prefix('$') else {
-            return Err(r.error(format!("expected a section header like $Nodes, got '{section}'")));
+            return Err(r.error(format!(
+                "expected a section header like $Nodes, got '{section}'"
+            )));
         };
         match name {
             "MeshFormat" => {
@@ -107,7 +109,10 @@ fn read_format(lines: &mut Lines) -> Result<()> {
     let r = lines.next_record("the format line 'version file-type data-size'")?;
     r.expect_len(3, "the format line")?;
     if r.fields[0] != "4.1" {
-        return Err(r.error(format!("MSH version {} is not supported; save as 4.1", r.fields[0])));
+        return Err(r.error(format!(
+            "MSH version {} is not supported; save as 4.1",
+            r.fields[0]
+        )));
     }
     if r.fields[1] != "0" {
         return Err(r.error("binary MSH is not supported; save as ASCII (Mesh.Binary = 0)"));
@@ -154,7 +159,9 @@ fn read_physical_names(lines: &mut Lines, state: &mut State) -> Result<()> {
             .filter(|s| !s.is_empty())
             .ok_or_else(|| bad("physical name: missing quoted name"))?;
         if dim == 3 {
-            state.names.insert(tag, name.replace(char::is_whitespace, "_"));
+            state
+                .names
+                .insert(tag, name.replace(char::is_whitespace, "_"));
         }
     }
     Ok(())
@@ -209,7 +216,11 @@ fn read_nodes(lines: &mut Lines, state: &mut State) -> Result<()> {
             let c = lines.next_record("node coordinates")?;
             c.expect_len(width, "a node coordinate line")?;
             let p = Vec3::new(c.float(0, "x")?, c.float(1, "y")?, c.float(2, "z")?);
-            if state.node_index.insert(tag, state.positions.len()).is_some() {
+            if state
+                .node_index
+                .insert(tag, state.positions.len())
+                .is_some()
+            {
                 return Err(c.error(format!("node tag {tag} (line {tag_line}) is defined twice")));
             }
             state.positions.push(p);

@@ -148,10 +148,15 @@ fn read_ele(path: &Path, num_vertices: usize, offset: usize) -> Result<EleData> 
         None => 4,
     };
     if per_tet != 4 && per_tet != 10 {
-        return Err(head.error(format!("nodes per tetrahedron must be 4 or 10, got {per_tet}")));
+        return Err(head.error(format!(
+            "nodes per tetrahedron must be 4 or 10, got {per_tet}"
+        )));
     }
     if per_tet == 10 {
-        log::warn!("{}: 10-node tets; using their corner nodes only", path.display());
+        log::warn!(
+            "{}: 10-node tets; using their corner nodes only",
+            path.display()
+        );
     }
     let attributes = match head.fields.get(2) {
         Some(_) => count(&head, 2, "number of attributes")?,
@@ -245,7 +250,11 @@ fn read_face(path: &Path, num_vertices: usize, offset: usize) -> Result<HashMap<
 pub fn write_tetgen(mesh: &TetMesh, base: &Path) -> Result<()> {
     let [node_path, ele_path, face_path] = tetgen_paths(base);
     let mut s = String::new();
-    let _ = writeln!(s, "# skinpatch mesh: positions in mm\n{} 3 0 0", mesh.num_vertices());
+    let _ = writeln!(
+        s,
+        "# skinpatch mesh: positions in mm\n{} 3 0 0",
+        mesh.num_vertices()
+    );
     for (i, p) in mesh.positions.iter().enumerate() {
         let _ = writeln!(s, "{i} {:?} {:?} {:?}", p.x, p.y, p.z);
     }

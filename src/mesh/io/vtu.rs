@@ -144,14 +144,10 @@ fn attribute(f: &Field) -> Attribute {
 pub fn write_vtu(path: &Path, grid: &Grid) -> Result<()> {
     grid.check()?;
     let points: Vec<f64> = grid.points.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
-    let connectivity = grid
-        .tets
-        .iter()
-        .flat_map(|t| t.map(|v| v as u64))
-        .collect();
+    let connectivity = grid.tets.iter().flat_map(|t| t.map(|v| v as u64)).collect();
     let offsets = (1..=grid.tets.len() as u64).map(|k| 4 * k).collect();
     let vtk = Vtk {
-        version: Version::new((1, 0)),
+        version: Version::new(),
         title: String::new(),
         byte_order: ByteOrder::LittleEndian,
         file_path: None,
