@@ -28,7 +28,7 @@
 
 use std::sync::Mutex;
 
-use super::{markers, RawMesh, TetMesh, Vec3};
+use super::{markers, TetMesh, Vec3};
 use crate::error::{Error, Result};
 
 /// Serialises all calls into TetGen.
@@ -408,6 +408,7 @@ fn add_regions(
 
 #[cfg(feature = "tetgen")]
 fn run_tetgen(spec: &PatchSpec, scale: f64) -> Result<TetMesh> {
+    use super::RawMesh;
     use std::collections::{BTreeMap, HashMap};
     let plc = build_plc(spec, scale);
     let fail = |e: &str| Error::MeshGeneration(format!("TetGen: {e}"));
@@ -481,6 +482,7 @@ fn run_tetgen(spec: &PatchSpec, scale: f64) -> Result<TetMesh> {
     ))
 }
 
+#[cfg(feature = "tetgen")]
 fn check_min_dihedral(mesh: &TetMesh, bound_deg: f64) -> Result<()> {
     if bound_deg <= 0.0 {
         return Ok(());
