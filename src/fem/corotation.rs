@@ -1,0 +1,270 @@
+//! Corotational linear tetrahedra (Müller & Gross 2004) with the invertible
+//! rotation of Irving et al. 2004 (DESIGN §5.2).
+//!
+//! Per tet with rest vertices `X0..X3`, `Dm = [X1−X0, X2−X0, X3−X0]`; the
+//! shape-function gradients are the rows of `Dm⁻¹` (`g1..g3`) and
+//! `g0 = −(g1 + g2 + g3)`, so `F = Σ_a x_a ⊗ g_a = Ds·Dm⁻¹`.
+//!
+//! The rest stiffness of isotropic linear elasticity, in 3×3 blocks:
+//! `K0_ab = V [λ g_a g_bᵀ + μ g_b g_aᵀ + μ (g_a·g_b) I]`.
+//!
+//! Rotation: SVD `F = U Σ Vᵀ`; when `det U < 0` or `det V < 0` the column of
+//! the smallest singular value is negated (and that σ with it), so `U`, `V`
+//! are rotations and an inverted tet has one negative σ̂. `R = U Vᵀ`.
+//!
+//! Force `f_a = −R Σ_b K0_ab (Rᵀ x_b − X_b)`, stiffness `K_ab ≈ R K0_ab Rᵀ`.
+//! Because `RᵀF = V Σ̂ Vᵀ` is symmetric, this force is exactly minus the
+//! gradient of the corotated energy
+//! `Ψ = V [μ Σ_i (σ̂_i − 1)² + (λ/2)(Σ_i σ̂_i − 3)²]`,
+//! which the tests check by finite differences.
+
+use nalgebra::{Matrix3, Vector3};
+
+use super::material::Material;
+use crate::mesh::Vec3;
+
+/// Precomputed rest data of one tet.
+#[derive(Clone, Debug)]
+pub struct RestElement {
+    /// `Dm⁻¹`.
+    pub dm_inv: Matrix3<f64>,
+    /// Rest volume (mm³).
+    pub volume: f64,
+    /// Shape-function gradients `g_a` (1/mm).
+    pub grads: [Vector3<f64>; 4],
+    /// Rest stiffness blocks `K0_ab` (N/mm).
+    pub k0: [[Matrix3<f64>; 4]; 4],
+    /// Rest positions (mm).
+    pub rest: [Vec3; 4],
+    /// Shear modulus μ (MPa).
+    pub mu: f64,
+    /// Lamé λ (MPa).
+    pub lambda: f64,
+}
+
+impl RestElement {
+    /// Rest data of the positively oriented tet `rest` with `material`.
+    pub fn new(rest: [Vec3; 4], material: &Material) -> RestElement {
+        let dm = Matrix3::from_columns(&[rest[1] - rest[0], rest[2] - rest[0], rest[3] - rest[0]]);
+        let volume = dm.determinant() / 6.0;
+        let dm_inv = dm
+            .try_inverse()
+            .expect("mesh validation rejects degenerate tets");
+        let g1 = dm_inv.row(0).transpose();
+        let g2 = dm_inv.row(1).transpose();
+        let g3 = dm_inv.row(2).transpose();
+        let grads = [-(g1 + g2 + g3), g1, g2, g3];
+        let (mu, lambda) = (material.mu(), material.lambda());
+        let k0 = std::array::from_fn(|a| {
+            std::array::from_fn(|b| {
+                let (ga, gb) = (&grads[a], &grads[b]);
+                (ga * gb.transpose() * lambda
+                    + gb * ga.transpose() * mu
+                    + Matrix3::identity() * (mu * ga.dot(gb)))
+                    * volume
+            })
+        });
+        RestElement {
+            dm_inv,
+            volume,
+            grads,
+            k0,
+            rest,
+            mu,
+            lambda,
+        }
+    }
+
+    /// Deformation gradient `F = Σ_a x_a ⊗ g_a`.
+    pub fn deformation_gradient(&self, x: &[Vec3; 4]) -> Matrix3<f64> {
+        let ds = Matrix3::from_columns(&[x[1] - x[0], x[2] - x[0], x[3] - x[0]]);
+        ds * self.dm_inv
+    }
+
+    /// Elastic forces on the four vertices at positions `x`, with rotation `r`.
+    pub fn forces(&self, x: &[Vec3; 4], r: &Matrix3<f64>) -> [Vec3; 4] {
+        let rt = r.transpose();
+        let u: [Vec3; 4] = std::array::from_fn(|b| rt * x[b] - self.rest[b]);
+        std::array::from_fn(|a| {
+            let mut s = Vec3::zeros();
+            for (b, ub) in u.iter().enumerate() {
+                s += self.k0[a][b] * ub;
+            }
+            -(r * s)
+        })
+    }
+
+    /// Corotated elastic energy at `x` (N·mm).
+    pub fn energy(&self, x: &[Vec3; 4]) -> f64 {
+        let sigma = Corotation::of(&self.deformation_gradient(x)).sigma;
+        let dev: f64 = sigma.iter().map(|s| (s - 1.0).powi(2)).sum();
+        let tr = sigma.sum() - 3.0;
+        self.volume * (self.mu * dev + 0.5 * self.lambda * tr * tr)
+    }
+}
+
+/// The sign-corrected SVD of a deformation gradient.
+#[derive(Clone, Copy, Debug)]
+pub struct Corotation {
+    /// Rotation `R = U Vᵀ`.
+    pub r: Matrix3<f64>,
+    /// Left rotation (principal directions in the deformed frame, columns).
+    pub u: Matrix3<f64>,
+    /// Right rotation (principal directions in the rest frame, columns).
+    pub v: Matrix3<f64>,
+    /// Sign-corrected singular values σ̂, descending except that an inverted
+    /// tet's negative value sits last.
+    pub sigma: Vector3<f64>,
+}
+
+impl Corotation {
+    /// Computes the rotation of `f`. A non-finite `f` (which the solver
+    /// guards against) yields the identity.
+    pub fn of(f: &Matrix3<f64>) -> Corotation {
+        let fallback = Corotation {
+            r: Matrix3::identity(),
+            u: Matrix3::identity(),
+            v: Matrix3::identity(),
+            sigma: Vector3::from_fn(|i, _| f[(i, i)]),
+        };
+        if !f.iter().all(|c| c.is_finite()) {
+            return fallback;
+        }
+        let Some(svd) = f.try_svd(true, true, 1e-15, 200) else {
+            return fallback;
+        };
+        let (Some(mut u), Some(v_t)) = (svd.u, svd.v_t) else {
+            return fallback;
+        };
+        let mut v = v_t.transpose();
+        let mut sigma = svd.singular_values;
+        // Order descending so the smallest singular value is last.
+        let mut order = [0usize, 1, 2];
+        order.sort_by(|&i, &j| sigma[j].total_cmp(&sigma[i]));
+        if order != [0, 1, 2] {
+            let (u0, v0, s0) = (u, v, sigma);
+            for (k, &i) in order.iter().enumerate() {
+                u.set_column(k, &u0.column(i));
+                v.set_column(k, &v0.column(i));
+                sigma[k] = s0[i];
+            }
+        }
+        if u.determinant() < 0.0 {
+            u.column_mut(2).neg_mut();
+            sigma[2] = -sigma[2];
+        }
+        if v.determinant() < 0.0 {
+            v.column_mut(2).neg_mut();
+            sigma[2] = -sigma[2];
+        }
+        Corotation {
+            r: u * v.transpose(),
+            u,
+            v,
+            sigma,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Rotation3;
+
+    fn material() -> Material {
+        Material {
+            youngs_mpa: 0.15,
+            poisson: 0.45,
+            density_t_mm3: 1.1e-9,
+        }
+    }
+
+    fn rest_tet() -> [Vec3; 4] {
+        [
+            Vec3::new(0.1, -0.2, 0.0),
+            Vec3::new(1.3, 0.1, -0.1),
+            Vec3::new(0.2, 0.9, 0.2),
+            Vec3::new(0.3, 0.2, 1.1),
+        ]
+    }
+
+    fn element() -> RestElement {
+        RestElement::new(rest_tet(), &material())
+    }
+
+    fn deform(f: &Matrix3<f64>, t: Vec3) -> [Vec3; 4] {
+        rest_tet().map(|p| f * p + t)
+    }
+
+    #[test]
+    fn rest_stiffness_is_symmetric_and_kills_rigid_translation() {
+        let e = element();
+        for a in 0..4 {
+            let mut row = Matrix3::zeros();
+            for b in 0..4 {
+                assert!((e.k0[a][b] - e.k0[b][a].transpose()).norm() < 1e-15);
+                row += e.k0[a][b];
+            }
+            assert!(row.norm() < 1e-14, "row {a} sums to {row}");
+        }
+    }
+
+    #[test]
+    fn rigid_rotation_gives_zero_force_and_unit_stretches() {
+        let e = element();
+        let rot = Rotation3::from_euler_angles(0.0, 0.0, std::f64::consts::FRAC_PI_2);
+        let x = deform(rot.matrix(), Vec3::new(3.0, -1.0, 2.0));
+        let c = Corotation::of(&e.deformation_gradient(&x));
+        assert!((c.r - rot.matrix()).norm() < 1e-12);
+        for s in c.sigma.iter() {
+            assert!((s - 1.0).abs() < 1e-12);
+        }
+        for f in e.forces(&x, &c.r) {
+            assert!(f.norm() < 1e-14, "force {f}");
+        }
+        assert!(e.energy(&x).abs() < 1e-28);
+    }
+
+    #[test]
+    fn forces_are_minus_the_energy_gradient() {
+        let e = element();
+        let f = Matrix3::new(1.1, 0.2, -0.1, 0.05, 0.9, 0.15, -0.2, 0.1, 1.2);
+        // Also an inverted configuration (det F < 0).
+        let inverted = Matrix3::new(1.0, 0.1, 0.0, 0.0, 1.0, 0.2, 0.1, 0.0, -0.4);
+        for f in [f, inverted] {
+            let x = deform(&f, Vec3::new(0.3, 0.1, -0.2));
+            let c = Corotation::of(&e.deformation_gradient(&x));
+            let forces = e.forces(&x, &c.r);
+            let h = 1e-6;
+            for a in 0..4 {
+                for k in 0..3 {
+                    let (mut xp, mut xm) = (x, x);
+                    xp[a][k] += h;
+                    xm[a][k] -= h;
+                    let grad = (e.energy(&xp) - e.energy(&xm)) / (2.0 * h);
+                    let scale = forces.iter().map(|v| v.norm()).fold(0.0, f64::max);
+                    assert!(
+                        (forces[a][k] + grad).abs() < 1e-7 * scale,
+                        "vertex {a} axis {k}: force {} vs −∂Ψ {}",
+                        forces[a][k],
+                        -grad
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn inverted_tet_has_one_negative_stretch_and_rotations() {
+        let f = Matrix3::new(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -0.5);
+        let c = Corotation::of(&f);
+        assert!((c.u.determinant() - 1.0).abs() < 1e-12);
+        assert!((c.v.determinant() - 1.0).abs() < 1e-12);
+        let mut s: Vec<f64> = c.sigma.iter().copied().collect();
+        s.sort_by(f64::total_cmp);
+        assert_eq!(s.iter().filter(|v| **v < 0.0).count(), 1);
+        assert!((s[0] + 0.5).abs() < 1e-12 && (s[1] - 1.0).abs() < 1e-12);
+        let back = c.u * nalgebra::Matrix3::from_diagonal(&c.sigma) * c.v.transpose();
+        assert!((back - f).norm() < 1e-12);
+    }
+}

@@ -1,0 +1,106 @@
+//! Isotropic linear-elastic materials per region, in the FEM's unit system
+//! (mm, N, MPa, t/mm³, s).
+//!
+//! Lamé parameters from Young's modulus E and Poisson's ratio ν:
+//! `μ = E / (2(1 + ν))`, `λ = E ν / ((1 + ν)(1 − 2ν))`.
+//!
+//! Published skin moduli vary by orders of magnitude with site, age, loading
+//! rate and test method: epidermis ~1 MPa in vitro, dermis 0.1–1 MPa,
+//! hypodermis a few kPa. The defaults (top layer 150 kPa, bottom 15 kPa,
+//! ν = 0.45, 1100 kg/m³) are a soft, plausible middle, not a measurement.
+
+use crate::error::{Error, Result};
+
+/// Material constants of one region, in FEM units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Material {
+    /// Young's modulus (MPa).
+    pub youngs_mpa: f64,
+    /// Poisson's ratio, 0 ≤ ν < 0.5.
+    pub poisson: f64,
+    /// Mass density (t/mm³); 1100 kg/m³ is 1.1e-9 t/mm³.
+    pub density_t_mm3: f64,
+}
+
+impl Material {
+    /// Builds a material from scenario units (kPa, kg/m³), validating ranges.
+    /// `region` names the material in errors (`material.dermis.poisson …`).
+    pub fn from_scenario_units(
+        region: &str,
+        youngs_kpa: f64,
+        poisson: f64,
+        density_kg_m3: f64,
+    ) -> Result<Material> {
+        let key = |k: &str| format!("material.{region}.{k}");
+        if !(youngs_kpa.is_finite() && youngs_kpa > 0.0) {
+            return Err(Error::parameter(
+                key("youngs_modulus_kpa"),
+                format!("must be > 0, got {youngs_kpa}"),
+            ));
+        }
+        if !(0.0..0.5).contains(&poisson) {
+            return Err(Error::parameter(
+                key("poisson_ratio"),
+                format!("must be in [0, 0.5), got {poisson}"),
+            ));
+        }
+        if !(density_kg_m3.is_finite() && density_kg_m3 > 0.0) {
+            return Err(Error::parameter(
+                key("density_kg_m3"),
+                format!("must be > 0, got {density_kg_m3}"),
+            ));
+        }
+        Ok(Material {
+            youngs_mpa: youngs_kpa * 1e-3,
+            poisson,
+            density_t_mm3: density_kg_m3 * 1e-12,
+        })
+    }
+
+    /// Shear modulus μ (MPa).
+    pub fn mu(&self) -> f64 {
+        self.youngs_mpa / (2.0 * (1.0 + self.poisson))
+    }
+
+    /// Lamé's first parameter λ (MPa).
+    pub fn lambda(&self) -> f64 {
+        let nu = self.poisson;
+        self.youngs_mpa * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lame_parameters_and_units() {
+        let m = Material::from_scenario_units("dermis", 150.0, 0.45, 1100.0).unwrap();
+        assert_eq!(m.youngs_mpa, 0.15);
+        assert!((m.density_t_mm3 - 1.1e-9).abs() < 1e-24);
+        assert!((m.mu() - 0.15 / 2.9).abs() < 1e-15);
+        assert!((m.lambda() - 0.15 * 0.45 / (1.45 * 0.1)).abs() < 1e-14);
+        // E = μ(3λ + 2μ)/(λ + μ)
+        let (l, mu) = (m.lambda(), m.mu());
+        assert!((mu * (3.0 * l + 2.0 * mu) / (l + mu) - 0.15).abs() < 1e-14);
+    }
+
+    #[test]
+    fn bad_values_name_region_and_key() {
+        let e = Material::from_scenario_units("dermis", -1.0, 0.3, 1000.0).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "material.dermis.youngs_modulus_kpa must be > 0, got -1"
+        );
+        let e = Material::from_scenario_units("fat", 1.0, 0.5, 1000.0).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "material.fat.poisson_ratio must be in [0, 0.5), got 0.5"
+        );
+        let e = Material::from_scenario_units("fat", 1.0, 0.3, f64::NAN).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "material.fat.density_kg_m3 must be > 0, got NaN"
+        );
+    }
+}
