@@ -3,6 +3,7 @@
 //! * [`material`]: per-region isotropic materials and Lamé parameters;
 //! * [`corotation`]: per-element rest data, rotation, forces, energy.
 
+pub mod assembly;
 pub mod corotation;
 pub mod material;
 
