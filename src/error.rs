@@ -61,6 +61,10 @@ pub enum Error {
     #[error("mesh generation failed: {0}")]
     MeshGeneration(String),
 
+    /// The simulation could not reach equilibrium (names the frame and residual).
+    #[error("solver failed: {0}")]
+    Solver(String),
+
     /// A feature needed for the request was disabled at build time.
     #[error("{0}")]
     FeatureDisabled(String),

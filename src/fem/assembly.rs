@@ -16,7 +16,6 @@ use nalgebra::Matrix3;
 use nalgebra_sparse::CsrMatrix;
 use rayon::prelude::*;
 
-use super::corotation::RestElement;
 use crate::mesh::Vec3;
 
 /// One tet touching a node: the tet, the node's local index in it, and for
@@ -113,8 +112,12 @@ impl Assembly {
         &self.incidences[self.incidence_start[i]..self.incidence_start[i + 1]]
     }
 
-    /// Refills the stiffness values with `K_ab = R K0_ab Rᵀ` of every tet.
-    pub fn assemble_stiffness(&mut self, rest: &[RestElement], rotations: &[Matrix3<f64>]) {
+    /// Refills the stiffness values from per-tet blocks: `block(tet, a, b)`
+    /// is the 3×3 coupling of the tet's local vertices `a` and `b`.
+    pub fn assemble_stiffness<B>(&mut self, block: B)
+    where
+        B: Fn(usize, usize, usize) -> Matrix3<f64> + Sync,
+    {
         let starts = &self.neighbour_start;
         let mut rows: Vec<&mut [f64]> = Vec::with_capacity(starts.len() - 1);
         let mut rest_values = self.matrix.values_mut();
@@ -130,11 +133,9 @@ impl Assembly {
             values.fill(0.0);
             let n = values.len() / 9;
             for inc in &incidences[incidence_start[i]..incidence_start[i + 1]] {
-                let e = &rest[inc.tet as usize];
-                let r = &rotations[inc.tet as usize];
                 let a = inc.local as usize;
                 for (b, &slot) in inc.slots.iter().enumerate() {
-                    let block = r * e.k0[a][b] * r.transpose();
+                    let block = block(inc.tet as usize, a, b);
                     let k = slot as usize;
                     for row in 0..3 {
                         let base = 3 * n * row + 3 * k;
@@ -202,7 +203,7 @@ pub fn multiply(matrix: &CsrMatrix<f64>, x: &[f64], y: &mut [f64]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fem::Material;
+    use crate::fem::{Material, RestElement};
 
     fn two_tets() -> (Vec<Vec3>, Vec<[usize; 4]>) {
         let p = vec![
@@ -230,7 +231,10 @@ mod tests {
             .collect();
         let rot = nalgebra::Rotation3::from_euler_angles(0.3, -0.2, 0.7).into_inner();
         let mut asm = Assembly::new(5, &tets);
-        asm.assemble_stiffness(&rest, &[rot, Matrix3::identity()]);
+        let rotations = [rot, Matrix3::identity()];
+        asm.assemble_stiffness(|t, a, b| {
+            rotations[t] * rest[t].k0[a][b] * rotations[t].transpose()
+        });
         let mut dense = nalgebra::DMatrix::<f64>::zeros(15, 15);
         for (t, tet) in tets.iter().enumerate() {
             let r = if t == 0 { rot } else { Matrix3::identity() };

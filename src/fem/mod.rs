@@ -4,8 +4,11 @@
 //! * [`corotation`]: per-element rest data, rotation, forces, energy.
 
 pub mod assembly;
+pub mod boundary;
 pub mod corotation;
+pub mod integrate;
 pub mod material;
+pub mod solve;
 
 pub use corotation::{Corotation, RestElement};
 pub use material::Material;

@@ -1,0 +1,230 @@
+//! Boundary conditions of the box patch (DESIGN §5.2).
+//!
+//! Node sets are found geometrically on the mesh's bounding box (tolerance
+//! 1e-9 of its diagonal), so they work for generated and loaded box meshes:
+//! `bottom` (z = z_min), `x_min`, `x_max`, `y_min`, `y_max`, `top` (z = z_max).
+//!
+//! * bottom: `fixed` (all components) or `rollers` (z only);
+//! * sides: `clamped` (all components), `rollers` (normal component only) or `free`;
+//! * caliper: the two sides normal to `axis` act as frictionless jaws that
+//!   move apart (stretch > 1) or together (< 1): their axis coordinate is
+//!   `c + s(t)·(X − c)` about the patch centre c, other components follow
+//!   nothing (the jaws slide);
+//! * prescribed displacement of a named node set over time (all components).
+//!
+//! Keyframed quantities interpolate linearly in time and hold their end values
+//! outside the keyframe range.
+//!
+//! With `bottom = rollers`, `sides = rollers` on the other axis and a free
+//! top, a caliper stretch `s` has the exact homogeneous solution
+//! `F = diag(s, 1, λ_z)` in every layer (plane strain across the other axis,
+//! zero normal stress at the top), so every tet's largest stretch is `s`.
+
+use nalgebra::Vector3;
+
+use super::solve::Filter;
+use crate::mesh::{TetMesh, Vec3};
+
+/// Condition on the bottom face.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BottomCondition {
+    /// All components fixed.
+    Fixed,
+    /// Vertical component fixed, sliding in x and y.
+    Rollers,
+}
+
+/// Condition on the four side faces.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SideCondition {
+    /// All components fixed.
+    Clamped,
+    /// Normal component fixed.
+    Rollers,
+    /// Traction-free.
+    Free,
+}
+
+/// A piecewise-linear function of time.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Keyframes<T> {
+    /// (time in s, value), strictly increasing in time.
+    pub points: Vec<(f64, T)>,
+}
+
+impl<T> Keyframes<T>
+where
+    T: Copy + std::ops::Mul<f64, Output = T> + std::ops::Add<Output = T>,
+{
+    /// The value at time `t` (held constant outside the range).
+    pub fn at(&self, t: f64) -> T {
+        let p = &self.points;
+        if t <= p[0].0 {
+            return p[0].1;
+        }
+        for w in p.windows(2) {
+            let ((t0, v0), (t1, v1)) = (w[0], w[1]);
+            if t <= t1 {
+                let a = (t - t0) / (t1 - t0);
+                return v0 * (1.0 - a) + v1 * a;
+            }
+        }
+        p[p.len() - 1].1
+    }
+}
+
+/// Caliper jaws on the two sides normal to `axis`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Caliper {
+    /// 0 for x, 1 for y.
+    pub axis: usize,
+    /// Stretch ratio of the jaw distance over time.
+    pub stretch: Keyframes<f64>,
+}
+
+/// Prescribed displacement of a node set.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Prescribed {
+    /// Name of the set (for messages).
+    pub name: String,
+    /// Nodes of the set.
+    pub nodes: Vec<usize>,
+    /// Displacement (mm) over time.
+    pub displacement: Keyframes<Vector3<f64>>,
+}
+
+/// All boundary conditions of a run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BoundaryConditions {
+    /// Bottom face.
+    pub bottom: BottomCondition,
+    /// Side faces.
+    pub sides: SideCondition,
+    /// Optional caliper.
+    pub caliper: Option<Caliper>,
+    /// Prescribed node sets.
+    pub prescribed: Vec<Prescribed>,
+}
+
+/// The geometric node sets of a box mesh.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct NodeSets {
+    /// Nodes at z_min.
+    pub bottom: Vec<usize>,
+    /// Nodes at z_max.
+    pub top: Vec<usize>,
+    /// Nodes at x_min, x_max, y_min, y_max.
+    pub sides: [Vec<usize>; 4],
+    /// Centre of the bounding box.
+    pub centre: Vec3,
+}
+
+impl NodeSets {
+    /// Finds the sets on the bounding box of `mesh`.
+    pub fn of(mesh: &TetMesh) -> NodeSets {
+        let (lo, hi) = mesh.bounds();
+        let tol = 1e-9 * (hi - lo).norm();
+        let pick = |f: &dyn Fn(&Vec3) -> bool| -> Vec<usize> {
+            (0..mesh.num_vertices())
+                .filter(|&i| f(&mesh.positions[i]))
+                .collect()
+        };
+        NodeSets {
+            bottom: pick(&|p| (p.z - lo.z).abs() <= tol),
+            top: pick(&|p| (p.z - hi.z).abs() <= tol),
+            sides: [
+                pick(&|p| (p.x - lo.x).abs() <= tol),
+                pick(&|p| (p.x - hi.x).abs() <= tol),
+                pick(&|p| (p.y - lo.y).abs() <= tol),
+                pick(&|p| (p.y - hi.y).abs() <= tol),
+            ],
+            centre: (lo + hi) / 2.0,
+        }
+    }
+
+    /// A set by name: `bottom`, `top`, `x_min`, `x_max`, `y_min`, `y_max`.
+    pub fn by_name(&self, name: &str) -> Option<&[usize]> {
+        Some(match name {
+            "bottom" => &self.bottom,
+            "top" => &self.top,
+            "x_min" => &self.sides[0],
+            "x_max" => &self.sides[1],
+            "y_min" => &self.sides[2],
+            "y_max" => &self.sides[3],
+            _ => return None,
+        })
+    }
+}
+
+impl BoundaryConditions {
+    /// Filters and target positions at time `t`.
+    pub fn constraints(&self, sets: &NodeSets, rest: &[Vec3], t: f64) -> (Vec<Filter>, Vec<Vec3>) {
+        let n = rest.len();
+        let mut filters = vec![Filter::Free; n];
+        let mut targets = rest.to_vec();
+        let axes = [Vector3::x(), Vector3::y(), Vector3::z()];
+        let mut fix = |i: usize, axis: usize, value: f64, filters: &mut Vec<Filter>| {
+            filters[i] = filters[i].constrain(&axes[axis]);
+            targets[i][axis] = value;
+        };
+        for &i in &sets.bottom {
+            match self.bottom {
+                BottomCondition::Fixed => (0..3).for_each(|a| fix(i, a, rest[i][a], &mut filters)),
+                BottomCondition::Rollers => fix(i, 2, rest[i].z, &mut filters),
+            }
+        }
+        let caliper_axis = self.caliper.as_ref().map(|c| c.axis);
+        for (k, side) in sets.sides.iter().enumerate() {
+            let normal = k / 2;
+            if caliper_axis == Some(normal) {
+                continue;
+            }
+            for &i in side {
+                match self.sides {
+                    SideCondition::Clamped => {
+                        (0..3).for_each(|a| fix(i, a, rest[i][a], &mut filters))
+                    }
+                    SideCondition::Rollers => fix(i, normal, rest[i][normal], &mut filters),
+                    SideCondition::Free => {}
+                }
+            }
+        }
+        if let Some(c) = &self.caliper {
+            let s = c.stretch.at(t);
+            let centre = sets.centre[c.axis];
+            for side in &sets.sides[2 * c.axis..2 * c.axis + 2] {
+                for &i in side {
+                    fix(
+                        i,
+                        c.axis,
+                        centre + s * (rest[i][c.axis] - centre),
+                        &mut filters,
+                    );
+                }
+            }
+        }
+        for p in &self.prescribed {
+            let u = p.displacement.at(t);
+            for &i in &p.nodes {
+                (0..3).for_each(|a| fix(i, a, rest[i][a] + u[a], &mut filters));
+            }
+        }
+        (filters, targets)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keyframes_interpolate_and_hold() {
+        let k = Keyframes {
+            points: vec![(0.0, 1.0), (1.0, 1.25), (2.0, 0.8)],
+        };
+        assert_eq!(k.at(-1.0), 1.0);
+        assert!((k.at(0.5) - 1.125).abs() < 1e-15);
+        assert!((k.at(1.5) - 1.025).abs() < 1e-15);
+        assert_eq!(k.at(5.0), 0.8);
+    }
+}

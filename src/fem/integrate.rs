@@ -1,0 +1,293 @@
+//! Time integration: quasi-static equilibrium by Newton iterations.
+//!
+//! A [`Simulation`] owns the element rest data, the assembly pattern, the
+//! current positions and the constraint filters. Each Newton iteration
+//! evaluates rotations and forces in a parallel element loop, gathers them
+//! per node, assembles the projected consistent tangent (see
+//! [`super::corotation`]) and solves the filtered system
+//! (see [`super::solve`]), with a backtracking line search on the residual.
+//!
+//! Convergence: the relative residual is `‖S r‖ / scale`, where `r` is the
+//! net nodal force and `scale` the larger of the reaction forces on the
+//! constrained directions and the external loads — the load level the
+//! residual is measured against. A load-free state (scale → 0) converges
+//! when `‖S r‖` reaches round-off, `1e-15·E·L²` with L the mesh diagonal.
+
+use nalgebra::Matrix3;
+use rayon::prelude::*;
+
+use super::assembly::Assembly;
+use super::corotation::{Corotation, RestElement, Tangent};
+use super::material::Material;
+use super::solve::{self, CgSettings, CgStats, CgWorkspace, Filter};
+use crate::error::{Error, Result};
+use crate::mesh::{TetMesh, Vec3};
+
+/// Newton iteration settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NewtonSettings {
+    /// Converged when the relative residual is at most this.
+    pub rel_tol: f64,
+    /// Iteration limit per solve.
+    pub max_iterations: usize,
+    /// Linear solver settings for each Newton step.
+    pub cg: CgSettings,
+}
+
+impl Default for NewtonSettings {
+    fn default() -> Self {
+        NewtonSettings {
+            rel_tol: 1e-6,
+            max_iterations: 50,
+            cg: CgSettings {
+                rel_tol: 1e-4,
+                max_iterations: 2000,
+            },
+        }
+    }
+}
+
+/// What one equilibrium solve did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct NewtonStats {
+    /// Newton iterations.
+    pub iterations: usize,
+    /// Total conjugate-gradient iterations.
+    pub cg_iterations: usize,
+    /// Final relative residual.
+    pub rel_residual: f64,
+    /// Load scale the residual is relative to (N).
+    pub scale: f64,
+}
+
+/// The simulated patch: rest data, state and workspaces.
+#[derive(Clone, Debug)]
+pub struct Simulation {
+    /// Rest positions (mm).
+    pub rest_positions: Vec<Vec3>,
+    /// Tets (positively oriented at rest).
+    pub tets: Vec<[usize; 4]>,
+    /// Per-tet rest data.
+    pub elements: Vec<RestElement>,
+    /// Current positions (mm).
+    pub x: Vec<Vec3>,
+    /// External nodal loads (N).
+    pub f_ext: Vec<Vec3>,
+    /// Per-node constraint filters.
+    pub filters: Vec<Filter>,
+    /// Positions imposed on each node's constrained directions.
+    pub targets: Vec<Vec3>,
+    /// Newton settings.
+    pub settings: NewtonSettings,
+    assembly: Assembly,
+    corotations: Vec<Corotation>,
+    tangents: Vec<Tangent>,
+    tet_forces: Vec<[Vec3; 4]>,
+    f_int: Vec<Vec3>,
+    cg: CgWorkspace,
+    dx: Vec<f64>,
+    rhs: Vec<f64>,
+    force_floor: f64,
+}
+
+impl Simulation {
+    /// Sets up a simulation of `mesh` with one material per tet.
+    pub fn new(mesh: &TetMesh, tet_material: &[Material]) -> Simulation {
+        let elements: Vec<RestElement> = (0..mesh.num_tets())
+            .into_par_iter()
+            .map(|t| RestElement::new(mesh.tet_points(t), &tet_material[t]))
+            .collect();
+        let n = mesh.num_vertices();
+        let (lo, hi) = mesh.bounds();
+        let size = (hi - lo).norm();
+        let stiffest = tet_material
+            .iter()
+            .map(|m| m.youngs_mpa)
+            .fold(0.0, f64::max);
+        Simulation {
+            rest_positions: mesh.positions.clone(),
+            tets: mesh.tets.clone(),
+            assembly: Assembly::new(n, &mesh.tets),
+            corotations: vec![Corotation::of(&Matrix3::identity()); elements.len()],
+            tangents: Vec::new(),
+            tet_forces: vec![[Vec3::zeros(); 4]; elements.len()],
+            elements,
+            x: mesh.positions.clone(),
+            f_ext: vec![Vec3::zeros(); n],
+            filters: vec![Filter::Free; n],
+            targets: mesh.positions.clone(),
+            settings: NewtonSettings::default(),
+            f_int: vec![Vec3::zeros(); n],
+            cg: CgWorkspace::default(),
+            dx: vec![0.0; 3 * n],
+            rhs: vec![0.0; 3 * n],
+            force_floor: 1e-15 * stiffest * size * size,
+        }
+    }
+
+    /// Number of nodes.
+    pub fn num_nodes(&self) -> usize {
+        self.x.len()
+    }
+
+    /// Internal elastic forces at the last evaluation (N).
+    pub fn internal_forces(&self) -> &[Vec3] {
+        &self.f_int
+    }
+
+    /// Per-tet rotation data (R, U, V, σ̂) at the last evaluation.
+    pub fn corotations(&self) -> &[Corotation] {
+        &self.corotations
+    }
+
+    /// Deformation gradient of tet `t` at the current positions.
+    pub fn deformation_gradient(&self, t: usize) -> Matrix3<f64> {
+        let x = self.tets[t].map(|v| self.x[v]);
+        self.elements[t].deformation_gradient(&x)
+    }
+
+    /// Evaluates rotations and internal forces at the current positions.
+    pub fn evaluate_forces(&mut self) {
+        let (x, tets, elements) = (&self.x, &self.tets, &self.elements);
+        self.corotations
+            .par_iter_mut()
+            .zip(self.tet_forces.par_iter_mut())
+            .enumerate()
+            .for_each(|(t, (c, f))| {
+                let xe = tets[t].map(|v| x[v]);
+                let e = &elements[t];
+                *c = Corotation::of(&e.deformation_gradient(&xe));
+                *f = e.forces(&xe, &c.r);
+            });
+        self.assembly
+            .gather_forces(&self.tet_forces, &mut self.f_int);
+    }
+
+    /// The tangent stiffness at the current positions (evaluates forces first).
+    pub fn stiffness(&mut self) -> &nalgebra_sparse::CsrMatrix<f64> {
+        self.evaluate_forces();
+        self.assemble_tangent();
+        &self.assembly.matrix
+    }
+
+    /// Assembles the projected tangent stiffness at the last evaluation.
+    fn assemble_tangent(&mut self) {
+        let (elements, corotations) = (&self.elements, &self.corotations);
+        self.tangents = (0..elements.len())
+            .into_par_iter()
+            .map(|t| elements[t].tangent(&corotations[t]))
+            .collect();
+        let tangents = &self.tangents;
+        self.assembly
+            .assemble_stiffness(|t, a, b| tangents[t].block(a, b));
+    }
+
+    /// Moves every constrained direction onto its target.
+    pub fn apply_targets(&mut self) {
+        for ((x, f), t) in self.x.iter_mut().zip(&self.filters).zip(&self.targets) {
+            if *f != Filter::Free {
+                *x = t + f.apply(&(*x - t));
+            }
+        }
+    }
+
+    /// Residual norms after [`Simulation::evaluate_forces`]: (‖S r‖, scale).
+    fn residual(&mut self) -> (f64, f64) {
+        let mut free = 0.0;
+        let mut reaction = 0.0;
+        let mut external = 0.0;
+        for i in 0..self.num_nodes() {
+            let r = self.f_int[i] + self.f_ext[i];
+            let s = self.filters[i].apply(&r);
+            self.rhs[3 * i..3 * i + 3].copy_from_slice(s.as_slice());
+            free += s.norm_squared();
+            reaction += (self.f_int[i] - self.filters[i].apply(&self.f_int[i])).norm_squared();
+            external += self.f_ext[i].norm_squared();
+        }
+        let scale = reaction.sqrt().max(external.sqrt()).max(self.force_floor);
+        (free.sqrt(), scale)
+    }
+
+    /// Whether `norm` is converged against `scale` (or at round-off).
+    fn converged(&self, norm: f64, scale: f64) -> bool {
+        norm <= self.settings.rel_tol * scale || norm <= self.force_floor
+    }
+
+    /// Solves for static equilibrium with the current constraints and loads.
+    /// `context` names the step in errors (e.g. `frame 12`).
+    pub fn solve_static(&mut self, context: &str) -> Result<NewtonStats> {
+        self.apply_targets();
+        self.evaluate_forces();
+        let (mut norm, mut scale) = self.residual();
+        let mut stats = NewtonStats::default();
+        for it in 0..self.settings.max_iterations {
+            stats.iterations = it;
+            stats.rel_residual = norm / scale;
+            stats.scale = scale;
+            if !stats.rel_residual.is_finite() {
+                return Err(not_converged(context, it, stats.rel_residual));
+            }
+            if self.converged(norm, scale) {
+                return Ok(stats);
+            }
+            self.assemble_tangent();
+            self.dx.fill(0.0);
+            let cg: CgStats = solve::solve(
+                &self.assembly,
+                &self.filters,
+                &self.rhs,
+                &mut self.dx,
+                &self.settings.cg,
+                &mut self.cg,
+            );
+            stats.cg_iterations += cg.iterations;
+            (norm, scale) = self.line_search(norm)?;
+            log::debug!(
+                "{context}: Newton {it}: CG {} its (rel {:.1e}), residual {:.3e} ({norm:.3e} N of {scale:.3e} N)",
+                cg.iterations,
+                cg.rel_residual,
+                norm / scale
+            );
+        }
+        stats.iterations = self.settings.max_iterations;
+        stats.rel_residual = norm / scale;
+        stats.scale = scale;
+        if self.converged(norm, scale) {
+            Ok(stats)
+        } else {
+            Err(not_converged(
+                context,
+                self.settings.max_iterations,
+                stats.rel_residual,
+            ))
+        }
+    }
+
+    /// Takes the step `dx`, halving it while the residual grows (at most 6 times).
+    fn line_search(&mut self, old_norm: f64) -> Result<(f64, f64)> {
+        let start = self.x.clone();
+        let mut alpha = 1.0;
+        for _ in 0..6 {
+            for (i, x) in self.x.iter_mut().enumerate() {
+                let d = Vec3::new(self.dx[3 * i], self.dx[3 * i + 1], self.dx[3 * i + 2]);
+                *x = start[i] + d * alpha;
+            }
+            self.evaluate_forces();
+            let (norm, scale) = self.residual();
+            if norm.is_finite() && norm < old_norm {
+                return Ok((norm, scale));
+            }
+            alpha *= 0.5;
+        }
+        // No decrease found: keep the smallest step (the Newton loop decides).
+        let (norm, scale) = self.residual();
+        Ok((norm, scale))
+    }
+}
+
+fn not_converged(context: &str, iterations: usize, rel: f64) -> Error {
+    Error::Solver(format!(
+        "{context}: equilibrium not reached after {iterations} Newton iterations \
+         (relative residual {rel:.3e})"
+    ))
+}

@@ -1,0 +1,228 @@
+//! FEM verification: patch test, rigid motion, caliper stretch (exact
+//! homogeneous solution), inversion recovery, determinism.
+
+mod common;
+
+use std::collections::{BTreeMap, HashMap};
+
+use nalgebra::{Matrix3, Rotation3, Vector3};
+use skinpatch::fem::boundary::{
+    BottomCondition, BoundaryConditions, Caliper, Keyframes, NodeSets, SideCondition,
+};
+use skinpatch::fem::integrate::Simulation;
+use skinpatch::fem::solve::Filter;
+use skinpatch::fem::{Corotation, Material};
+use skinpatch::mesh::{io, RawMesh, TetMesh, Vec3};
+
+fn patch_3k() -> TetMesh {
+    io::read_tetgen(&common::root().join("meshes/patch_3k")).unwrap()
+}
+
+fn skin(region: i32) -> Material {
+    let kpa = if region == 1 { 150.0 } else { 15.0 };
+    Material::from_scenario_units("test", kpa, 0.45, 1100.0).unwrap()
+}
+
+fn tight(sim: &mut Simulation) {
+    sim.settings.rel_tol = 1e-11;
+    sim.settings.cg.rel_tol = 1e-12;
+    sim.settings.max_iterations = 30;
+}
+
+/// Prescribes `x = A X + c` on every boundary node and checks that every tet
+/// ends with F = A.
+fn patch_test(a: Matrix3<f64>) {
+    let _ = env_logger::builder().is_test(true).try_init();
+    let mesh = patch_3k();
+    let material = vec![skin(1); mesh.num_tets()];
+    let mut sim = Simulation::new(&mesh, &material);
+    tight(&mut sim);
+    let c = Vec3::new(0.3, -0.2, 0.1);
+    for f in &mesh.boundary {
+        for &v in &f.nodes {
+            sim.filters[v] = Filter::Fixed;
+            sim.targets[v] = a * mesh.positions[v] + c;
+        }
+    }
+    let stats = sim.solve_static("patch test").unwrap();
+    let mut worst: f64 = 0.0;
+    for t in 0..mesh.num_tets() {
+        worst = worst.max((sim.deformation_gradient(t) - a).abs().max());
+    }
+    assert!(worst < 1e-9, "max |F − A| = {worst:e} after {stats:?}");
+}
+
+#[test]
+fn patch_test_small_strain() {
+    patch_test(Matrix3::new(
+        1.01, 0.002, 0.0, -0.003, 0.995, 0.004, 0.001, 0.0, 1.006,
+    ));
+}
+
+#[test]
+fn patch_test_large_strain_with_rotation() {
+    let rot = Rotation3::from_euler_angles(0.2, -0.1, 0.4).into_inner();
+    patch_test(rot * Matrix3::new(1.2, 0.05, 0.0, 0.0, 0.85, 0.03, 0.02, 0.0, 1.1));
+}
+
+#[test]
+fn rigid_rotation_by_ninety_degrees_has_no_force_or_strain() {
+    let mesh = patch_3k();
+    let material: Vec<Material> = mesh.tet_region.iter().map(|&r| skin(r)).collect();
+    let mut sim = Simulation::new(&mesh, &material);
+    let rot = Rotation3::from_axis_angle(&Vector3::y_axis(), std::f64::consts::FRAC_PI_2);
+    for (x, p) in sim.x.iter_mut().zip(&mesh.positions) {
+        *x = rot * p + Vec3::new(1.0, 2.0, 3.0);
+    }
+    sim.evaluate_forces();
+    let fmax = sim
+        .internal_forces()
+        .iter()
+        .map(|f| f.norm())
+        .fold(0.0, f64::max);
+    assert!(fmax < 1e-14, "max force {fmax:e} N");
+    for t in 0..mesh.num_tets() {
+        let c = Corotation::of(&sim.deformation_gradient(t));
+        for s in c.sigma.iter() {
+            assert!((s - 1.0).abs() < 1e-12, "tet {t} stretch {s}");
+        }
+    }
+}
+
+#[test]
+fn global_stiffness_is_symmetric_and_forces_balance() {
+    let mesh = patch_3k();
+    let material: Vec<Material> = mesh.tet_region.iter().map(|&r| skin(r)).collect();
+    let mut sim = Simulation::new(&mesh, &material);
+    // A smooth, large deformation.
+    for (x, p) in sim.x.iter_mut().zip(&mesh.positions) {
+        *x = p + Vec3::new(
+            0.2 * (p.y * 0.5).sin(),
+            0.1 * p.z * p.x * 0.1,
+            -0.3 * (p.x * 0.3).cos(),
+        );
+    }
+    sim.evaluate_forces();
+    // Internal forces of a free body sum to zero (no net force).
+    let net: Vec3 = sim.internal_forces().iter().sum();
+    let scale: f64 = sim.internal_forces().iter().map(|f| f.norm()).sum();
+    assert!(net.norm() < 1e-12 * scale, "net force {net}");
+    // K equals its transpose entry by entry.
+    let k = sim.stiffness().clone();
+    let kt = k.transpose();
+    assert_eq!(k.col_indices(), kt.col_indices());
+    let biggest = k.values().iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    for (a, b) in k.values().iter().zip(kt.values()) {
+        assert!((a - b).abs() <= 1e-12 * biggest, "{a} vs {b}");
+    }
+}
+
+/// Caliper stretch 1.2 with a free top, bottom on rollers and the y sides on
+/// rollers: F = diag(1.2, 1, λ_z) exactly, so every tet's largest principal
+/// stretch is 1.2 along x.
+#[test]
+fn caliper_stretch_is_homogeneous() {
+    let mesh = patch_3k();
+    let material: Vec<Material> = mesh.tet_region.iter().map(|&r| skin(r)).collect();
+    let mut sim = Simulation::new(&mesh, &material);
+    tight(&mut sim);
+    let bc = BoundaryConditions {
+        bottom: BottomCondition::Rollers,
+        sides: SideCondition::Rollers,
+        caliper: Some(Caliper {
+            axis: 0,
+            stretch: Keyframes {
+                points: vec![(0.0, 1.0), (1.0, 1.2)],
+            },
+        }),
+        prescribed: vec![],
+    };
+    let sets = NodeSets::of(&mesh);
+    let (filters, targets) = bc.constraints(&sets, &mesh.positions, 1.0);
+    sim.filters = filters;
+    sim.targets = targets;
+    sim.solve_static("caliper").unwrap();
+    for (t, m) in material.iter().enumerate() {
+        let c = Corotation::of(&sim.deformation_gradient(t));
+        let k = c.sigma.imax();
+        assert!(
+            (c.sigma[k] - 1.2).abs() < 1e-6,
+            "tet {t}: largest stretch {}",
+            c.sigma[k]
+        );
+        let dir = c.v.column(k);
+        assert!(dir.x.abs() > 1.0 - 1e-6, "tet {t}: direction {dir}");
+        // Lateral stretches: 1 across y, λ_z = 1 − λ(s − 1)/(λ + 2μ) through the thickness.
+        let lz = 1.0 - m.lambda() * 0.2 / (m.lambda() + 2.0 * m.mu());
+        let f = sim.deformation_gradient(t);
+        assert!(
+            (f[(1, 1)] - 1.0).abs() < 1e-6 && (f[(2, 2)] - lz).abs() < 1e-6,
+            "tet {t}: F = {f}"
+        );
+    }
+}
+
+/// One tet with three vertices fixed and the fourth pushed through the
+/// opposite face (inverted) returns to rest when released.
+#[test]
+fn inverted_element_recovers() {
+    let _ = env_logger::builder().is_test(true).try_init();
+    // Top face at z = 0 (the mesh needs a top surface), apex below.
+    let rest = vec![Vec3::zeros(), Vec3::y(), Vec3::x(), -Vec3::z()];
+    let raw = RawMesh {
+        positions: rest.clone(),
+        tets: vec![[0, 1, 2, 3]],
+        tet_region: vec![1],
+        region_names: BTreeMap::new(),
+        face_markers: HashMap::new(),
+    };
+    let mesh = TetMesh::from_raw("one tet", raw).unwrap();
+    let mut sim = Simulation::new(&mesh, &[skin(1)]);
+    tight(&mut sim);
+    for v in 0..3 {
+        sim.filters[v] = Filter::Fixed;
+    }
+    sim.x[3] = Vec3::new(0.2, 0.1, 0.6);
+    assert!(sim.deformation_gradient(0).determinant() < 0.0);
+    sim.solve_static("release").unwrap();
+    assert!(
+        (sim.x[3] - rest[3]).norm() < 1e-9,
+        "vertex ended at {}",
+        sim.x[3]
+    );
+}
+
+#[test]
+fn static_solves_are_deterministic() {
+    let mesh = patch_3k();
+    let material: Vec<Material> = mesh.tet_region.iter().map(|&r| skin(r)).collect();
+    let run = || {
+        let mut sim = Simulation::new(&mesh, &material);
+        let bc = BoundaryConditions {
+            bottom: BottomCondition::Fixed,
+            sides: SideCondition::Free,
+            caliper: Some(Caliper {
+                axis: 1,
+                stretch: Keyframes {
+                    points: vec![(0.0, 0.85)],
+                },
+            }),
+            prescribed: vec![],
+        };
+        let (f, t) = bc.constraints(&NodeSets::of(&mesh), &mesh.positions, 0.0);
+        sim.filters = f;
+        sim.targets = t;
+        sim.solve_static("compress").unwrap();
+        sim.x
+            .iter()
+            .flat_map(|p| p.iter().map(|c| c.to_bits()).collect::<Vec<_>>())
+            .collect::<Vec<u64>>()
+    };
+    let a = run();
+    let b = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap()
+        .install(run);
+    assert_eq!(a, b);
+}
