@@ -15,6 +15,7 @@
 //! The library never prints; it logs through `log` and returns [`Error`].
 
 pub mod error;
+pub mod export;
 pub mod fem;
 pub mod mesh;
 pub mod pipeline;

@@ -133,13 +133,66 @@ fn run(path: &Path, output: Option<PathBuf>) -> anyhow::Result<()> {
     if let Some(dir) = output {
         setup.output_dir = dir;
     }
-    let summary = skinpatch::pipeline::run(&setup)
-        .with_context(|| format!("running scenario {}", path.display()))?;
+    let progress = Progress::new();
+    let result = skinpatch::pipeline::run(&setup, |m, total| progress.frame(m, total));
+    progress.finish();
+    let summary = result.with_context(|| {
+        format!(
+            "running scenario {} (outputs so far are in {})",
+            path.display(),
+            setup.output_dir.display()
+        )
+    })?;
     let mut report = format!("scenario {}: mesh\n{}", setup.name, summary.quality);
     for file in &summary.written {
         report += &format!("wrote {}\n", file.display());
     }
     print_stdout(&report)
+}
+
+/// A progress bar on a terminal, plain lines otherwise.
+struct Progress {
+    bar: Option<indicatif::ProgressBar>,
+}
+
+impl Progress {
+    fn new() -> Progress {
+        use std::io::IsTerminal;
+        let bar = std::io::stderr().is_terminal().then(|| {
+            let bar = indicatif::ProgressBar::new(0);
+            bar.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "{elapsed_precise} [{bar:30}] frame {pos}/{len} {msg}",
+                )
+                .expect("valid template")
+                .progress_chars("=> "),
+            );
+            bar
+        });
+        Progress { bar }
+    }
+
+    fn frame(&self, m: &skinpatch::export::FrameMetrics, total: usize) {
+        let [fx, fy, fz] = m.probe_force_n;
+        let msg = format!(
+            "t = {:.3} s, probe force ({fx:.3e}, {fy:.3e}, {fz:.3e}) N, {} contact nodes",
+            m.time_s, m.contact_nodes
+        );
+        match &self.bar {
+            Some(bar) => {
+                bar.set_length(total as u64);
+                bar.set_position(m.frame as u64 + 1);
+                bar.set_message(msg);
+            }
+            None => eprintln!("frame {}/{}: {msg}", m.frame + 1, total),
+        }
+    }
+
+    fn finish(&self) {
+        if let Some(bar) = &self.bar {
+            bar.finish();
+        }
+    }
 }
 
 impl MeshArgs {

@@ -148,6 +148,33 @@ impl Assembly {
         });
     }
 
+    /// Writes `f(i, j, K_ij)` for every block of the current matrix into
+    /// `out` (same layout as the matrix values), in parallel over nodes.
+    pub fn map_blocks<F>(&self, out: &mut [f64], f: F)
+    where
+        F: Fn(usize, usize, &Matrix3<f64>) -> Matrix3<f64> + Sync,
+    {
+        let starts = &self.neighbour_start;
+        let mut rows: Vec<&mut [f64]> = Vec::with_capacity(starts.len() - 1);
+        let mut rest = out;
+        for i in 0..starts.len() - 1 {
+            let (head, tail) = rest.split_at_mut(9 * (starts[i + 1] - starts[i]));
+            rows.push(head);
+            rest = tail;
+        }
+        rows.into_par_iter().enumerate().for_each(|(i, values)| {
+            let nb = self.neighbours(i);
+            let n = nb.len();
+            for (k, &j) in nb.iter().enumerate() {
+                let b = f(i, j, &self.block(i, k));
+                for row in 0..3 {
+                    values[3 * n * row + 3 * k..3 * n * row + 3 * k + 3]
+                        .copy_from_slice(&[b[(row, 0)], b[(row, 1)], b[(row, 2)]]);
+                }
+            }
+        });
+    }
+
     /// The diagonal 3×3 block of node `i`.
     pub fn diagonal_block(&self, i: usize) -> Matrix3<f64> {
         self.block(i, self.diagonal_slot[i])

@@ -324,6 +324,12 @@ pub fn solve_with_contact(
         };
     }
     let mut report = ContactReport::default();
+    // Rounds solve loosely until the active set settles, then once tightly
+    // (and check again): most rounds then cost one or two Newton iterations.
+    let final_tol = sim.settings.rel_tol;
+    let loose_tol = final_tol.max(1e-3);
+    let mut tight = false;
+    let mut outcome = Ok(());
     for round in 0..state.max_rounds {
         report.rounds = round + 1;
         sim.filters.copy_from_slice(base_filters);
@@ -343,15 +349,26 @@ pub fn solve_with_contact(
                 }
             }
         }
-        let stats = sim.solve_static(context)?;
+        sim.settings.rel_tol = if tight { final_tol } else { loose_tol };
+        let stats = match sim.solve_static(context) {
+            Ok(s) => s,
+            Err(e) => {
+                outcome = Err(e);
+                break;
+            }
+        };
         report.newton_iterations += stats.iterations;
         report.cg_iterations += stats.cg_iterations;
         report.rel_residual = stats.rel_residual;
-        let changed = update_active_set(sim, base_ext, pose, mode, state);
-        if !changed {
-            break;
+        let changed = update_active_set(sim, base_ext, pose, mode, state, tight);
+        match (changed, tight) {
+            (false, true) => break,
+            (false, false) => tight = true,
+            (true, _) => {}
         }
     }
+    sim.settings.rel_tol = final_tol;
+    outcome?;
     state.last_pose = Some(*pose);
     finish_report(sim, base_ext, pose, state, &mut report);
     Ok(report)
@@ -370,7 +387,10 @@ fn update_active_set(
     pose: &ProbePose,
     mode: ContactMode,
     state: &mut ContactState,
+    tight: bool,
 ) -> bool {
+    // Friction forces are settled to 1e-4 of their size in tight rounds, 1e-2 before.
+    let friction_tol = if tight { 1e-4 } else { 1e-2 };
     let mut changed = false;
     let forces: Vec<(usize, Vec3)> = state
         .active
@@ -408,7 +428,7 @@ fn update_active_set(
                 // Keep the direction, tangent to the current normal.
                 let dir = (dir - n * dir.dot(&n)).try_normalize(1e-12).unwrap_or(dir);
                 let updated = dir * magnitude;
-                if (updated - friction).norm() > 1e-4 * magnitude.max(1e-12) {
+                if (updated - friction).norm() > friction_tol * magnitude.max(1e-12) {
                     *entry = NodeContact::Slide { friction: updated };
                     changed = true;
                 }

@@ -19,13 +19,24 @@ use rayon::prelude::*;
 use super::assembly::Assembly;
 use super::corotation::{Corotation, RestElement, Tangent};
 use super::material::Material;
-use super::solve::{self, CgSettings, CgStats, CgWorkspace, Filter};
+use super::solve::{self, CgSettings, CgWorkspace, DirectSolver, Filter};
 use crate::error::{Error, Result};
 use crate::mesh::{TetMesh, Vec3};
+
+/// Which linear solver Newton steps use.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LinearSolver {
+    /// Block-Jacobi preconditioned conjugate gradients.
+    Cg,
+    /// Sparse Cholesky (falls back to CG if the factorisation fails).
+    Direct,
+}
 
 /// Newton iteration settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NewtonSettings {
+    /// Linear solver.
+    pub linear: LinearSolver,
     /// Converged when the relative residual is at most this.
     pub rel_tol: f64,
     /// Iteration limit per solve.
@@ -37,6 +48,7 @@ pub struct NewtonSettings {
 impl Default for NewtonSettings {
     fn default() -> Self {
         NewtonSettings {
+            linear: LinearSolver::Cg,
             rel_tol: 1e-6,
             max_iterations: 50,
             cg: CgSettings {
@@ -85,6 +97,7 @@ pub struct Simulation {
     tet_forces: Vec<[Vec3; 4]>,
     f_int: Vec<Vec3>,
     cg: CgWorkspace,
+    direct: DirectSolver,
     dx: Vec<f64>,
     rhs: Vec<f64>,
     force_floor: f64,
@@ -119,6 +132,7 @@ impl Simulation {
             settings: NewtonSettings::default(),
             f_int: vec![Vec3::zeros(); n],
             cg: CgWorkspace::default(),
+            direct: DirectSolver::default(),
             dx: vec![0.0; 3 * n],
             rhs: vec![0.0; 3 * n],
             force_floor: 1e-15 * stiffest * size * size,
@@ -231,21 +245,11 @@ impl Simulation {
                 return Ok(stats);
             }
             self.assemble_tangent();
-            self.dx.fill(0.0);
-            let cg: CgStats = solve::solve(
-                &self.assembly,
-                &self.filters,
-                &self.rhs,
-                &mut self.dx,
-                &self.settings.cg,
-                &mut self.cg,
-            );
-            stats.cg_iterations += cg.iterations;
+            let iterations = self.linear_solve();
+            stats.cg_iterations += iterations;
             (norm, scale) = self.line_search(norm)?;
             log::debug!(
-                "{context}: Newton {it}: CG {} its (rel {:.1e}), residual {:.3e} ({norm:.3e} N of {scale:.3e} N)",
-                cg.iterations,
-                cg.rel_residual,
+                "{context}: Newton {it}: {iterations} linear iterations, residual {:.3e} ({norm:.3e} N of {scale:.3e} N)",
                 norm / scale
             );
         }
@@ -261,6 +265,28 @@ impl Simulation {
                 stats.rel_residual,
             ))
         }
+    }
+
+    /// Solves for the Newton step into `dx`; returns the linear iterations
+    /// (1 for a direct solve).
+    fn linear_solve(&mut self) -> usize {
+        if self.settings.linear == LinearSolver::Direct
+            && self
+                .direct
+                .solve(&self.assembly, &self.filters, &self.rhs, &mut self.dx)
+        {
+            return 1;
+        }
+        self.dx.fill(0.0);
+        let cg = solve::solve(
+            &self.assembly,
+            &self.filters,
+            &self.rhs,
+            &mut self.dx,
+            &self.settings.cg,
+            &mut self.cg,
+        );
+        cg.iterations
     }
 
     /// Takes the step `dx`, halving it while the residual grows (at most 6 times).

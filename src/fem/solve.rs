@@ -8,6 +8,10 @@
 //! The preconditioner inverts each node's filtered diagonal block
 //! (block Jacobi). Dot products reduce over fixed-size chunks in a fixed
 //! order, so results do not depend on the thread count.
+//!
+//! [`DirectSolver`] solves the same filtered system with a sparse Cholesky
+//! factorisation (faer, AMD ordering); its symbolic analysis is done once for
+//! the fixed pattern and reused for every numeric factorisation.
 
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
@@ -261,5 +265,69 @@ mod tests {
                 .unwrap();
             assert_eq!(pool.install(|| dot(&a, &b)).to_bits(), reference.to_bits());
         }
+    }
+}
+
+/// Sparse Cholesky solves of the filtered system (see the module docs).
+#[derive(Default)]
+pub struct DirectSolver {
+    symbolic: Option<faer::sparse::linalg::solvers::SymbolicLlt<usize>>,
+    values: Vec<f64>,
+}
+
+impl std::fmt::Debug for DirectSolver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DirectSolver")
+            .field("analysed", &self.symbolic.is_some())
+            .finish()
+    }
+}
+
+impl Clone for DirectSolver {
+    fn clone(&self) -> Self {
+        DirectSolver {
+            symbolic: self.symbolic.clone(),
+            values: Vec::new(),
+        }
+    }
+}
+
+impl DirectSolver {
+    /// Solves `(S K S + I − S) x = S b` exactly; `x` is overwritten. Returns
+    /// `false` if the factorisation failed (matrix not positive definite).
+    pub fn solve(&mut self, asm: &Assembly, filters: &[Filter], b: &[f64], x: &mut [f64]) -> bool {
+        use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+        use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+        use faer::linalg::solvers::SolveCore;
+        let m = &asm.matrix;
+        let n = m.nrows();
+        self.values.resize(m.values().len(), 0.0);
+        asm.map_blocks(&mut self.values, |i, j, k| {
+            let (si, sj) = (filters[i].matrix(), filters[j].matrix());
+            let mut out = si * k * sj;
+            if i == j {
+                out += Matrix3::identity() - si;
+            }
+            out
+        });
+        // The matrix is symmetric, so its CSR arrays are also its CSC arrays.
+        let symbolic_view =
+            SymbolicSparseColMatRef::new_checked(n, n, m.row_offsets(), None, m.col_indices());
+        if self.symbolic.is_none() {
+            match SymbolicLlt::try_new(symbolic_view, faer::Side::Lower) {
+                Ok(s) => self.symbolic = Some(s),
+                Err(_) => return false,
+            }
+        }
+        let symbolic = self.symbolic.clone().expect("analysed above");
+        let view = SparseColMatRef::new(symbolic_view, &self.values);
+        let Ok(llt) = Llt::try_new_with_symbolic(symbolic, view, faer::Side::Lower) else {
+            return false;
+        };
+        x.copy_from_slice(b);
+        filter_in_place(filters, x);
+        let rhs = faer::MatMut::from_column_major_slice_mut(x, n, 1);
+        llt.solve_in_place_with_conj(faer::Conj::No, rhs);
+        x.iter().all(|v| v.is_finite())
     }
 }

@@ -18,8 +18,17 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::mesh::generate::{LayerSpec, PatchSpec, RefineZone, ZoneShape};
+use crate::mesh::generate::PatchSpec;
 use crate::mesh::{io, TetMesh};
+
+mod mesh;
+mod simulation;
+
+pub use mesh::{MeshSection, RefineSection, ZoneKind};
+pub use simulation::{
+    BoundarySection, CaliperSection, MaterialSection, PrescribedSection, ProbeSection,
+    SimulationSetup, SolverSection, TimeSection,
+};
 
 /// Region id of the top layer (epidermis + dermis) in generated meshes.
 pub const TOP_REGION_ID: i32 = 1;
@@ -33,75 +42,23 @@ pub struct Scenario {
     /// The patch mesh: generated (default) or loaded from a file.
     #[serde(default)]
     pub mesh: MeshSection,
+    /// Materials by region name.
+    #[serde(default)]
+    pub material: std::collections::BTreeMap<String, MaterialSection>,
+    /// Supports, caliper and prescribed node sets.
+    #[serde(default)]
+    pub boundary: BoundarySection,
+    /// The rigid probe (none: no contact).
+    pub probe: Option<ProbeSection>,
+    /// Equilibrium and linear-solver tolerances.
+    #[serde(default)]
+    pub solver: SolverSection,
+    /// Duration, frame rate and substeps.
+    #[serde(default)]
+    pub time: TimeSection,
     /// Where and what to write.
     #[serde(default)]
     pub output: OutputSection,
-}
-
-/// `[mesh]`: a layered box patch generated with TetGen, or a mesh file.
-///
-/// The patch spans x ∈ [−w/2, w/2], y ∈ [−d/2, d/2], z ∈ [−h, 0] with the
-/// skin surface at z = 0. All generation keys are optional; their defaults
-/// are the design's skin patch (DESIGN §5.1–5.2).
-#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct MeshSection {
-    /// Mesh file to load instead of generating: `.msh` (Gmsh 4.1 ASCII),
-    /// `.node`/`.ele` or a TetGen base name. Relative to the scenario file.
-    pub file: Option<PathBuf>,
-    /// Patch extent in x (mm). Default 10.
-    pub width_mm: Option<f64>,
-    /// Patch extent in y (mm). Default 10.
-    pub depth_mm: Option<f64>,
-    /// Thickness of the top layer, epidermis + dermis (mm). Default 1.5.
-    pub top_layer_mm: Option<f64>,
-    /// Thickness of the bottom layer, hypodermis (mm); 0 for a single layer. Default 3.5.
-    pub bottom_layer_mm: Option<f64>,
-    /// Region name of the top layer. Default `dermis`.
-    pub top_region: Option<String>,
-    /// Region name of the bottom layer. Default `hypodermis`.
-    pub bottom_region: Option<String>,
-    /// Largest tet volume in the top layer (mm³). Default 0.004.
-    pub top_max_volume_mm3: Option<f64>,
-    /// Largest tet volume in the bottom layer (mm³). Default 0.02.
-    pub bottom_max_volume_mm3: Option<f64>,
-    /// Aim for this many tets by scaling all volume limits together. Default: none.
-    pub target_tets: Option<usize>,
-    /// Relative tolerance on `target_tets`. Default 0.05.
-    pub target_tolerance: Option<f64>,
-    /// TetGen radius–edge ratio bound (`-q`), ≥ 1.1. Default 1.5.
-    pub radius_edge_max: Option<f64>,
-    /// Smallest dihedral angle the mesh must reach (degrees); 0 = no check. Default 0.
-    pub min_dihedral_deg: Option<f64>,
-    /// Optional zone of smaller tets under the top surface.
-    pub refine: Option<RefineSection>,
-}
-
-/// Shape of a refinement zone.
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
-#[serde(rename_all = "lowercase")]
-pub enum ZoneKind {
-    /// Hemisphere of `radius_mm` below `center_mm` (meshed as its circumscribing box).
-    Sphere,
-    /// Box of `size_mm = [x, y, depth]` hanging from `center_mm`.
-    Box,
-}
-
-/// `[mesh.refine]`: where tets are smaller (contact accuracy needs it).
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct RefineSection {
-    /// `sphere` or `box`.
-    pub shape: ZoneKind,
-    /// Centre (x, y) on the top surface (mm). Default [0, 0].
-    #[serde(default)]
-    pub center_mm: [f64; 2],
-    /// Sphere radius (mm); required for `sphere`.
-    pub radius_mm: Option<f64>,
-    /// Box extent [x, y, depth] (mm); required for `box`.
-    pub size_mm: Option<[f64; 3]>,
-    /// Largest tet volume inside the zone (mm³).
-    pub max_volume_mm3: f64,
 }
 
 /// `[output]`: where results go.
@@ -114,6 +71,9 @@ pub struct OutputSection {
     pub mesh_vtu: bool,
     /// Also write the mesh as TetGen files `mesh.node/.ele/.face`. Default false.
     pub mesh_tetgen: bool,
+    /// Write `frames/frame_NNNN.vtu` (deformed mesh, displacement, principal
+    /// stretches) and `frames.pvd` for ParaView. Default true.
+    pub frames_vtu: bool,
 }
 
 impl Default for OutputSection {
@@ -122,6 +82,7 @@ impl Default for OutputSection {
             dir: None,
             mesh_vtu: true,
             mesh_tetgen: false,
+            frames_vtu: true,
         }
     }
 }
@@ -141,6 +102,10 @@ pub struct Setup {
     pub write_mesh_vtu: bool,
     /// Write `mesh.node/.ele/.face`.
     pub write_mesh_tetgen: bool,
+    /// Write one VTU per frame.
+    pub write_frames: bool,
+    /// The simulation.
+    pub simulation: SimulationSetup,
 }
 
 /// Where a setup's mesh comes from.
@@ -153,6 +118,22 @@ pub enum MeshSource {
 }
 
 impl Scenario {
+    /// Validates the simulation sections against `mesh`.
+    pub fn simulation(&self, mesh: &TetMesh) -> Result<SimulationSetup> {
+        let sets = crate::fem::boundary::NodeSets::of(mesh);
+        let (frames, frame_dt, substeps) = self.time.frames()?;
+        Ok(SimulationSetup {
+            tet_material: simulation::materials(&self.material, mesh)?,
+            boundary: self.boundary.conditions(&sets)?,
+            sets,
+            probe: self.probe.as_ref().map(ProbeSection::probe).transpose()?,
+            newton: self.solver.settings()?,
+            frames,
+            frame_dt,
+            substeps,
+        })
+    }
+
     /// Parses scenario text; `path` names the file in errors.
     pub fn parse(text: &str, path: &Path) -> Result<Scenario> {
         let fail = |message: String| Error::Scenario {
@@ -244,7 +225,7 @@ fn closest(name: &str, candidates: &[String]) -> Option<String> {
 }
 
 /// A finite value `> 0`.
-fn positive(key: &str, v: f64) -> Result<f64> {
+pub(crate) fn positive(key: &str, v: f64) -> Result<f64> {
     if v.is_finite() && v > 0.0 {
         Ok(v)
     } else {
@@ -253,190 +234,11 @@ fn positive(key: &str, v: f64) -> Result<f64> {
 }
 
 /// A finite value `≥ 0`.
-fn non_negative(key: &str, v: f64) -> Result<f64> {
+pub(crate) fn non_negative(key: &str, v: f64) -> Result<f64> {
     if v.is_finite() && v >= 0.0 {
         Ok(v)
     } else {
         Err(Error::parameter(key, format!("must be ≥ 0, got {v}")))
-    }
-}
-
-fn region_name(key: &str, name: &str) -> Result<String> {
-    let ok = !name.is_empty()
-        && name
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
-    if ok {
-        Ok(name.to_string())
-    } else {
-        Err(Error::parameter(
-            key,
-            format!("must be a non-empty name of letters, digits, '_' or '-', got '{name}'"),
-        ))
-    }
-}
-
-impl MeshSection {
-    /// Names of the generation keys that are set, for conflicts with `file`.
-    fn generation_keys_set(&self) -> Vec<&'static str> {
-        let mut keys = Vec::new();
-        let mut check = |set: bool, k: &'static str| {
-            if set {
-                keys.push(k)
-            }
-        };
-        check(self.width_mm.is_some(), "width_mm");
-        check(self.depth_mm.is_some(), "depth_mm");
-        check(self.top_layer_mm.is_some(), "top_layer_mm");
-        check(self.bottom_layer_mm.is_some(), "bottom_layer_mm");
-        check(self.top_region.is_some(), "top_region");
-        check(self.bottom_region.is_some(), "bottom_region");
-        check(self.top_max_volume_mm3.is_some(), "top_max_volume_mm3");
-        check(
-            self.bottom_max_volume_mm3.is_some(),
-            "bottom_max_volume_mm3",
-        );
-        check(self.target_tets.is_some(), "target_tets");
-        check(self.target_tolerance.is_some(), "target_tolerance");
-        check(self.radius_edge_max.is_some(), "radius_edge_max");
-        check(self.min_dihedral_deg.is_some(), "min_dihedral_deg");
-        check(self.refine.is_some(), "refine");
-        keys
-    }
-
-    /// Validates the generation keys into a [`PatchSpec`], applying defaults.
-    pub fn patch_spec(&self) -> Result<PatchSpec> {
-        let width = positive("mesh.width_mm", self.width_mm.unwrap_or(10.0))?;
-        let depth = positive("mesh.depth_mm", self.depth_mm.unwrap_or(10.0))?;
-        let top = positive("mesh.top_layer_mm", self.top_layer_mm.unwrap_or(1.5))?;
-        let bottom = non_negative("mesh.bottom_layer_mm", self.bottom_layer_mm.unwrap_or(3.5))?;
-        let top_vol = positive(
-            "mesh.top_max_volume_mm3",
-            self.top_max_volume_mm3.unwrap_or(0.004),
-        )?;
-        let bottom_vol = positive(
-            "mesh.bottom_max_volume_mm3",
-            self.bottom_max_volume_mm3.unwrap_or(0.02),
-        )?;
-        let top_name = region_name(
-            "mesh.top_region",
-            self.top_region.as_deref().unwrap_or("dermis"),
-        )?;
-        let bottom_name = region_name(
-            "mesh.bottom_region",
-            self.bottom_region.as_deref().unwrap_or("hypodermis"),
-        )?;
-        if bottom > 0.0 && top_name == bottom_name {
-            return Err(Error::parameter(
-                "mesh.bottom_region",
-                format!("must differ from mesh.top_region, both are '{top_name}'"),
-            ));
-        }
-        let mut layers = vec![LayerSpec {
-            name: top_name,
-            id: TOP_REGION_ID,
-            thickness_mm: top,
-            max_volume_mm3: top_vol,
-        }];
-        if bottom > 0.0 {
-            layers.push(LayerSpec {
-                name: bottom_name,
-                id: BOTTOM_REGION_ID,
-                thickness_mm: bottom,
-                max_volume_mm3: bottom_vol,
-            });
-        }
-        if let Some(0) = self.target_tets {
-            return Err(Error::parameter("mesh.target_tets", "must be > 0, got 0"));
-        }
-        let tolerance = positive(
-            "mesh.target_tolerance",
-            self.target_tolerance.unwrap_or(0.05),
-        )?;
-        let spec = PatchSpec {
-            width_mm: width,
-            depth_mm: depth,
-            layers,
-            refine: self.refine.as_ref().map(RefineSection::zone).transpose()?,
-            radius_edge_max: self.radius_edge_max.unwrap_or(1.5),
-            min_dihedral_deg: self.min_dihedral_deg.unwrap_or(0.0),
-            target_tets: self.target_tets,
-            target_tolerance: tolerance,
-        };
-        spec.check()?;
-        Ok(spec)
-    }
-
-    /// Where the mesh comes from; `base` is the scenario file's folder.
-    pub fn source(&self, base: &Path) -> Result<MeshSource> {
-        match &self.file {
-            None => Ok(MeshSource::Generated(self.patch_spec()?)),
-            Some(file) => {
-                if let Some(k) = self.generation_keys_set().first() {
-                    return Err(Error::parameter(
-                        format!("mesh.{k}"),
-                        "has no effect when mesh.file is set; remove one of them",
-                    ));
-                }
-                Ok(MeshSource::File(base.join(file)))
-            }
-        }
-    }
-}
-
-impl RefineSection {
-    fn zone(&self) -> Result<RefineZone> {
-        let key = "mesh.refine";
-        for (i, c) in self.center_mm.iter().enumerate() {
-            if !c.is_finite() {
-                return Err(Error::parameter(
-                    format!("{key}.center_mm[{i}]"),
-                    format!("must be finite, got {c}"),
-                ));
-            }
-        }
-        let shape = match self.shape {
-            ZoneKind::Sphere => {
-                if self.size_mm.is_some() {
-                    return Err(Error::parameter(
-                        format!("{key}.size_mm"),
-                        "applies to shape = \"box\"; a sphere takes radius_mm",
-                    ));
-                }
-                let r = self.radius_mm.ok_or_else(|| {
-                    Error::parameter(
-                        format!("{key}.radius_mm"),
-                        "is required for shape = \"sphere\"",
-                    )
-                })?;
-                ZoneShape::Sphere {
-                    center_mm: self.center_mm,
-                    radius_mm: positive(&format!("{key}.radius_mm"), r)?,
-                }
-            }
-            ZoneKind::Box => {
-                if self.radius_mm.is_some() {
-                    return Err(Error::parameter(
-                        format!("{key}.radius_mm"),
-                        "applies to shape = \"sphere\"; a box takes size_mm",
-                    ));
-                }
-                let s = self.size_mm.ok_or_else(|| {
-                    Error::parameter(format!("{key}.size_mm"), "is required for shape = \"box\"")
-                })?;
-                for (i, v) in s.iter().enumerate() {
-                    positive(&format!("{key}.size_mm[{i}]"), *v)?;
-                }
-                ZoneShape::Box {
-                    center_mm: self.center_mm,
-                    size_mm: s,
-                }
-            }
-        };
-        Ok(RefineZone {
-            shape,
-            max_volume_mm3: positive(&format!("{key}.max_volume_mm3"), self.max_volume_mm3)?,
-        })
     }
 }
 
@@ -459,6 +261,7 @@ impl Setup {
             MeshSource::Generated(spec) => crate::mesh::generate::generate(spec)?,
             MeshSource::File(file) => io::read_mesh(file)?,
         };
+        let simulation = scenario.simulation(&mesh)?;
         Ok(Setup {
             name,
             mesh,
@@ -466,6 +269,8 @@ impl Setup {
             output_dir,
             write_mesh_vtu: scenario.output.mesh_vtu,
             write_mesh_tetgen: scenario.output.mesh_tetgen,
+            write_frames: scenario.output.frames_vtu,
+            simulation,
         })
     }
 

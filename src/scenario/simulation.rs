@@ -1,0 +1,430 @@
+//! Simulation sections: `[material.<region>]`, `[boundary]`, `[probe]`,
+//! `[solver]` and `[time]`, and their validation into FEM types.
+//!
+//! Keyframes are arrays of rows whose first entry is the time in seconds:
+//! `path_mm = [[0.0, 0, 0, 1.5], [1.0, 0, 0, 0.5]]`. Times must increase.
+
+use std::collections::BTreeMap;
+
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+use super::positive;
+use crate::error::{Error, Result};
+use crate::fem::boundary::{
+    BottomCondition, BoundaryConditions, Caliper, Keyframes, NodeSets, Prescribed, SideCondition,
+};
+use crate::fem::contact::{ContactMode, Probe, ProbeShape};
+use crate::fem::integrate::{LinearSolver, NewtonSettings};
+use crate::fem::solve::CgSettings;
+use crate::fem::Material;
+use crate::mesh::TetMesh;
+
+/// `[material.<region>]`: one region's material. Defaults: the top layer
+/// (`dermis`) 150 kPa, the bottom layer (`hypodermis`) 15 kPa, ν = 0.45,
+/// 1100 kg/m³ (DESIGN §5.2). Other regions need a section.
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialSection {
+    /// Young's modulus (kPa).
+    pub youngs_modulus_kpa: Option<f64>,
+    /// Poisson's ratio, in [0, 0.5). Default 0.45.
+    pub poisson_ratio: Option<f64>,
+    /// Density (kg/m³). Default 1100.
+    pub density_kg_m3: Option<f64>,
+}
+
+/// `[boundary]`.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct BoundarySection {
+    /// `fixed` (default) or `rollers`.
+    pub bottom: String,
+    /// `clamped`, `rollers` (default) or `free`.
+    pub sides: String,
+    /// Optional caliper on two opposite sides.
+    pub caliper: Option<CaliperSection>,
+    /// Prescribed displacements of named node sets.
+    pub prescribed: Vec<PrescribedSection>,
+}
+
+impl Default for BoundarySection {
+    fn default() -> Self {
+        BoundarySection {
+            bottom: "fixed".into(),
+            sides: "rollers".into(),
+            caliper: None,
+            prescribed: Vec::new(),
+        }
+    }
+}
+
+/// `[boundary.caliper]`: frictionless jaws on the sides normal to `axis`.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CaliperSection {
+    /// `x` or `y`.
+    pub axis: String,
+    /// Rows `[time_s, stretch_ratio]`.
+    pub stretch: Vec<[f64; 2]>,
+}
+
+/// `[[boundary.prescribed]]`: a node set moved by a displacement over time.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct PrescribedSection {
+    /// `top`, `bottom`, `x_min`, `x_max`, `y_min` or `y_max`.
+    pub set: String,
+    /// Rows `[time_s, dx_mm, dy_mm, dz_mm]`.
+    pub displacement_mm: Vec<[f64; 4]>,
+}
+
+/// `[probe]`: a rigid probe on a keyframed path.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ProbeSection {
+    /// `sphere`, `capsule` or `punch`.
+    pub shape: String,
+    /// Radius (mm).
+    pub radius_mm: f64,
+    /// Capsule length between the end centres (mm).
+    pub length_mm: Option<f64>,
+    /// Rows `[time_s, x_mm, y_mm, z_mm]`: centre of the sphere or capsule,
+    /// centre of the punch face.
+    pub path_mm: Vec<[f64; 4]>,
+    /// Capsule axis rows `[time_s, ax, ay, az]`. Default: x.
+    pub axis: Option<Vec<[f64; 4]>>,
+    /// `frictionless` (default), `coulomb` or `bonded`.
+    pub contact: Option<String>,
+    /// Coulomb friction coefficient (with `contact = "coulomb"`).
+    pub friction: Option<f64>,
+}
+
+/// `[solver]`.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct SolverSection {
+    /// Linear solver for Newton steps: `cg` (block-Jacobi PCG, default) or
+    /// `direct` (sparse Cholesky).
+    pub linear: String,
+    /// Relative residual at which a frame is in equilibrium. Default 1e-6.
+    pub rel_tol: f64,
+    /// Newton iterations per equilibrium solve. Default 50.
+    pub max_newton_iterations: usize,
+    /// Relative tolerance of each linear solve. Default 1e-4.
+    pub linear_rel_tol: f64,
+    /// Iteration limit of each linear solve. Default 3000.
+    pub max_linear_iterations: usize,
+}
+
+impl Default for SolverSection {
+    fn default() -> Self {
+        SolverSection {
+            linear: "cg".into(),
+            rel_tol: 1e-6,
+            max_newton_iterations: 50,
+            linear_rel_tol: 1e-4,
+            max_linear_iterations: 3000,
+        }
+    }
+}
+
+/// `[time]`: frames at a fixed rate; each frame may take several quasi-static
+/// load substeps.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct TimeSection {
+    /// Simulated time (s). Default 1.
+    pub duration_s: f64,
+    /// Frames per second of simulated time. Default 60.
+    pub frame_rate_hz: f64,
+    /// Load substeps per frame. Default 1.
+    pub substeps: usize,
+}
+
+impl Default for TimeSection {
+    fn default() -> Self {
+        TimeSection {
+            duration_s: 1.0,
+            frame_rate_hz: 60.0,
+            substeps: 1,
+        }
+    }
+}
+
+/// Validated simulation settings.
+#[derive(Clone, Debug)]
+pub struct SimulationSetup {
+    /// Material of each tet.
+    pub tet_material: Vec<Material>,
+    /// Boundary conditions.
+    pub boundary: BoundaryConditions,
+    /// Geometric node sets of the patch.
+    pub sets: NodeSets,
+    /// The probe, if any.
+    pub probe: Option<Probe>,
+    /// Newton and linear-solver settings.
+    pub newton: NewtonSettings,
+    /// Number of frames after the rest frame.
+    pub frames: usize,
+    /// Frame interval (s).
+    pub frame_dt: f64,
+    /// Substeps per frame.
+    pub substeps: usize,
+}
+
+fn keyframes<const N: usize>(key: &str, rows: &[[f64; N]]) -> Result<Vec<(f64, [f64; N])>> {
+    if rows.is_empty() {
+        return Err(Error::parameter(key, "needs at least one row [time_s, …]"));
+    }
+    let mut last = f64::NEG_INFINITY;
+    for (i, row) in rows.iter().enumerate() {
+        if let Some(bad) = row.iter().find(|v| !v.is_finite()) {
+            return Err(Error::parameter(format!("{key}[{i}]"), format!("must be finite, got {bad}")));
+        }
+        if row[0] <= last {
+            return Err(Error::parameter(
+                format!("{key}[{i}]"),
+                format!("times must increase, got {} after {last}", row[0]),
+            ));
+        }
+        last = row[0];
+    }
+    Ok(rows.iter().map(|r| (r[0], *r)).collect())
+}
+
+fn vector_keyframes(key: &str, rows: &[[f64; 4]]) -> Result<Keyframes<Vector3<f64>>> {
+    Ok(Keyframes {
+        points: keyframes(key, rows)?
+            .into_iter()
+            .map(|(t, r)| (t, Vector3::new(r[1], r[2], r[3])))
+            .collect(),
+    })
+}
+
+/// Materials per tet from the `[material.*]` sections.
+pub fn materials(sections: &BTreeMap<String, MaterialSection>, mesh: &TetMesh) -> Result<Vec<Material>> {
+    for name in sections.keys() {
+        if mesh.region_by_name(name).is_none() {
+            let known: Vec<&str> = mesh.regions.iter().map(|r| r.name.as_str()).collect();
+            return Err(Error::parameter(
+                format!("material.{name}"),
+                format!("names no region of the mesh (regions: {})", known.join(", ")),
+            ));
+        }
+    }
+    let mut by_id = BTreeMap::new();
+    for region in &mesh.regions {
+        let s = sections.get(&region.name).cloned().unwrap_or_default();
+        let default_kpa = match region.name.as_str() {
+            "dermis" => Some(150.0),
+            "hypodermis" => Some(15.0),
+            _ => None,
+        };
+        let kpa = s.youngs_modulus_kpa.or(default_kpa).ok_or_else(|| {
+            Error::parameter(
+                format!("material.{}.youngs_modulus_kpa", region.name),
+                "is required: the region has no default material",
+            )
+        })?;
+        let m = Material::from_scenario_units(
+            &region.name,
+            kpa,
+            s.poisson_ratio.unwrap_or(0.45),
+            s.density_kg_m3.unwrap_or(1100.0),
+        )?;
+        by_id.insert(region.id, m);
+    }
+    Ok(mesh.tet_region.iter().map(|id| by_id[id]).collect())
+}
+
+impl BoundarySection {
+    /// Validates into boundary conditions on `mesh`'s node sets.
+    pub fn conditions(&self, sets: &NodeSets) -> Result<BoundaryConditions> {
+        let bottom = match self.bottom.as_str() {
+            "fixed" => BottomCondition::Fixed,
+            "rollers" => BottomCondition::Rollers,
+            other => {
+                return Err(Error::parameter(
+                    "boundary.bottom",
+                    format!("must be \"fixed\" or \"rollers\", got \"{other}\""),
+                ))
+            }
+        };
+        let sides = match self.sides.as_str() {
+            "clamped" => SideCondition::Clamped,
+            "rollers" => SideCondition::Rollers,
+            "free" => SideCondition::Free,
+            other => {
+                return Err(Error::parameter(
+                    "boundary.sides",
+                    format!("must be \"clamped\", \"rollers\" or \"free\", got \"{other}\""),
+                ))
+            }
+        };
+        let caliper = match &self.caliper {
+            None => None,
+            Some(c) => {
+                let axis = match c.axis.as_str() {
+                    "x" => 0,
+                    "y" => 1,
+                    other => {
+                        return Err(Error::parameter(
+                            "boundary.caliper.axis",
+                            format!("must be \"x\" or \"y\", got \"{other}\""),
+                        ))
+                    }
+                };
+                let points = keyframes("boundary.caliper.stretch", &c.stretch)?;
+                for (i, (_, r)) in points.iter().enumerate() {
+                    positive(&format!("boundary.caliper.stretch[{i}] ratio"), r[1])?;
+                }
+                Some(Caliper {
+                    axis,
+                    stretch: Keyframes { points: points.into_iter().map(|(t, r)| (t, r[1])).collect() },
+                })
+            }
+        };
+        let mut prescribed = Vec::new();
+        for (i, p) in self.prescribed.iter().enumerate() {
+            let key = format!("boundary.prescribed[{i}]");
+            let nodes = sets.by_name(&p.set).ok_or_else(|| {
+                Error::parameter(
+                    format!("{key}.set"),
+                    format!("must be top, bottom, x_min, x_max, y_min or y_max, got \"{}\"", p.set),
+                )
+            })?;
+            prescribed.push(Prescribed {
+                name: p.set.clone(),
+                nodes: nodes.to_vec(),
+                displacement: vector_keyframes(&format!("{key}.displacement_mm"), &p.displacement_mm)?,
+            });
+        }
+        Ok(BoundaryConditions { bottom, sides, caliper, prescribed })
+    }
+}
+
+impl ProbeSection {
+    /// Validates into a [`Probe`].
+    pub fn probe(&self) -> Result<Probe> {
+        let radius = positive("probe.radius_mm", self.radius_mm)?;
+        let shape = match self.shape.as_str() {
+            "sphere" => ProbeShape::Sphere { radius_mm: radius },
+            "punch" => ProbeShape::Punch { radius_mm: radius },
+            "capsule" => {
+                let length = self.length_mm.ok_or_else(|| {
+                    Error::parameter("probe.length_mm", "is required for shape = \"capsule\"")
+                })?;
+                ProbeShape::Capsule {
+                    radius_mm: radius,
+                    length_mm: super::non_negative("probe.length_mm", length)?,
+                }
+            }
+            other => {
+                return Err(Error::parameter(
+                    "probe.shape",
+                    format!("must be \"sphere\", \"capsule\" or \"punch\", got \"{other}\""),
+                ))
+            }
+        };
+        if self.length_mm.is_some() && !matches!(shape, ProbeShape::Capsule { .. }) {
+            return Err(Error::parameter("probe.length_mm", "applies to shape = \"capsule\" only"));
+        }
+        let mode = match (self.contact.as_deref().unwrap_or("frictionless"), self.friction) {
+            ("frictionless", None) => ContactMode::Frictionless,
+            ("bonded", None) => ContactMode::Bonded,
+            ("coulomb", Some(mu)) => {
+                if !(mu.is_finite() && mu >= 0.0) {
+                    return Err(Error::parameter("probe.friction", format!("must be ≥ 0, got {mu}")));
+                }
+                ContactMode::Coulomb(mu)
+            }
+            ("coulomb", None) => {
+                return Err(Error::parameter("probe.friction", "is required with contact = \"coulomb\""))
+            }
+            ("frictionless" | "bonded", Some(_)) => {
+                return Err(Error::parameter("probe.friction", "applies to contact = \"coulomb\" only"))
+            }
+            (other, _) => {
+                return Err(Error::parameter(
+                    "probe.contact",
+                    format!("must be \"frictionless\", \"coulomb\" or \"bonded\", got \"{other}\""),
+                ))
+            }
+        };
+        let axis = match &self.axis {
+            Some(rows) => {
+                let k = vector_keyframes("probe.axis", rows)?;
+                if let Some((t, _)) = k.points.iter().find(|(_, a)| a.norm() == 0.0) {
+                    return Err(Error::parameter("probe.axis", format!("is zero at t = {t}")));
+                }
+                k
+            }
+            None => Keyframes { points: vec![(0.0, Vector3::x())] },
+        };
+        Ok(Probe {
+            shape,
+            path: vector_keyframes("probe.path_mm", &self.path_mm)?,
+            axis,
+            mode,
+        })
+    }
+}
+
+impl SolverSection {
+    /// Validates into Newton settings.
+    pub fn settings(&self) -> Result<NewtonSettings> {
+        let check_tol = |key: &str, v: f64| {
+            if v.is_finite() && v > 0.0 && v < 1.0 {
+                Ok(v)
+            } else {
+                Err(Error::parameter(key, format!("must be in (0, 1), got {v}")))
+            }
+        };
+        let count = |key: &str, v: usize| {
+            if v > 0 {
+                Ok(v)
+            } else {
+                Err(Error::parameter(key, "must be > 0, got 0"))
+            }
+        };
+        let linear = match self.linear.as_str() {
+            "direct" => LinearSolver::Direct,
+            "cg" => LinearSolver::Cg,
+            other => {
+                return Err(Error::parameter(
+                    "solver.linear",
+                    format!("must be \"direct\" or \"cg\", got \"{other}\""),
+                ))
+            }
+        };
+        Ok(NewtonSettings {
+            linear,
+            rel_tol: check_tol("solver.rel_tol", self.rel_tol)?,
+            max_iterations: count("solver.max_newton_iterations", self.max_newton_iterations)?,
+            cg: CgSettings {
+                rel_tol: check_tol("solver.linear_rel_tol", self.linear_rel_tol)?,
+                max_iterations: count("solver.max_linear_iterations", self.max_linear_iterations)?,
+            },
+        })
+    }
+}
+
+impl TimeSection {
+    /// (frames, frame interval, substeps).
+    pub fn frames(&self) -> Result<(usize, f64, usize)> {
+        let duration = positive("time.duration_s", self.duration_s)?;
+        let rate = positive("time.frame_rate_hz", self.frame_rate_hz)?;
+        if self.substeps == 0 {
+            return Err(Error::parameter("time.substeps", "must be > 0, got 0"));
+        }
+        let frames = (duration * rate).round() as usize;
+        if frames == 0 || frames > 1_000_000 {
+            return Err(Error::parameter(
+                "time",
+                format!("duration_s × frame_rate_hz must give 1 to 1e6 frames, got {}", duration * rate),
+            ));
+        }
+        Ok((frames, 1.0 / rate, self.substeps))
+    }
+}
