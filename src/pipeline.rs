@@ -83,7 +83,11 @@ fn simulate(
     for frame in 0..=s.frames {
         let start = Instant::now();
         let t = frame as f64 * s.frame_dt;
-        let mut m = FrameMetrics { frame, time_s: t, ..Default::default() };
+        let mut m = FrameMetrics {
+            frame,
+            time_s: t,
+            ..Default::default()
+        };
         let substeps = if frame == 0 { 1 } else { s.substeps };
         for k in 1..=substeps {
             let ts = t_prev + (t - t_prev) * k as f64 / substeps as f64;

@@ -168,8 +168,11 @@ impl Assembly {
             for (k, &j) in nb.iter().enumerate() {
                 let b = f(i, j, &self.block(i, k));
                 for row in 0..3 {
-                    values[3 * n * row + 3 * k..3 * n * row + 3 * k + 3]
-                        .copy_from_slice(&[b[(row, 0)], b[(row, 1)], b[(row, 2)]]);
+                    values[3 * n * row + 3 * k..3 * n * row + 3 * k + 3].copy_from_slice(&[
+                        b[(row, 0)],
+                        b[(row, 1)],
+                        b[(row, 2)],
+                    ]);
                 }
             }
         });

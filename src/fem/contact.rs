@@ -231,6 +231,10 @@ pub struct ContactState {
     pub active: std::collections::BTreeMap<usize, NodeContact>,
     /// Probe pose at the end of the previous solve.
     last_pose: Option<ProbePose>,
+    /// Pose of the previous solve, during the current one.
+    previous: ProbePose,
+    /// Positions of the active nodes when the current solve started.
+    frame_start: std::collections::BTreeMap<usize, Vec3>,
     /// Limit on active-set rounds per solve.
     pub max_rounds: usize,
 }
@@ -289,6 +293,12 @@ impl ContactState {
             tolerance,
             active: Default::default(),
             last_pose: None,
+            previous: ProbePose {
+                shape: ProbeShape::Sphere { radius_mm: 0.0 },
+                centre: Vec3::zeros(),
+                axis: Vec3::x(),
+            },
+            frame_start: Default::default(),
             max_rounds: 40,
         }
     }
@@ -311,13 +321,17 @@ pub fn solve_with_contact(
 ) -> crate::error::Result<ContactReport> {
     let (base_filters, base_targets, base_ext) = base;
     let previous = state.last_pose.unwrap_or(*pose);
-    // A new frame: sticking nodes ride along with the probe, sliding nodes
-    // restart as sticking (friction re-decides), frictionless ones slide.
+    // A new frame: sticking nodes ride along with the probe; sliding nodes
+    // keep sliding with last frame's friction (a steady drag then settles in
+    // a round or two) and stick again if they end up moving with the probe.
+    state.frame_start = state.active.keys().map(|&v| (v, sim.x[v])).collect();
+    state.previous = previous;
     for (&v, c) in state.active.iter_mut() {
-        *c = match mode {
-            ContactMode::Frictionless => NodeContact::Slide {
+        *c = match (mode, *c) {
+            (ContactMode::Frictionless, _) => NodeContact::Slide {
                 friction: Vec3::zeros(),
             },
+            (ContactMode::Coulomb(_), slide @ NodeContact::Slide { .. }) => slide,
             _ => NodeContact::Stick {
                 anchor: pose.project(&previous.carry(pose, &sim.x[v])).0,
             },
@@ -419,6 +433,20 @@ fn update_active_set(
                 }
             }
             (ContactMode::Coulomb(mu), NodeContact::Slide { friction }) => {
+                // Slip over this solve relative to the probe surface: if the
+                // node ends up moving along its friction force, it sticks.
+                if let Some(start) = state.frame_start.get(&v) {
+                    let carried = state.previous.carry(pose, start);
+                    let slip = sim.x[v] - carried;
+                    let slip_t = slip - n * slip.dot(&n);
+                    if friction.dot(&slip_t) > 0.0 && slip_t.norm() > 0.1 * tol {
+                        *entry = NodeContact::Stick {
+                            anchor: pose.project(&carried).0,
+                        };
+                        changed = true;
+                        continue;
+                    }
+                }
                 let magnitude = mu * normal.max(0.0);
                 let dir = if friction.norm() > 0.0 {
                     friction.normalize()

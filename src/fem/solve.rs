@@ -296,9 +296,9 @@ impl DirectSolver {
     /// Solves `(S K S + I − S) x = S b` exactly; `x` is overwritten. Returns
     /// `false` if the factorisation failed (matrix not positive definite).
     pub fn solve(&mut self, asm: &Assembly, filters: &[Filter], b: &[f64], x: &mut [f64]) -> bool {
+        use faer::linalg::solvers::SolveCore;
         use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
         use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
-        use faer::linalg::solvers::SolveCore;
         let m = &asm.matrix;
         let n = m.nrows();
         self.values.resize(m.values().len(), 0.0);

@@ -180,7 +180,10 @@ fn keyframes<const N: usize>(key: &str, rows: &[[f64; N]]) -> Result<Vec<(f64, [
     let mut last = f64::NEG_INFINITY;
     for (i, row) in rows.iter().enumerate() {
         if let Some(bad) = row.iter().find(|v| !v.is_finite()) {
-            return Err(Error::parameter(format!("{key}[{i}]"), format!("must be finite, got {bad}")));
+            return Err(Error::parameter(
+                format!("{key}[{i}]"),
+                format!("must be finite, got {bad}"),
+            ));
         }
         if row[0] <= last {
             return Err(Error::parameter(
@@ -203,13 +206,19 @@ fn vector_keyframes(key: &str, rows: &[[f64; 4]]) -> Result<Keyframes<Vector3<f6
 }
 
 /// Materials per tet from the `[material.*]` sections.
-pub fn materials(sections: &BTreeMap<String, MaterialSection>, mesh: &TetMesh) -> Result<Vec<Material>> {
+pub fn materials(
+    sections: &BTreeMap<String, MaterialSection>,
+    mesh: &TetMesh,
+) -> Result<Vec<Material>> {
     for name in sections.keys() {
         if mesh.region_by_name(name).is_none() {
             let known: Vec<&str> = mesh.regions.iter().map(|r| r.name.as_str()).collect();
             return Err(Error::parameter(
                 format!("material.{name}"),
-                format!("names no region of the mesh (regions: {})", known.join(", ")),
+                format!(
+                    "names no region of the mesh (regions: {})",
+                    known.join(", ")
+                ),
             ));
         }
     }
@@ -281,7 +290,9 @@ impl BoundarySection {
                 }
                 Some(Caliper {
                     axis,
-                    stretch: Keyframes { points: points.into_iter().map(|(t, r)| (t, r[1])).collect() },
+                    stretch: Keyframes {
+                        points: points.into_iter().map(|(t, r)| (t, r[1])).collect(),
+                    },
                 })
             }
         };
@@ -291,16 +302,27 @@ impl BoundarySection {
             let nodes = sets.by_name(&p.set).ok_or_else(|| {
                 Error::parameter(
                     format!("{key}.set"),
-                    format!("must be top, bottom, x_min, x_max, y_min or y_max, got \"{}\"", p.set),
+                    format!(
+                        "must be top, bottom, x_min, x_max, y_min or y_max, got \"{}\"",
+                        p.set
+                    ),
                 )
             })?;
             prescribed.push(Prescribed {
                 name: p.set.clone(),
                 nodes: nodes.to_vec(),
-                displacement: vector_keyframes(&format!("{key}.displacement_mm"), &p.displacement_mm)?,
+                displacement: vector_keyframes(
+                    &format!("{key}.displacement_mm"),
+                    &p.displacement_mm,
+                )?,
             });
         }
-        Ok(BoundaryConditions { bottom, sides, caliper, prescribed })
+        Ok(BoundaryConditions {
+            bottom,
+            sides,
+            caliper,
+            prescribed,
+        })
     }
 }
 
@@ -328,22 +350,37 @@ impl ProbeSection {
             }
         };
         if self.length_mm.is_some() && !matches!(shape, ProbeShape::Capsule { .. }) {
-            return Err(Error::parameter("probe.length_mm", "applies to shape = \"capsule\" only"));
+            return Err(Error::parameter(
+                "probe.length_mm",
+                "applies to shape = \"capsule\" only",
+            ));
         }
-        let mode = match (self.contact.as_deref().unwrap_or("frictionless"), self.friction) {
+        let mode = match (
+            self.contact.as_deref().unwrap_or("frictionless"),
+            self.friction,
+        ) {
             ("frictionless", None) => ContactMode::Frictionless,
             ("bonded", None) => ContactMode::Bonded,
             ("coulomb", Some(mu)) => {
                 if !(mu.is_finite() && mu >= 0.0) {
-                    return Err(Error::parameter("probe.friction", format!("must be ≥ 0, got {mu}")));
+                    return Err(Error::parameter(
+                        "probe.friction",
+                        format!("must be ≥ 0, got {mu}"),
+                    ));
                 }
                 ContactMode::Coulomb(mu)
             }
             ("coulomb", None) => {
-                return Err(Error::parameter("probe.friction", "is required with contact = \"coulomb\""))
+                return Err(Error::parameter(
+                    "probe.friction",
+                    "is required with contact = \"coulomb\"",
+                ))
             }
             ("frictionless" | "bonded", Some(_)) => {
-                return Err(Error::parameter("probe.friction", "applies to contact = \"coulomb\" only"))
+                return Err(Error::parameter(
+                    "probe.friction",
+                    "applies to contact = \"coulomb\" only",
+                ))
             }
             (other, _) => {
                 return Err(Error::parameter(
@@ -356,11 +393,16 @@ impl ProbeSection {
             Some(rows) => {
                 let k = vector_keyframes("probe.axis", rows)?;
                 if let Some((t, _)) = k.points.iter().find(|(_, a)| a.norm() == 0.0) {
-                    return Err(Error::parameter("probe.axis", format!("is zero at t = {t}")));
+                    return Err(Error::parameter(
+                        "probe.axis",
+                        format!("is zero at t = {t}"),
+                    ));
                 }
                 k
             }
-            None => Keyframes { points: vec![(0.0, Vector3::x())] },
+            None => Keyframes {
+                points: vec![(0.0, Vector3::x())],
+            },
         };
         Ok(Probe {
             shape,
@@ -422,7 +464,10 @@ impl TimeSection {
         if frames == 0 || frames > 1_000_000 {
             return Err(Error::parameter(
                 "time",
-                format!("duration_s × frame_rate_hz must give 1 to 1e6 frames, got {}", duration * rate),
+                format!(
+                    "duration_s × frame_rate_hz must give 1 to 1e6 frames, got {}",
+                    duration * rate
+                ),
             ));
         }
         Ok((frames, 1.0 / rate, self.substeps))
