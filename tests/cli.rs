@@ -22,20 +22,19 @@ fn text(bytes: &[u8]) -> String {
 }
 
 #[test]
-fn run_press_writes_the_mesh() {
+fn run_writes_mesh_frames_and_metrics() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("press");
     let o = skinpatch(&[
         "run",
-        "examples/press.toml",
+        "tests/fixtures/press_small.toml",
         "--output",
         out.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "stderr: {}", text(&o.stderr));
     let stdout = text(&o.stdout);
-    assert!(stdout.contains("wrote"), "{stdout}");
+    let mesh = io::read_tetgen(&root().join("meshes/patch_3k")).unwrap();
     let grid = io::read_vtu(&out.join("mesh.vtu")).unwrap();
-    let mesh = io::read_tetgen(&root().join("meshes/patch_25k")).unwrap();
     assert_eq!(
         (grid.points.len(), grid.tets.len()),
         (mesh.num_vertices(), mesh.num_tets())
@@ -44,7 +43,80 @@ fn run_press_writes_the_mesh() {
         stdout.contains(&format!("tets {}", mesh.num_tets())),
         "{stdout}"
     );
-    meshio_agrees(&out.join("mesh.vtu"), mesh.num_vertices(), mesh.num_tets());
+    // Seven frames (t = 0 … 1 s at 6 Hz), each a VTU with the deformed mesh.
+    let metrics = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    let rows: Vec<&str> = metrics.lines().collect();
+    assert_eq!(rows.len(), 8, "{metrics}");
+    assert!(rows[0].starts_with("frame,time_s,probe_force_x_n"));
+    let last = io::read_vtu(&out.join("frames/frame_0006.vtu")).unwrap();
+    let stretch = last
+        .cell_data
+        .iter()
+        .find(|f| f.name == "principal_stretch")
+        .unwrap();
+    assert_eq!(stretch.components, 3);
+    let displacement = last
+        .point_data
+        .iter()
+        .find(|f| f.name == "displacement_mm")
+        .unwrap();
+    let io::Values::F64(d) = &displacement.values else {
+        panic!("float displacement")
+    };
+    // The surface under the probe went down about 0.5 mm.
+    let deepest = d.chunks(3).map(|c| c[2]).fold(0.0, f64::min);
+    assert!(
+        (-0.55..-0.4).contains(&deepest),
+        "deepest displacement {deepest}"
+    );
+    // The probe is pushed up and dragged back against +x motion.
+    let f: Vec<f64> = rows[7].split(',').map(|v| v.parse().unwrap()).collect();
+    assert!(f[4] > 0.0 && f[2] < 0.0, "{}", rows[7]);
+    let pvd = std::fs::read_to_string(out.join("frames.pvd")).unwrap();
+    assert_eq!(pvd.matches("<DataSet").count(), 7);
+    meshio_agrees(
+        &out.join("frames/frame_0006.vtu"),
+        mesh.num_vertices(),
+        mesh.num_tets(),
+    );
+}
+
+/// Same scenario, same bytes: every output but the wall-time column.
+#[test]
+fn runs_are_deterministic() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |name: &str| {
+        let out = dir.path().join(name);
+        let o = skinpatch(&[
+            "run",
+            "tests/fixtures/press_small.toml",
+            "--output",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+        out
+    };
+    let (a, b) = (run("a"), run("b"));
+    for k in 0..=6 {
+        let f = format!("frames/frame_{k:04}.vtu");
+        assert_eq!(
+            std::fs::read(a.join(&f)).unwrap(),
+            std::fs::read(b.join(&f)).unwrap(),
+            "{f}"
+        );
+    }
+    let strip = |p: &Path| -> Vec<String> {
+        std::fs::read_to_string(p)
+            .unwrap()
+            .lines()
+            .map(|l| l.rsplit_once(',').unwrap().0.to_string())
+            .collect()
+    };
+    assert_eq!(strip(&a.join("metrics.csv")), strip(&b.join("metrics.csv")));
+    assert_eq!(
+        std::fs::read(a.join("mesh.vtu")).unwrap(),
+        std::fs::read(b.join("mesh.vtu")).unwrap()
+    );
 }
 
 /// Reads the file with the Python package meshio when it is installed
@@ -181,4 +253,34 @@ fn bad_scenarios_fail_cleanly() {
     }
     let o = skinpatch(&["run", "no/such/scenario.toml"]);
     assert!(text(&o.stderr).contains("no/such/scenario.toml"));
+}
+
+/// A run whose solver gives up stops with an error naming the frame and the
+/// residual, and keeps every frame written before.
+#[test]
+fn solver_failure_stops_cleanly_and_keeps_outputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenario = std::fs::read_to_string(root().join("tests/fixtures/press_small.toml")).unwrap();
+    let scenario = scenario.replace("../../meshes", root().join("meshes").to_str().unwrap())
+        + "\n[solver]\nmax_newton_iterations = 1\n";
+    let path = dir.path().join("starved.toml");
+    std::fs::write(&path, scenario).unwrap();
+    let out = dir.path().join("out");
+    let o = skinpatch(&[
+        "run",
+        path.to_str().unwrap(),
+        "--output",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let stderr = text(&o.stderr);
+    assert!(stderr.contains("frame 1 (t = 0.1667 s)"), "{stderr}");
+    assert!(stderr.contains("relative residual"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let metrics = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    assert_eq!(metrics.lines().count(), 2, "header and frame 0: {metrics}");
+    io::read_vtu(&out.join("frames/frame_0000.vtu")).unwrap();
+    assert!(std::fs::read_to_string(out.join("frames.pvd"))
+        .unwrap()
+        .contains("frame_0000.vtu"));
 }

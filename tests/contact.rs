@@ -108,3 +108,22 @@ fn press_balances_forces_and_respects_penetration_bound() {
     );
     println!("{rep:?}");
 }
+
+/// A probe pushed to 60% of the patch thickness: no NaN, no crash, a force
+/// that grows with depth, and penetration within 1.5% of the local size.
+#[test]
+fn deep_press_is_robust() {
+    let path = common::root().join("tests/fixtures/deep_press.toml");
+    let mut setup = skinpatch::scenario::Setup::load(&path).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    setup.output_dir = dir.path().to_path_buf();
+    let summary = skinpatch::pipeline::run(&setup, |_, _| {}).unwrap();
+    let forces: Vec<f64> = summary.frames.iter().map(|m| m.probe_force_n[2]).collect();
+    assert_eq!(forces.len(), 11);
+    for w in forces.windows(2) {
+        assert!(w[1].is_finite() && w[1] > w[0], "{forces:?}");
+    }
+    for m in &summary.frames {
+        assert!(m.max_penetration_mm <= 0.015, "{m:?}");
+    }
+}
