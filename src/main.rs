@@ -43,6 +43,21 @@ enum Command {
     /// (TetGen), BASE.vtu and BASE.poly (the TetGen input that regenerates the
     /// mesh). It always prints the quality report.
     Mesh(Box<MeshArgs>),
+    /// Benchmark a stage and print its figures.
+    ///
+    /// `bench fem` simulates the first frames of a scenario (default the
+    /// press-and-drag example) with each linear solver in one run and prints
+    /// frames/s, iterations, the time split and the ratio between solvers.
+    Bench {
+        /// Stage to benchmark: `fem`.
+        stage: String,
+        /// Scenario to simulate.
+        #[arg(long, default_value = "examples/press.toml")]
+        scenario: PathBuf,
+        /// Frames to simulate (after the rest frame).
+        #[arg(long, default_value_t = 10)]
+        frames: usize,
+    },
 }
 
 #[derive(Args)]
@@ -116,6 +131,11 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run { scenario, output } => run(&scenario, output),
         Command::Mesh(args) => mesh(*args),
+        Command::Bench {
+            stage,
+            scenario,
+            frames,
+        } => bench(&stage, &scenario, frames),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -147,6 +167,51 @@ fn run(path: &Path, output: Option<PathBuf>) -> anyhow::Result<()> {
     for file in &summary.written {
         report += &format!("wrote {}\n", file.display());
     }
+    print_stdout(&report)
+}
+
+fn bench(stage: &str, path: &Path, frames: usize) -> anyhow::Result<()> {
+    use skinpatch::fem::integrate::LinearSolver;
+    if stage != "fem" {
+        bail!("unknown stage '{stage}': `bench` knows `fem`");
+    }
+    let mut setup = Setup::load(path).with_context(|| format!("scenario {}", path.display()))?;
+    let mut report = format!(
+        "bench fem: {} ({} tets), first {} frames\n\
+         {:<8} {:>9} {:>9} {:>8} {:>10} {:>9} {:>9} {:>9} {:>9}\n",
+        path.display(),
+        setup.mesh.num_tets(),
+        frames,
+        "solver",
+        "frames/s",
+        "wall s",
+        "Newton",
+        "linear it",
+        "forces s",
+        "assemb s",
+        "linear s",
+        "other s"
+    );
+    let mut walls = Vec::new();
+    for (name, solver) in [("cg", LinearSolver::Cg), ("direct", LinearSolver::Direct)] {
+        setup.simulation.newton.linear = solver;
+        let f = skinpatch::pipeline::bench_fem(&setup, frames)?;
+        let t = f.timings;
+        let other = f.wall_s - t.forces_s - t.assembly_s - t.linear_s;
+        report += &format!(
+            "{name:<8} {:>9.3} {:>9.2} {:>8} {:>10} {:>9.2} {:>9.2} {:>9.2} {:>9.2}\n",
+            f.frames as f64 / f.wall_s,
+            f.wall_s,
+            f.newton_iterations,
+            f.linear_iterations,
+            t.forces_s,
+            t.assembly_s,
+            t.linear_s,
+            other
+        );
+        walls.push(f.wall_s);
+    }
+    report += &format!("direct / cg wall-time ratio: {:.2}\n", walls[1] / walls[0]);
     print_stdout(&report)
 }
 

@@ -284,3 +284,30 @@ fn solver_failure_stops_cleanly_and_keeps_outputs() {
         .unwrap()
         .contains("frame_0000.vtu"));
 }
+
+#[test]
+fn bench_fem_compares_solvers() {
+    let o = skinpatch(&[
+        "bench",
+        "fem",
+        "--scenario",
+        "tests/fixtures/press_small.toml",
+        "--frames",
+        "2",
+    ]);
+    assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    let out = text(&o.stdout);
+    assert!(out.contains("frames/s"), "{out}");
+    let rows: Vec<&str> = out
+        .lines()
+        .filter(|l| l.starts_with("cg ") || l.starts_with("direct "))
+        .collect();
+    assert_eq!(rows.len(), 2, "{out}");
+    // Both solvers take the same Newton path on this small problem.
+    let newton: Vec<&str> = rows
+        .iter()
+        .map(|r| r.split_whitespace().nth(3).unwrap())
+        .collect();
+    assert_eq!(newton[0], newton[1], "{out}");
+    assert!(out.contains("direct / cg wall-time ratio"), "{out}");
+}

@@ -59,6 +59,17 @@ impl Default for NewtonSettings {
     }
 }
 
+/// Time spent in each part of the solver, accumulated until reset (s).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Timings {
+    /// Element loop: rotations, forces and their gather.
+    pub forces_s: f64,
+    /// Element tangents and stiffness assembly.
+    pub assembly_s: f64,
+    /// Linear solves.
+    pub linear_s: f64,
+}
+
 /// What one equilibrium solve did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct NewtonStats {
@@ -91,6 +102,8 @@ pub struct Simulation {
     pub targets: Vec<Vec3>,
     /// Newton settings.
     pub settings: NewtonSettings,
+    /// Accumulated solver timings (reset by the caller).
+    pub timings: Timings,
     assembly: Assembly,
     corotations: Vec<Corotation>,
     tangents: Vec<Tangent>,
@@ -130,6 +143,7 @@ impl Simulation {
             filters: vec![Filter::Free; n],
             targets: mesh.positions.clone(),
             settings: NewtonSettings::default(),
+            timings: Timings::default(),
             f_int: vec![Vec3::zeros(); n],
             cg: CgWorkspace::default(),
             direct: DirectSolver::default(),
@@ -162,6 +176,7 @@ impl Simulation {
 
     /// Evaluates rotations and internal forces at the current positions.
     pub fn evaluate_forces(&mut self) {
+        let start = std::time::Instant::now();
         let (x, tets, elements) = (&self.x, &self.tets, &self.elements);
         self.corotations
             .par_iter_mut()
@@ -175,6 +190,7 @@ impl Simulation {
             });
         self.assembly
             .gather_forces(&self.tet_forces, &mut self.f_int);
+        self.timings.forces_s += start.elapsed().as_secs_f64();
     }
 
     /// The tangent stiffness at the current positions (evaluates forces first).
@@ -186,6 +202,7 @@ impl Simulation {
 
     /// Assembles the projected tangent stiffness at the last evaluation.
     fn assemble_tangent(&mut self) {
+        let start = std::time::Instant::now();
         let (elements, corotations) = (&self.elements, &self.corotations);
         self.tangents = (0..elements.len())
             .into_par_iter()
@@ -194,6 +211,7 @@ impl Simulation {
         let tangents = &self.tangents;
         self.assembly
             .assemble_stiffness(|t, a, b| tangents[t].block(a, b));
+        self.timings.assembly_s += start.elapsed().as_secs_f64();
     }
 
     /// Moves every constrained direction onto its target.
@@ -270,6 +288,13 @@ impl Simulation {
     /// Solves for the Newton step into `dx`; returns the linear iterations
     /// (1 for a direct solve).
     fn linear_solve(&mut self) -> usize {
+        let start = std::time::Instant::now();
+        let iterations = self.linear_solve_untimed();
+        self.timings.linear_s += start.elapsed().as_secs_f64();
+        iterations
+    }
+
+    fn linear_solve_untimed(&mut self) -> usize {
         if self.settings.linear == LinearSolver::Direct
             && self
                 .direct
