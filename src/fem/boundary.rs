@@ -8,8 +8,8 @@
 //! * sides: `clamped` (all components), `rollers` (normal component only) or `free`;
 //! * caliper: the two sides normal to `axis` act as frictionless jaws that
 //!   move apart (stretch > 1) or together (< 1): their axis coordinate is
-//!   `c + s(t)·(X − c)` about the patch centre c, other components follow
-//!   nothing (the jaws slide);
+//!   `c + s(t)·(X − c)` about the patch centre c; their other components
+//!   are free (the jaws slide);
 //! * prescribed displacement of a named node set over time (all components).
 //!
 //! Keyframed quantities interpolate linearly in time and hold their end values
