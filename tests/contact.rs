@@ -127,3 +127,101 @@ fn deep_press_is_robust() {
         assert!(m.max_penetration_mm <= 0.015, "{m:?}");
     }
 }
+
+/// Runs tests/fixtures/drag.toml with the given `[probe]` contact lines.
+fn drag(contact: &str) -> (skinpatch::pipeline::RunSummary, tempfile::TempDir) {
+    let fixture = common::root().join("tests/fixtures/drag.toml");
+    let text = std::fs::read_to_string(&fixture)
+        .unwrap()
+        .replace("[time]", &format!("{contact}\n[time]"));
+    let scenario = skinpatch::scenario::Scenario::parse(&text, &fixture).unwrap();
+    let mut setup = skinpatch::scenario::Setup::from_scenario(&scenario, &fixture).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    setup.output_dir = dir.path().to_path_buf();
+    (skinpatch::pipeline::run(&setup, |_, _| {}).unwrap(), dir)
+}
+
+/// With μ = 0 a dragged probe carries no tangential force (up to the
+/// faceting of the mesh: under 2% of the normal force).
+#[test]
+fn frictionless_drag_has_no_tangential_force() {
+    let (summary, _dir) = drag("contact = \"frictionless\"");
+    for m in &summary.frames[4..] {
+        let [fx, fy, fz] = m.probe_force_n;
+        assert!(fx.hypot(fy) < 0.02 * fz, "{m:?}");
+    }
+}
+
+/// With a large μ the surface under the probe moves with it: the nodes in
+/// contact at the end travelled the full 0.5 mm of the drag.
+#[test]
+fn sticky_drag_carries_the_surface() {
+    let (summary, dir) = drag("contact = \"coulomb\"\nfriction = 5.0");
+    let last = summary.frames.last().unwrap();
+    assert!(
+        last.probe_force_n[0] < -0.5 * last.probe_force_n[2],
+        "{last:?}"
+    );
+    let read =
+        |k: usize| io::read_vtu(&dir.path().join(format!("frames/frame_{k:04}.vtu"))).unwrap();
+    let (end, pressed) = (read(6), read(3));
+    let disp = |g: &skinpatch::mesh::io::Grid| match &g.point_data[0].values {
+        skinpatch::mesh::io::Values::F64(v) => v.clone(),
+        _ => panic!("float displacement"),
+    };
+    let (d_end, d_pressed) = (disp(&end), disp(&pressed));
+    let mut checked = 0;
+    for (v, p) in end.points.iter().enumerate() {
+        // Nodes under the sphere's lowest point (0.25, 0, −0.5) at the end.
+        if (p.x - 0.25).hypot(p.y) < 0.3 && p.z > -0.6 && p.z < -0.3 {
+            let moved = d_end[3 * v] - d_pressed[3 * v];
+            assert!((moved - 0.5).abs() < 0.02, "node {v} moved {moved} mm");
+            checked += 1;
+        }
+    }
+    assert!(checked >= 3, "{checked} nodes under the probe");
+}
+
+/// A bonded probe pressed 0.3 mm and lifted 0.3 mm above the surface pulls
+/// the skin up with it: the probe force turns downward and the node under it
+/// rises about 0.3 mm.
+#[test]
+fn bonded_probe_pulls_the_surface() {
+    let fixture = common::root().join("tests/fixtures/press_small.toml");
+    let text = std::fs::read_to_string(&fixture)
+        .unwrap()
+        .replace(
+            "path_mm = [[0.0, 0.0, 0.0, 1.5], [0.5, 0.0, 0.0, 1.0], [1.0, 0.5, 0.0, 1.0]]",
+            "path_mm = [[0.0, 0.0, 0.0, 1.5], [0.5, 0.0, 0.0, 1.2], [1.0, 0.0, 0.0, 1.8]]",
+        )
+        .replace(
+            "contact = \"coulomb\"\nfriction = 0.8",
+            "contact = \"bonded\"",
+        );
+    assert!(text.contains("bonded") && text.contains("1.8]]"));
+    let scenario = skinpatch::scenario::Scenario::parse(&text, &fixture).unwrap();
+    let mut setup = skinpatch::scenario::Setup::from_scenario(&scenario, &fixture).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    setup.output_dir = dir.path().to_path_buf();
+    let summary = skinpatch::pipeline::run(&setup, |_, _| {}).unwrap();
+    let last = summary.frames.last().unwrap();
+    assert!(last.probe_force_n[2] < 0.0, "{last:?}");
+    assert!(last.contact_nodes > 0);
+    let grid = io::read_vtu(&dir.path().join("frames/frame_0006.vtu")).unwrap();
+    let skinpatch::mesh::io::Values::F64(d) = &grid.point_data[0].values else {
+        panic!()
+    };
+    // The rest-top node closest to the probe axis.
+    let top = (0..grid.points.len())
+        .filter(|&v| (grid.points[v].z - d[3 * v + 2]).abs() < 1e-9)
+        .min_by(|&a, &b| {
+            let r = |v: usize| (grid.points[v].x - d[3 * v]).hypot(grid.points[v].y - d[3 * v + 1]);
+            r(a).total_cmp(&r(b))
+        })
+        .unwrap();
+    assert!(
+        (d[3 * top + 2] - 0.3).abs() < 0.05,
+        "top centre rose {} mm",
+        d[3 * top + 2]
+    );
+}
