@@ -110,6 +110,7 @@ fn simulate(
     let mesh = &setup.mesh;
     let mut sim = Simulation::new(mesh, &s.tet_material);
     sim.settings = s.newton;
+    sim.dynamics = s.dynamics;
     let sides: Vec<usize> = s.sets.sides.iter().flatten().copied().collect();
     let mut contact = ContactState::new(mesh, &sides);
     let no_loads = vec![Vec3::zeros(); mesh.num_vertices()];
@@ -127,6 +128,9 @@ fn simulate(
             let ts = t_prev + (t - t_prev) * k as f64 / substeps as f64;
             let context = format!("frame {frame} (t = {ts:.4} s)");
             let (filters, targets) = s.boundary.constraints(&s.sets, &mesh.positions, ts);
+            if sim.dynamics.is_some() {
+                sim.begin_step();
+            }
             match &s.probe {
                 Some(probe) => {
                     let r = solve_with_contact(
@@ -153,6 +157,7 @@ fn simulate(
                     m.rel_residual = st.rel_residual;
                 }
             }
+            sim.end_step();
         }
         t_prev = t;
         m.step_wall_s = start.elapsed().as_secs_f64();

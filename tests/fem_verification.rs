@@ -226,3 +226,83 @@ fn static_solves_are_deterministic() {
         .install(run);
     assert_eq!(a, b);
 }
+
+/// Backward Euler on one tet: released from a stretched state, the free
+/// apex overshoots its rest position (inertia) when undamped, and creeps back
+/// without overshoot when heavily mass-damped.
+#[test]
+fn implicit_euler_has_inertia_and_damping() {
+    use skinpatch::fem::integrate::Dynamics;
+    let rest = vec![Vec3::zeros(), Vec3::y(), Vec3::x(), -Vec3::z()];
+    let raw = RawMesh {
+        positions: rest.clone(),
+        tets: vec![[0, 1, 2, 3]],
+        tet_region: vec![1],
+        region_names: BTreeMap::new(),
+        face_markers: HashMap::new(),
+    };
+    let mesh = TetMesh::from_raw("one tet", raw).unwrap();
+    let run = |alpha: f64| -> (f64, f64) {
+        let mut sim = Simulation::new(&mesh, &[skin(1)]);
+        tight(&mut sim);
+        for v in 0..3 {
+            sim.filters[v] = Filter::Fixed;
+        }
+        let apex = (0..4).find(|&v| mesh.positions[v].z < 0.0).unwrap();
+        // Period of the apex's vertical oscillation: 2π √(m/k).
+        let k = sim.stiffness().clone();
+        let kzz = nalgebra::DMatrix::from(&k)[(3 * apex + 2, 3 * apex + 2)];
+        let period = 2.0 * std::f64::consts::PI * (sim.mass[apex] / kzz).sqrt();
+        sim.dynamics = Some(Dynamics {
+            dt: period / 100.0,
+            alpha,
+            beta: 0.0,
+        });
+        sim.x[apex].z = -1.2;
+        let (mut highest, mut lowest_after) = (f64::NEG_INFINITY, f64::INFINITY);
+        for step in 0..100 {
+            sim.begin_step();
+            sim.solve_static("step").unwrap();
+            sim.end_step();
+            highest = highest.max(sim.x[apex].z);
+            if step > 50 {
+                lowest_after = lowest_after.min(sim.x[apex].z);
+            }
+        }
+        (highest, lowest_after)
+    };
+    let (undamped_top, _) = run(0.0);
+    assert!(
+        undamped_top > -0.9,
+        "undamped apex reached {undamped_top}, expected past rest (−1)"
+    );
+    let (damped_top, _) = run(1e5);
+    assert!(damped_top < -1.0 + 1e-9, "damped apex reached {damped_top}");
+}
+
+/// Slow loading: backward-Euler frames agree with quasi-static ones.
+#[test]
+fn implicit_euler_approaches_quasi_static_for_slow_loading() {
+    let fixture = common::root().join("tests/fixtures/press_small.toml");
+    let run = |extra: &str| {
+        let text = std::fs::read_to_string(&fixture)
+            .unwrap()
+            .replace("[time]", &format!("[time]\n{extra}"));
+        let scenario = skinpatch::scenario::Scenario::parse(&text, &fixture).unwrap();
+        let mut setup = skinpatch::scenario::Setup::from_scenario(&scenario, &fixture).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        setup.output_dir = dir.path().to_path_buf();
+        setup.write_frames = false;
+        skinpatch::pipeline::run(&setup, |_, _| {}).unwrap().frames
+    };
+    let quasi = run("");
+    let dynamic = run("integrator = \"implicit-euler\"\ndamping_alpha_per_s = 10.0");
+    for (q, d) in quasi.iter().zip(&dynamic).skip(1) {
+        let (fq, fd) = (q.probe_force_n[2], d.probe_force_n[2]);
+        assert!(
+            (fq - fd).abs() < 0.02 * fq,
+            "frame {}: {fq} vs {fd}",
+            q.frame
+        );
+    }
+}

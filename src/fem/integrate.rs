@@ -1,4 +1,12 @@
-//! Time integration: quasi-static equilibrium by Newton iterations.
+//! Time integration: quasi-static equilibrium or implicit (backward) Euler
+//! dynamics, each step solved by Newton iterations.
+//!
+//! Backward Euler with lumped mass `m` and Rayleigh damping `C = αM + βK`
+//! solves, for the end-of-step positions x (step h, start x_n, v_n),
+//! `m (x − x_n − h v_n)/h² + α m (x − x_n)/h − (1 + β/h) f(x) + (β/h) f(x_n) = f_ext`,
+//! where the stiffness-proportional term uses `f(x) − f(x_n) ≈ −K (x − x_n)`,
+//! so its derivative is exactly `−(β/h) K`. The Newton matrix is
+//! `(1 + β/h) K + (1/h² + α/h) m I`; afterwards `v = (x − x_n)/h`.
 //!
 //! A [`Simulation`] owns the element rest data, the assembly pattern, the
 //! current positions and the constraint filters. Each Newton iteration
@@ -70,6 +78,17 @@ pub struct Timings {
     pub linear_s: f64,
 }
 
+/// Backward-Euler step size and Rayleigh damping.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Dynamics {
+    /// Time step (s).
+    pub dt: f64,
+    /// Mass-proportional damping α (1/s).
+    pub alpha: f64,
+    /// Stiffness-proportional damping β (s).
+    pub beta: f64,
+}
+
 /// What one equilibrium solve did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct NewtonStats {
@@ -104,6 +123,15 @@ pub struct Simulation {
     pub settings: NewtonSettings,
     /// Accumulated solver timings (reset by the caller).
     pub timings: Timings,
+    /// Implicit-Euler dynamics; `None` for quasi-static solves.
+    pub dynamics: Option<Dynamics>,
+    /// Nodal velocities (mm/s), updated by [`Simulation::end_step`].
+    pub v: Vec<Vec3>,
+    /// Lumped nodal masses (t).
+    pub mass: Vec<f64>,
+    x_n: Vec<Vec3>,
+    f_elastic: Vec<Vec3>,
+    f_elastic_n: Vec<Vec3>,
     assembly: Assembly,
     corotations: Vec<Corotation>,
     tangents: Vec<Tangent>,
@@ -144,6 +172,12 @@ impl Simulation {
             targets: mesh.positions.clone(),
             settings: NewtonSettings::default(),
             timings: Timings::default(),
+            dynamics: None,
+            v: vec![Vec3::zeros(); n],
+            mass: lumped_mass(mesh, tet_material),
+            x_n: mesh.positions.clone(),
+            f_elastic: vec![Vec3::zeros(); n],
+            f_elastic_n: vec![Vec3::zeros(); n],
             f_int: vec![Vec3::zeros(); n],
             cg: CgWorkspace::default(),
             direct: DirectSolver::default(),
@@ -190,7 +224,36 @@ impl Simulation {
             });
         self.assembly
             .gather_forces(&self.tet_forces, &mut self.f_int);
+        if let Some(d) = self.dynamics {
+            // f_int becomes the effective force: elastic, damping and inertia.
+            let (h, k) = (d.dt, d.beta / d.dt);
+            self.f_elastic.copy_from_slice(&self.f_int);
+            for i in 0..self.f_int.len() {
+                let dx = self.x[i] - self.x_n[i];
+                let inertia = (dx - self.v[i] * h) * (self.mass[i] / (h * h))
+                    + dx * (d.alpha * self.mass[i] / h);
+                self.f_int[i] = self.f_elastic[i] * (1.0 + k) - self.f_elastic_n[i] * k - inertia;
+            }
+        }
         self.timings.forces_s += start.elapsed().as_secs_f64();
+    }
+
+    /// Starts a backward-Euler step from the current state.
+    pub fn begin_step(&mut self) {
+        let dynamics = self.dynamics.take();
+        self.evaluate_forces();
+        self.dynamics = dynamics;
+        self.x_n.copy_from_slice(&self.x);
+        self.f_elastic_n.copy_from_slice(&self.f_int);
+    }
+
+    /// Ends a backward-Euler step: velocities from the position change.
+    pub fn end_step(&mut self) {
+        if let Some(d) = self.dynamics {
+            for ((v, x), xn) in self.v.iter_mut().zip(&self.x).zip(&self.x_n) {
+                *v = (x - xn) / d.dt;
+            }
+        }
     }
 
     /// The tangent stiffness at the current positions (evaluates forces first).
@@ -209,8 +272,14 @@ impl Simulation {
             .map(|t| elements[t].tangent(&corotations[t]))
             .collect();
         let tangents = &self.tangents;
+        let k = self.dynamics.map_or(1.0, |d| 1.0 + d.beta / d.dt);
         self.assembly
-            .assemble_stiffness(|t, a, b| tangents[t].block(a, b));
+            .assemble_stiffness(|t, a, b| tangents[t].block(a, b) * k);
+        if let Some(d) = self.dynamics {
+            let c = 1.0 / (d.dt * d.dt) + d.alpha / d.dt;
+            let diagonal: Vec<f64> = self.mass.iter().map(|m| m * c).collect();
+            self.assembly.add_to_diagonal(&diagonal);
+        }
         self.timings.assembly_s += start.elapsed().as_secs_f64();
     }
 
@@ -334,6 +403,18 @@ impl Simulation {
         let (norm, scale) = self.residual();
         Ok((norm, scale))
     }
+}
+
+/// Lumped masses: each tet gives a quarter of ρV to each vertex.
+fn lumped_mass(mesh: &TetMesh, tet_material: &[Material]) -> Vec<f64> {
+    let mut mass = vec![0.0; mesh.num_vertices()];
+    for (t, tet) in mesh.tets.iter().enumerate() {
+        let m = tet_material[t].density_t_mm3 * mesh.tet_volume(t) / 4.0;
+        for &v in tet {
+            mass[v] += m;
+        }
+    }
+    mass
 }
 
 fn not_converged(context: &str, iterations: usize, rel: f64) -> Error {

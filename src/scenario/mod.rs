@@ -131,6 +131,7 @@ impl Scenario {
             frames,
             frame_dt,
             substeps,
+            dynamics: self.time.dynamics(frame_dt, substeps)?,
         })
     }
 

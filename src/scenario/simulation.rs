@@ -15,7 +15,7 @@ use crate::fem::boundary::{
     BottomCondition, BoundaryConditions, Caliper, Keyframes, NodeSets, Prescribed, SideCondition,
 };
 use crate::fem::contact::{ContactMode, Probe, ProbeShape};
-use crate::fem::integrate::{LinearSolver, NewtonSettings};
+use crate::fem::integrate::{Dynamics, LinearSolver, NewtonSettings};
 use crate::fem::solve::CgSettings;
 use crate::fem::Material;
 use crate::mesh::TetMesh;
@@ -134,6 +134,13 @@ impl Default for SolverSection {
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct TimeSection {
+    /// `quasi-static` (default: equilibrium at every step) or
+    /// `implicit-euler` (backward-Euler dynamics, one step per substep).
+    pub integrator: String,
+    /// Rayleigh mass-proportional damping α (1/s). Default 0.
+    pub damping_alpha_per_s: f64,
+    /// Rayleigh stiffness-proportional damping β (s). Default 0.
+    pub damping_beta_s: f64,
     /// Simulated time (s). Default 1.
     pub duration_s: f64,
     /// Frames per second of simulated time. Default 60.
@@ -145,6 +152,9 @@ pub struct TimeSection {
 impl Default for TimeSection {
     fn default() -> Self {
         TimeSection {
+            integrator: "quasi-static".into(),
+            damping_alpha_per_s: 0.0,
+            damping_beta_s: 0.0,
             duration_s: 1.0,
             frame_rate_hz: 60.0,
             substeps: 1,
@@ -171,6 +181,8 @@ pub struct SimulationSetup {
     pub frame_dt: f64,
     /// Substeps per frame.
     pub substeps: usize,
+    /// Backward-Euler dynamics (step = frame interval / substeps), or quasi-static.
+    pub dynamics: Option<Dynamics>,
 }
 
 fn keyframes<const N: usize>(key: &str, rows: &[[f64; N]]) -> Result<Vec<(f64, [f64; N])>> {
@@ -453,6 +465,26 @@ impl SolverSection {
 }
 
 impl TimeSection {
+    /// The integrator: `None` for quasi-static, else backward-Euler settings.
+    pub fn dynamics(&self, frame_dt: f64, substeps: usize) -> Result<Option<Dynamics>> {
+        match self.integrator.as_str() {
+            "quasi-static" => Ok(None),
+            "implicit-euler" => {
+                let a = super::non_negative("time.damping_alpha_per_s", self.damping_alpha_per_s)?;
+                let b = super::non_negative("time.damping_beta_s", self.damping_beta_s)?;
+                Ok(Some(Dynamics {
+                    dt: frame_dt / substeps as f64,
+                    alpha: a,
+                    beta: b,
+                }))
+            }
+            other => Err(Error::parameter(
+                "time.integrator",
+                format!("must be \"quasi-static\" or \"implicit-euler\", got \"{other}\""),
+            )),
+        }
+    }
+
     /// (frames, frame interval, substeps).
     pub fn frames(&self) -> Result<(usize, f64, usize)> {
         let duration = positive("time.duration_s", self.duration_s)?;
