@@ -231,10 +231,9 @@ pub struct ContactState {
     pub active: std::collections::BTreeMap<usize, NodeContact>,
     /// Probe pose at the end of the previous solve.
     last_pose: Option<ProbePose>,
-    /// Pose of the previous solve, during the current one.
-    previous: ProbePose,
-    /// Positions of the active nodes when the current solve started.
-    frame_start: std::collections::BTreeMap<usize, Vec3>,
+    /// Where each active node would be had it moved rigidly with the probe
+    /// since the current solve started (to detect re-sticking).
+    carried: std::collections::BTreeMap<usize, Vec3>,
     /// Limit on active-set rounds per solve.
     pub max_rounds: usize,
 }
@@ -293,12 +292,7 @@ impl ContactState {
             tolerance,
             active: Default::default(),
             last_pose: None,
-            previous: ProbePose {
-                shape: ProbeShape::Sphere { radius_mm: 0.0 },
-                centre: Vec3::zeros(),
-                axis: Vec3::x(),
-            },
-            frame_start: Default::default(),
+            carried: Default::default(),
             max_rounds: 40,
         }
     }
@@ -324,8 +318,11 @@ pub fn solve_with_contact(
     // A new frame: sticking nodes ride along with the probe; sliding nodes
     // keep sliding with last frame's friction (a steady drag then settles in
     // a round or two) and stick again if they end up moving with the probe.
-    state.frame_start = state.active.keys().map(|&v| (v, sim.x[v])).collect();
-    state.previous = previous;
+    state.carried = state
+        .active
+        .keys()
+        .map(|&v| (v, previous.carry(pose, &sim.x[v])))
+        .collect();
     for (&v, c) in state.active.iter_mut() {
         *c = match (mode, *c) {
             (ContactMode::Frictionless, _) => NodeContact::Slide {
@@ -378,6 +375,10 @@ pub fn solve_with_contact(
         match (changed, tight) {
             (false, true) => break,
             (false, false) => tight = true,
+            (true, _) if round + 1 == state.max_rounds => log::warn!(
+                "{context}: contact set still changing after {} rounds; keeping the last equilibrium",
+                state.max_rounds
+            ),
             (true, _) => {}
         }
     }
@@ -435,8 +436,7 @@ fn update_active_set(
             (ContactMode::Coulomb(mu), NodeContact::Slide { friction }) => {
                 // Slip over this solve relative to the probe surface: if the
                 // node ends up moving along its friction force, it sticks.
-                if let Some(start) = state.frame_start.get(&v) {
-                    let carried = state.previous.carry(pose, start);
+                if let Some(&carried) = state.carried.get(&v) {
                     let slip = sim.x[v] - carried;
                     let slip_t = slip - n * slip.dot(&n);
                     if friction.dot(&slip_t) > 0.0 && slip_t.norm() > 0.1 * tol {
