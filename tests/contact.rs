@@ -130,15 +130,9 @@ fn deep_press_is_robust() {
 
 /// Runs tests/fixtures/drag.toml with the given `[probe]` contact lines.
 fn drag(contact: &str) -> (skinpatch::pipeline::RunSummary, tempfile::TempDir) {
-    let fixture = common::root().join("tests/fixtures/drag.toml");
-    let text = std::fs::read_to_string(&fixture)
-        .unwrap()
-        .replace("[time]", &format!("{contact}\n[time]"));
-    let scenario = skinpatch::scenario::Scenario::parse(&text, &fixture).unwrap();
-    let mut setup = skinpatch::scenario::Setup::from_scenario(&scenario, &fixture).unwrap();
-    let dir = tempfile::tempdir().unwrap();
-    setup.output_dir = dir.path().to_path_buf();
-    (skinpatch::pipeline::run(&setup, |_, _| {}).unwrap(), dir)
+    common::run_fixture("drag.toml", |t| {
+        t.replace("[time]", &format!("{contact}\n[time]"))
+    })
 }
 
 /// With μ = 0 a dragged probe carries no tangential force (up to the
@@ -187,23 +181,19 @@ fn sticky_drag_carries_the_surface() {
 /// rises about 0.3 mm.
 #[test]
 fn bonded_probe_pulls_the_surface() {
-    let fixture = common::root().join("tests/fixtures/press_small.toml");
-    let text = std::fs::read_to_string(&fixture)
-        .unwrap()
-        .replace(
-            "path_mm = [[0.0, 0.0, 0.0, 1.5], [0.5, 0.0, 0.0, 1.0], [1.0, 0.5, 0.0, 1.0]]",
-            "path_mm = [[0.0, 0.0, 0.0, 1.5], [0.5, 0.0, 0.0, 1.2], [1.0, 0.0, 0.0, 1.8]]",
-        )
-        .replace(
-            "contact = \"coulomb\"\nfriction = 0.8",
-            "contact = \"bonded\"",
-        );
-    assert!(text.contains("bonded") && text.contains("1.8]]"));
-    let scenario = skinpatch::scenario::Scenario::parse(&text, &fixture).unwrap();
-    let mut setup = skinpatch::scenario::Setup::from_scenario(&scenario, &fixture).unwrap();
-    let dir = tempfile::tempdir().unwrap();
-    setup.output_dir = dir.path().to_path_buf();
-    let summary = skinpatch::pipeline::run(&setup, |_, _| {}).unwrap();
+    let (summary, dir) = common::run_fixture("press_small.toml", |t| {
+        let t = t
+            .replace(
+                "path_mm = [[0.0, 0.0, 0.0, 1.5], [0.5, 0.0, 0.0, 1.0], [1.0, 0.5, 0.0, 1.0]]",
+                "path_mm = [[0.0, 0.0, 0.0, 1.5], [0.5, 0.0, 0.0, 1.2], [1.0, 0.0, 0.0, 1.8]]",
+            )
+            .replace(
+                "contact = \"coulomb\"\nfriction = 0.8",
+                "contact = \"bonded\"",
+            );
+        assert!(t.contains("bonded") && t.contains("1.8]]"));
+        t
+    });
     let last = summary.frames.last().unwrap();
     assert!(last.probe_force_n[2] < 0.0, "{last:?}");
     assert!(last.contact_nodes > 0);

@@ -3,8 +3,6 @@
 
 mod common;
 
-use std::collections::{BTreeMap, HashMap};
-
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use skinpatch::fem::boundary::{
     BottomCondition, BoundaryConditions, Caliper, Keyframes, NodeSets, SideCondition,
@@ -12,7 +10,7 @@ use skinpatch::fem::boundary::{
 use skinpatch::fem::integrate::Simulation;
 use skinpatch::fem::solve::Filter;
 use skinpatch::fem::{Corotation, Material};
-use skinpatch::mesh::{io, RawMesh, TetMesh, Vec3};
+use skinpatch::mesh::{io, TetMesh, Vec3};
 
 fn patch_3k() -> TetMesh {
     io::read_tetgen(&common::root().join("meshes/patch_3k")).unwrap()
@@ -167,16 +165,8 @@ fn caliper_stretch_is_homogeneous() {
 #[test]
 fn inverted_element_recovers() {
     let _ = env_logger::builder().is_test(true).try_init();
-    // Top face at z = 0 (the mesh needs a top surface), apex below.
-    let rest = vec![Vec3::zeros(), Vec3::y(), Vec3::x(), -Vec3::z()];
-    let raw = RawMesh {
-        positions: rest.clone(),
-        tets: vec![[0, 1, 2, 3]],
-        tet_region: vec![1],
-        region_names: BTreeMap::new(),
-        face_markers: HashMap::new(),
-    };
-    let mesh = TetMesh::from_raw("one tet", raw).unwrap();
+    let mesh = common::one_tet();
+    let rest = mesh.positions.clone();
     let mut sim = Simulation::new(&mesh, &[skin(1)]);
     tight(&mut sim);
     for v in 0..3 {
@@ -233,15 +223,7 @@ fn static_solves_are_deterministic() {
 #[test]
 fn implicit_euler_has_inertia_and_damping() {
     use skinpatch::fem::integrate::Dynamics;
-    let rest = vec![Vec3::zeros(), Vec3::y(), Vec3::x(), -Vec3::z()];
-    let raw = RawMesh {
-        positions: rest.clone(),
-        tets: vec![[0, 1, 2, 3]],
-        tet_region: vec![1],
-        region_names: BTreeMap::new(),
-        face_markers: HashMap::new(),
-    };
-    let mesh = TetMesh::from_raw("one tet", raw).unwrap();
+    let mesh = common::one_tet();
     let run = |alpha: f64| -> (f64, f64) {
         let mut sim = Simulation::new(&mesh, &[skin(1)]);
         tight(&mut sim);
@@ -283,17 +265,12 @@ fn implicit_euler_has_inertia_and_damping() {
 /// Slow loading: backward-Euler frames agree with quasi-static ones.
 #[test]
 fn implicit_euler_approaches_quasi_static_for_slow_loading() {
-    let fixture = common::root().join("tests/fixtures/press_small.toml");
     let run = |extra: &str| {
-        let text = std::fs::read_to_string(&fixture)
-            .unwrap()
-            .replace("[time]", &format!("[time]\n{extra}"));
-        let scenario = skinpatch::scenario::Scenario::parse(&text, &fixture).unwrap();
-        let mut setup = skinpatch::scenario::Setup::from_scenario(&scenario, &fixture).unwrap();
-        let dir = tempfile::tempdir().unwrap();
-        setup.output_dir = dir.path().to_path_buf();
-        setup.write_frames = false;
-        skinpatch::pipeline::run(&setup, |_, _| {}).unwrap().frames
+        let (summary, _dir) = common::run_fixture("press_small.toml", |t| {
+            t.replace("[time]", &format!("[time]\n{extra}"))
+                .replace("[time]", "[output]\nframes_vtu = false\n\n[time]")
+        });
+        summary.frames
     };
     let quasi = run("");
     let dynamic = run("integrator = \"implicit-euler\"\ndamping_alpha_per_s = 10.0");

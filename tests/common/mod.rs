@@ -82,3 +82,31 @@ pub fn write_tetgen_text(dir: &Path, name: &str, node: &str, ele: &str) -> PathB
     std::fs::write(dir.join(format!("{name}.ele")), ele).unwrap();
     base
 }
+
+/// Loads the fixture scenario `tests/fixtures/<name>`, edits its text, runs
+/// it into a temporary folder and returns the summary with that folder.
+pub fn run_fixture(
+    name: &str,
+    edit: impl Fn(String) -> String,
+) -> (skinpatch::pipeline::RunSummary, tempfile::TempDir) {
+    let fixture = root().join("tests/fixtures").join(name);
+    let text = edit(std::fs::read_to_string(&fixture).unwrap());
+    let scenario = skinpatch::scenario::Scenario::parse(&text, &fixture).unwrap();
+    let mut setup = skinpatch::scenario::Setup::from_scenario(&scenario, &fixture).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    setup.output_dir = dir.path().to_path_buf();
+    (skinpatch::pipeline::run(&setup, |_, _| {}).unwrap(), dir)
+}
+
+/// One tet with its top face at z = 0 (a mesh needs a top surface) and its
+/// apex at (0, 0, −1).
+pub fn one_tet() -> skinpatch::mesh::TetMesh {
+    use skinpatch::mesh::{RawMesh, Vec3};
+    let raw = RawMesh {
+        positions: vec![Vec3::zeros(), Vec3::y(), Vec3::x(), -Vec3::z()],
+        tets: vec![[0, 1, 2, 3]],
+        tet_region: vec![1],
+        ..Default::default()
+    };
+    skinpatch::mesh::TetMesh::from_raw("one tet", raw).unwrap()
+}
