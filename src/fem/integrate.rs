@@ -309,6 +309,16 @@ impl Simulation {
         (free.sqrt(), scale)
     }
 
+    /// The reported relative residual: 0 for a load-free state at round-off
+    /// (there is no load to be relative to).
+    fn relative(&self, norm: f64, scale: f64) -> f64 {
+        if scale <= self.force_floor && norm <= self.force_floor {
+            0.0
+        } else {
+            norm / scale
+        }
+    }
+
     /// Whether `norm` is converged against `scale` (or at round-off).
     fn converged(&self, norm: f64, scale: f64) -> bool {
         norm <= self.settings.rel_tol * scale || norm <= self.force_floor
@@ -323,7 +333,7 @@ impl Simulation {
         let mut stats = NewtonStats::default();
         for it in 0..self.settings.max_iterations {
             stats.iterations = it;
-            stats.rel_residual = norm / scale;
+            stats.rel_residual = self.relative(norm, scale);
             stats.scale = scale;
             if !stats.rel_residual.is_finite() {
                 return Err(not_converged(context, it, stats.rel_residual));
@@ -341,7 +351,7 @@ impl Simulation {
             );
         }
         stats.iterations = self.settings.max_iterations;
-        stats.rel_residual = norm / scale;
+        stats.rel_residual = self.relative(norm, scale);
         stats.scale = scale;
         if self.converged(norm, scale) {
             Ok(stats)
