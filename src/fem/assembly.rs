@@ -118,15 +118,7 @@ impl Assembly {
     where
         B: Fn(usize, usize, usize) -> Matrix3<f64> + Sync,
     {
-        let starts = &self.neighbour_start;
-        let mut rows: Vec<&mut [f64]> = Vec::with_capacity(starts.len() - 1);
-        let mut rest_values = self.matrix.values_mut();
-        for i in 0..starts.len() - 1 {
-            let len = 9 * (starts[i + 1] - starts[i]);
-            let (head, tail) = rest_values.split_at_mut(len);
-            rows.push(head);
-            rest_values = tail;
-        }
+        let rows = node_rows(&self.neighbour_start, self.matrix.values_mut());
         let incidences = &self.incidences;
         let incidence_start = &self.incidence_start;
         rows.into_par_iter().enumerate().for_each(|(i, values)| {
@@ -154,14 +146,7 @@ impl Assembly {
     where
         F: Fn(usize, usize, &Matrix3<f64>) -> Matrix3<f64> + Sync,
     {
-        let starts = &self.neighbour_start;
-        let mut rows: Vec<&mut [f64]> = Vec::with_capacity(starts.len() - 1);
-        let mut rest = out;
-        for i in 0..starts.len() - 1 {
-            let (head, tail) = rest.split_at_mut(9 * (starts[i + 1] - starts[i]));
-            rows.push(head);
-            rest = tail;
-        }
+        let rows = node_rows(&self.neighbour_start, out);
         rows.into_par_iter().enumerate().for_each(|(i, values)| {
             let nb = self.neighbours(i);
             let n = nb.len();
@@ -207,6 +192,17 @@ impl Assembly {
     pub fn neighbours(&self, i: usize) -> &[usize] {
         &self.neighbours[self.neighbour_start[i]..self.neighbour_start[i + 1]]
     }
+}
+
+/// Splits a value array into the (contiguous) three rows of each node.
+fn node_rows<'a>(starts: &[usize], mut values: &'a mut [f64]) -> Vec<&'a mut [f64]> {
+    let mut rows = Vec::with_capacity(starts.len() - 1);
+    for w in starts.windows(2) {
+        let (head, tail) = values.split_at_mut(9 * (w[1] - w[0]));
+        rows.push(head);
+        values = tail;
+    }
+    rows
 }
 
 /// The CSR structure with zero values.

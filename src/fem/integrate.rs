@@ -105,8 +105,6 @@ pub struct NewtonStats {
 /// The simulated patch: rest data, state and workspaces.
 #[derive(Clone, Debug)]
 pub struct Simulation {
-    /// Rest positions (mm).
-    pub rest_positions: Vec<Vec3>,
     /// Tets (positively oriented at rest).
     pub tets: Vec<[usize; 4]>,
     /// Per-tet rest data.
@@ -134,7 +132,7 @@ pub struct Simulation {
     f_elastic_n: Vec<Vec3>,
     assembly: Assembly,
     corotations: Vec<Corotation>,
-    tangents: Vec<Tangent>,
+    x_start: Vec<Vec3>,
     tet_forces: Vec<[Vec3; 4]>,
     f_int: Vec<Vec3>,
     cg: CgWorkspace,
@@ -159,11 +157,10 @@ impl Simulation {
             .map(|m| m.youngs_mpa)
             .fold(0.0, f64::max);
         Simulation {
-            rest_positions: mesh.positions.clone(),
             tets: mesh.tets.clone(),
             assembly: Assembly::new(n, &mesh.tets),
             corotations: vec![Corotation::of(&Matrix3::identity()); elements.len()],
-            tangents: Vec::new(),
+            x_start: Vec::new(),
             tet_forces: vec![[Vec3::zeros(); 4]; elements.len()],
             elements,
             x: mesh.positions.clone(),
@@ -267,11 +264,10 @@ impl Simulation {
     fn assemble_tangent(&mut self) {
         let start = std::time::Instant::now();
         let (elements, corotations) = (&self.elements, &self.corotations);
-        self.tangents = (0..elements.len())
+        let tangents: Vec<Tangent> = (0..elements.len())
             .into_par_iter()
             .map(|t| elements[t].tangent(&corotations[t]))
             .collect();
-        let tangents = &self.tangents;
         let k = self.dynamics.map_or(1.0, |d| 1.0 + d.beta / d.dt);
         self.assembly
             .assemble_stiffness(|t, a, b| tangents[t].block(a, b) * k);
@@ -395,12 +391,12 @@ impl Simulation {
 
     /// Takes the step `dx`, halving it while the residual grows (at most 6 times).
     fn line_search(&mut self, old_norm: f64) -> Result<(f64, f64)> {
-        let start = self.x.clone();
+        self.x_start.clone_from(&self.x);
         let mut alpha = 1.0;
         for _ in 0..6 {
             for (i, x) in self.x.iter_mut().enumerate() {
                 let d = Vec3::new(self.dx[3 * i], self.dx[3 * i + 1], self.dx[3 * i + 2]);
-                *x = start[i] + d * alpha;
+                *x = self.x_start[i] + d * alpha;
             }
             self.evaluate_forces();
             let (norm, scale) = self.residual();
