@@ -26,7 +26,12 @@
 //! `U (e_i e_jᵀ + e_j e_iᵀ) Vᵀ/√2` with eigenvalue
 //! `(Ψ_i − Ψ_j)/(σ̂_i − σ̂_j) = 2μ` and a *twist* mode
 //! `U (e_i e_jᵀ − e_j e_iᵀ) Vᵀ/√2` with eigenvalue `(Ψ_i + Ψ_j)/(σ̂_i + σ̂_j)`,
-//! which turns negative under compression and is clamped at zero. With
+//! which turns negative under compression. [`TangentKind::Exact`] keeps it
+//! (Newton then converges quadratically, while the assembled matrix stays
+//! positive definite as long as the compressed tets are held by the rest);
+//! [`TangentKind::Projected`] clamps it at zero, which is always positive
+//! semi-definite but converges only linearly under compression. Near
+//! `σ̂_i + σ̂_j = 0` (inverted tets) both clamp, as the exact value blows up. With
 //! `c_a = Vᵀ g_a`, the block `K_ab = V · U M_ab Uᵀ` where `M_ab` collects
 //! the modes in the principal frame (see [`Tangent::block`]). At rest it
 //! equals `K0_ab`; compared with the stiffness-warping tangent `R K0 Rᵀ` it
@@ -129,12 +134,25 @@ pub struct Tangent {
     cross: [f64; 3],
 }
 
+/// Which element tangent Newton iterations assemble (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TangentKind {
+    /// The exact Hessian of the corotated energy (may be indefinite).
+    Exact,
+    /// The Hessian with negative twist eigenvalues clamped at zero (PSD).
+    Projected,
+}
+
+/// Twist modes of pairs with `σ̂_i + σ̂_j` below this are clamped even in the
+/// exact tangent: their eigenvalue grows without bound as the pair inverts.
+const EXACT_TWIST_MIN_SUM: f64 = 0.2;
+
 /// The index pairs (i, j), i < j, in the order of [`Tangent`]'s arrays.
 const PAIRS: [(usize, usize); 3] = [(1, 2), (0, 2), (0, 1)];
 
 impl RestElement {
     /// Tangent data at the configuration whose rotation data is `rot`.
-    pub fn tangent(&self, rot: &Corotation) -> Tangent {
+    pub fn tangent(&self, rot: &Corotation, kind: TangentKind) -> Tangent {
         let (mu, lambda, vol) = (self.mu, self.lambda, self.volume);
         let s = rot.sigma;
         let trace_term = lambda * (s.sum() - 3.0);
@@ -146,7 +164,12 @@ impl RestElement {
             let flip = 2.0 * mu;
             let denom = s[i] + s[j];
             let twist = if denom > 1e-8 {
-                ((psi[i] + psi[j]) / denom).max(0.0)
+                let exact = (psi[i] + psi[j]) / denom;
+                if kind == TangentKind::Exact && denom >= EXACT_TWIST_MIN_SUM {
+                    exact
+                } else {
+                    exact.max(0.0)
+                }
             } else {
                 0.0
             };
@@ -330,8 +353,12 @@ mod tests {
         }
     }
 
-    fn stiffness(e: &RestElement, x: &[Vec3; 4]) -> nalgebra::SMatrix<f64, 12, 12> {
-        let t = e.tangent(&Corotation::of(&e.deformation_gradient(x)));
+    fn stiffness(
+        e: &RestElement,
+        x: &[Vec3; 4],
+        kind: TangentKind,
+    ) -> nalgebra::SMatrix<f64, 12, 12> {
+        let t = e.tangent(&Corotation::of(&e.deformation_gradient(x)), kind);
         let mut k = nalgebra::SMatrix::<f64, 12, 12>::zeros();
         for a in 0..4 {
             for b in 0..4 {
@@ -345,22 +372,22 @@ mod tests {
     #[test]
     fn tangent_at_rest_is_the_rest_stiffness() {
         let e = element();
-        let t = e.tangent(&Corotation::of(&Matrix3::identity()));
-        for a in 0..4 {
-            for b in 0..4 {
-                assert!((t.block(a, b) - e.k0[a][b]).norm() < 1e-14, "block {a}{b}");
+        for kind in [TangentKind::Exact, TangentKind::Projected] {
+            let t = e.tangent(&Corotation::of(&Matrix3::identity()), kind);
+            for a in 0..4 {
+                for b in 0..4 {
+                    assert!((t.block(a, b) - e.k0[a][b]).norm() < 1e-14, "block {a}{b}");
+                }
             }
         }
     }
 
-    #[test]
-    fn tangent_is_the_force_derivative_under_stretch() {
-        // No twist clamping is active when every σ̂_i + σ̂_j is large enough.
+    /// Compares the tangent at `F = rot · f` with central differences of the forces.
+    fn assert_tangent_is_force_derivative(f: Matrix3<f64>, kind: TangentKind) {
         let e = element();
         let rot = Rotation3::from_euler_angles(0.4, -0.3, 0.9).into_inner();
-        let f = rot * Matrix3::new(1.3, 0.1, 0.0, 0.05, 1.1, 0.1, 0.0, -0.1, 1.2);
-        let x = deform(&f, Vec3::new(0.1, 0.2, 0.3));
-        let k = stiffness(&e, &x);
+        let x = deform(&(rot * f), Vec3::new(0.1, 0.2, 0.3));
+        let k = stiffness(&e, &x, kind);
         let h = 1e-6;
         for b in 0..4 {
             for l in 0..3 {
@@ -385,13 +412,34 @@ mod tests {
     }
 
     #[test]
+    fn tangent_is_the_force_derivative_under_stretch() {
+        // No twist clamping is active when every σ̂_i + σ̂_j is large enough.
+        let f = Matrix3::new(1.3, 0.1, 0.0, 0.05, 1.1, 0.1, 0.0, -0.1, 1.2);
+        assert_tangent_is_force_derivative(f, TangentKind::Exact);
+        assert_tangent_is_force_derivative(f, TangentKind::Projected);
+    }
+
+    #[test]
+    fn exact_tangent_is_the_force_derivative_under_compression() {
+        // Strong compression: the twist eigenvalues are negative here.
+        let f = Matrix3::new(0.5, 0.1, 0.0, 0.0, 0.6, 0.1, 0.1, 0.0, 0.4);
+        assert_tangent_is_force_derivative(f, TangentKind::Exact);
+        let e = element();
+        let k = stiffness(&e, &deform(&f, Vec3::zeros()), TangentKind::Exact);
+        assert!(
+            k.symmetric_eigenvalues().min() < -1e-6 * k.norm(),
+            "the exact tangent is indefinite here"
+        );
+    }
+
+    #[test]
     fn tangent_is_positive_semidefinite_when_compressed_or_inverted() {
         let e = element();
         for f in [
             Matrix3::new(0.5, 0.1, 0.0, 0.0, 0.6, 0.1, 0.1, 0.0, 0.4),
             Matrix3::new(1.0, 0.1, 0.0, 0.0, 1.0, 0.2, 0.1, 0.0, -0.4),
         ] {
-            let k = stiffness(&e, &deform(&f, Vec3::zeros()));
+            let k = stiffness(&e, &deform(&f, Vec3::zeros()), TangentKind::Projected);
             let eig = k.symmetric_eigenvalues();
             assert!(eig.min() > -1e-12 * k.norm(), "eigenvalues {eig}");
         }

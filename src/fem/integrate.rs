@@ -11,9 +11,13 @@
 //! A [`Simulation`] owns the element rest data, the assembly pattern, the
 //! current positions and the constraint filters. Each Newton iteration
 //! evaluates rotations and forces in a parallel element loop, gathers them
-//! per node, assembles the projected consistent tangent (see
-//! [`super::corotation`]) and solves the filtered system
-//! (see [`super::solve`]), with a backtracking line search on the residual.
+//! per node, assembles the consistent tangent (see [`super::corotation`])
+//! and solves the filtered system (see [`super::solve`]), with a
+//! backtracking line search on the residual. Each solve starts with the
+//! exact tangent, which converges quadratically; if the linear solver meets
+//! a direction of non-positive curvature (compressed tets no longer held by
+//! their neighbours) the solve switches to the positive semi-definite
+//! projected tangent for its remaining iterations.
 //!
 //! Convergence: the relative residual is `‖S r‖ / scale`, where `r` is the
 //! net nodal force and `scale` the larger of the reaction forces on the
@@ -25,7 +29,7 @@ use nalgebra::Matrix3;
 use rayon::prelude::*;
 
 use super::assembly::Assembly;
-use super::corotation::{Corotation, RestElement, Tangent};
+use super::corotation::{Corotation, RestElement, Tangent, TangentKind};
 use super::material::Material;
 use super::solve::{self, CgSettings, CgWorkspace, DirectSolver, Filter};
 use crate::error::{Error, Result};
@@ -140,6 +144,7 @@ pub struct Simulation {
     dx: Vec<f64>,
     rhs: Vec<f64>,
     force_floor: f64,
+    tangent_kind: TangentKind,
 }
 
 impl Simulation {
@@ -181,6 +186,7 @@ impl Simulation {
             dx: vec![0.0; 3 * n],
             rhs: vec![0.0; 3 * n],
             force_floor: 1e-15 * stiffest * size * size,
+            tangent_kind: TangentKind::Exact,
         }
     }
 
@@ -253,20 +259,23 @@ impl Simulation {
         }
     }
 
-    /// The tangent stiffness at the current positions (evaluates forces first).
-    pub fn stiffness(&mut self) -> &nalgebra_sparse::CsrMatrix<f64> {
+    /// The tangent stiffness of `kind` at the current positions (evaluates
+    /// forces first).
+    pub fn stiffness(&mut self, kind: TangentKind) -> &nalgebra_sparse::CsrMatrix<f64> {
         self.evaluate_forces();
+        self.tangent_kind = kind;
         self.assemble_tangent();
         &self.assembly.matrix
     }
 
-    /// Assembles the projected tangent stiffness at the last evaluation.
+    /// Assembles the tangent stiffness (of `self.tangent_kind`) at the last
+    /// evaluation.
     fn assemble_tangent(&mut self) {
         let start = std::time::Instant::now();
-        let (elements, corotations) = (&self.elements, &self.corotations);
+        let (elements, corotations, kind) = (&self.elements, &self.corotations, self.tangent_kind);
         let tangents: Vec<Tangent> = (0..elements.len())
             .into_par_iter()
-            .map(|t| elements[t].tangent(&corotations[t]))
+            .map(|t| elements[t].tangent(&corotations[t], kind))
             .collect();
         let k = self.dynamics.map_or(1.0, |d| 1.0 + d.beta / d.dt);
         self.assembly
@@ -327,6 +336,7 @@ impl Simulation {
         self.evaluate_forces();
         let (mut norm, mut scale) = self.residual();
         let mut stats = NewtonStats::default();
+        self.tangent_kind = TangentKind::Exact;
         for it in 0..self.settings.max_iterations {
             stats.iterations = it;
             stats.rel_residual = self.relative(norm, scale);
@@ -338,9 +348,24 @@ impl Simulation {
                 return Ok(stats);
             }
             self.assemble_tangent();
-            let iterations = self.linear_solve();
+            let forcing = self.forcing(norm / scale);
+            let (mut iterations, solved) = self.linear_solve(forcing);
+            if !solved && self.tangent_kind == TangentKind::Exact {
+                log::debug!(
+                    "{context}: Newton {it}: exact tangent not positive definite; projecting"
+                );
+                self.tangent_kind = TangentKind::Projected;
+                self.assemble_tangent();
+                let (more, _) = self.linear_solve(forcing);
+                iterations += more;
+            }
             stats.cg_iterations += iterations;
+            let old_norm = norm;
             (norm, scale) = self.line_search(norm)?;
+            if !(norm < old_norm) && self.tangent_kind == TangentKind::Exact {
+                // The exact step was no descent direction: project from now on.
+                self.tangent_kind = TangentKind::Projected;
+            }
             log::debug!(
                 "{context}: Newton {it}: {iterations} linear iterations, residual {:.3e} ({norm:.3e} N of {scale:.3e} N)",
                 norm / scale
@@ -360,22 +385,40 @@ impl Simulation {
         }
     }
 
-    /// Solves for the Newton step into `dx`; returns the linear iterations
-    /// (1 for a direct solve).
-    fn linear_solve(&mut self) -> usize {
-        let start = std::time::Instant::now();
-        let iterations = self.linear_solve_untimed();
-        self.timings.linear_s += start.elapsed().as_secs_f64();
-        iterations
+    /// Relative tolerance of the linear solve at relative residual `rel`
+    /// (inexact Newton). Far from equilibrium a rough step does as well as an
+    /// exact one; in the middle the tolerance follows the residual, which
+    /// keeps the convergence quadratic; near the target it only has to bring
+    /// the residual below the target. Bounded by `[cg.rel_tol, 0.1]`.
+    fn forcing(&self, rel: f64) -> f64 {
+        let target = self.settings.rel_tol;
+        rel.max(0.5 * target / rel)
+            .clamp(self.settings.cg.rel_tol, 0.1)
     }
 
-    fn linear_solve_untimed(&mut self) -> usize {
-        if self.settings.linear == LinearSolver::Direct
-            && self
+    /// Solves for the Newton step into `dx`; returns the linear iterations
+    /// (1 for a direct solve) and whether the solve succeeded: a factorisation
+    /// or a conjugate-gradient run that met no non-positive curvature and
+    /// reached its tolerance.
+    fn linear_solve(&mut self, forcing: f64) -> (usize, bool) {
+        let start = std::time::Instant::now();
+        let outcome = self.linear_solve_untimed(forcing);
+        self.timings.linear_s += start.elapsed().as_secs_f64();
+        outcome
+    }
+
+    fn linear_solve_untimed(&mut self, forcing: f64) -> (usize, bool) {
+        if self.settings.linear == LinearSolver::Direct {
+            if self
                 .direct
                 .solve(&self.assembly, &self.filters, &self.rhs, &mut self.dx)
-        {
-            return 1;
+            {
+                return (1, true);
+            }
+            if self.tangent_kind == TangentKind::Exact {
+                // Not positive definite: the caller projects and retries.
+                return (1, false);
+            }
         }
         self.dx.fill(0.0);
         let cg = solve::solve(
@@ -383,10 +426,13 @@ impl Simulation {
             &self.filters,
             &self.rhs,
             &mut self.dx,
-            &self.settings.cg,
+            &CgSettings {
+                rel_tol: forcing,
+                ..self.settings.cg
+            },
             &mut self.cg,
         );
-        cg.iterations
+        (cg.iterations, cg.converged)
     }
 
     /// Takes the step `dx`, halving it while the residual grows (at most 6 times).

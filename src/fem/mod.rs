@@ -11,5 +11,5 @@ pub mod integrate;
 pub mod material;
 pub mod solve;
 
-pub use corotation::{Corotation, RestElement};
+pub use corotation::{Corotation, RestElement, TangentKind};
 pub use material::Material;

@@ -111,7 +111,8 @@ pub struct SolverSection {
     pub rel_tol: f64,
     /// Newton iterations per equilibrium solve. Default 50.
     pub max_newton_iterations: usize,
-    /// Relative tolerance of each linear solve. Default 1e-4.
+    /// Tightest relative tolerance of a linear (CG) solve; Newton steps use
+    /// an adaptive tolerance between this and 0.1. Default 1e-4.
     pub linear_rel_tol: f64,
     /// Iteration limit of each linear solve. Default 3000.
     pub max_linear_iterations: usize,
