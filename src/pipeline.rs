@@ -143,6 +143,7 @@ fn simulate(
                     )?;
                     m.probe_force_n = r.probe_force.into();
                     m.contact_nodes = r.contact_nodes;
+                    m.contact_area_mm2 = r.contact_area_mm2;
                     m.max_penetration_mm = r.max_penetration_mm;
                     m.newton_iterations += r.newton_iterations;
                     m.linear_iterations += r.cg_iterations;

@@ -215,3 +215,41 @@ fn bonded_probe_pulls_the_surface() {
         d[3 * top + 2]
     );
 }
+
+/// Hertz: a frictionless rigid sphere (R = 2 mm) on the E = 100 kPa,
+/// ν = 0.3 block. Theory for a half-space: F = (4/3)·E/(1−ν²)·√R·δ^{3/2}
+/// and contact radius a = √(Rδ). At δ = 0.05 and 0.1 mm the force is within
+/// 5% and the radius (of the contact area, a = √(A/π)) within 10%; at
+/// δ = 0.2 mm finite-size and large-deformation effects are allowed 10%.
+#[test]
+fn hertz_indentation_matches_theory() {
+    let (summary, _dir) = common::run_fixture("hertz.toml", |t| t);
+    let (e_mpa, nu, r): (f64, f64, f64) = (0.1, 0.3, 2.0);
+    let mut report = String::new();
+    for m in &summary.frames[1..] {
+        let delta = 0.2 * m.time_s;
+        let force = (4.0 / 3.0) * e_mpa / (1.0 - nu * nu) * r.sqrt() * delta.powf(1.5);
+        let a = (r * delta).sqrt();
+        let a_fem = (m.contact_area_mm2 / std::f64::consts::PI).sqrt();
+        let force_err = m.probe_force_n[2] / force - 1.0;
+        let radius_err = a_fem / a - 1.0;
+        report += &format!(
+            "δ {delta:.2} mm: force {:.4e} N vs {force:.4e} ({:+.2}%), radius {a_fem:.4} mm vs {a:.4} ({:+.2}%)\n",
+            m.probe_force_n[2],
+            100.0 * force_err,
+            100.0 * radius_err
+        );
+        let (force_bound, radius_bound) = if delta < 0.11 {
+            (0.05, 0.10)
+        } else {
+            (0.10, 0.10)
+        };
+        assert!(force_err.abs() < force_bound, "{report}");
+        assert!(radius_err.abs() < radius_bound, "{report}");
+        // Frictionless and centred: no tangential force.
+        let [fx, fy, fz] = m.probe_force_n;
+        assert!(fx.hypot(fy) < 1e-3 * fz, "{m:?}");
+    }
+    assert_eq!(summary.frames.len(), 5);
+    println!("{report}");
+}

@@ -25,6 +25,8 @@ pub struct FrameMetrics {
     pub probe_force_n: [f64; 3],
     /// Nodes in contact.
     pub contact_nodes: usize,
+    /// Skin area in contact (mm², lumped nodal areas of the contact nodes).
+    pub contact_area_mm2: f64,
     /// Largest penetration (mm).
     pub max_penetration_mm: f64,
     /// Newton iterations over the frame's substeps and contact rounds.
@@ -38,7 +40,7 @@ pub struct FrameMetrics {
 }
 
 const HEADER: &str = "frame,time_s,probe_force_x_n,probe_force_y_n,probe_force_z_n,\
-contact_nodes,max_penetration_mm,newton_iterations,linear_iterations,rel_residual,step_wall_s";
+contact_nodes,contact_area_mm2,max_penetration_mm,newton_iterations,linear_iterations,rel_residual,step_wall_s";
 
 /// `metrics.csv`, appended and flushed per frame.
 pub struct MetricsWriter {
@@ -62,10 +64,11 @@ impl MetricsWriter {
         let [fx, fy, fz] = m.probe_force_n;
         writeln!(
             self.file,
-            "{},{},{fx:e},{fy:e},{fz:e},{},{:e},{},{},{:e},{:.6}",
+            "{},{},{fx:e},{fy:e},{fz:e},{},{:e},{:e},{},{},{:e},{:.6}",
             m.frame,
             m.time_s,
             m.contact_nodes,
+            m.contact_area_mm2,
             m.max_penetration_mm,
             m.newton_iterations,
             m.linear_iterations,

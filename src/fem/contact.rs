@@ -227,6 +227,8 @@ pub struct ContactState {
     candidates: Vec<usize>,
     /// Allowed penetration per node: 1% of the mean incident edge length (mm).
     tolerance: Vec<f64>,
+    /// Top-surface triangles as mesh vertex indices (for the contact area).
+    top_triangles: Vec<[usize; 3]>,
     /// Active nodes, in ascending order (deterministic iteration).
     pub active: std::collections::BTreeMap<usize, NodeContact>,
     /// Probe pose at the end of the previous solve.
@@ -245,6 +247,9 @@ pub struct ContactReport {
     pub probe_force: Vec3,
     /// Number of nodes in contact.
     pub contact_nodes: usize,
+    /// Area of the skin in contact (mm², deformed): each top triangle
+    /// counts a third of its area per vertex in contact (lumped nodal areas).
+    pub contact_area_mm2: f64,
     /// Largest penetration of any top-surface node (mm, ≥ 0).
     pub max_penetration_mm: f64,
     /// Largest penetration relative to the local element size (the mean
@@ -290,6 +295,12 @@ impl ContactState {
         ContactState {
             candidates,
             tolerance,
+            top_triangles: mesh
+                .top
+                .triangles
+                .iter()
+                .map(|t| t.map(|s| mesh.top.vertices[s]))
+                .collect(),
             active: Default::default(),
             last_pose: None,
             carried: Default::default(),
@@ -501,6 +512,18 @@ fn finish_report(
     }
     report.probe_force = force;
     report.contact_nodes = state.active.len();
+    report.contact_area_mm2 = state
+        .top_triangles
+        .iter()
+        .map(|tri| {
+            let touching = tri.iter().filter(|v| state.active.contains_key(v)).count();
+            if touching == 0 {
+                return 0.0;
+            }
+            let [a, b, c] = tri.map(|v| sim.x[v]);
+            (b - a).cross(&(c - a)).norm() / 2.0 * touching as f64 / 3.0
+        })
+        .sum();
     for &v in &state.candidates {
         let pen = (-pose.distance(&sim.x[v]).0).max(0.0);
         report.max_penetration_mm = report.max_penetration_mm.max(pen);
