@@ -362,7 +362,8 @@ impl Simulation {
             stats.cg_iterations += iterations;
             let old_norm = norm;
             (norm, scale) = self.line_search(norm)?;
-            if !(norm < old_norm) && self.tangent_kind == TangentKind::Exact {
+            let descended = norm < old_norm;
+            if !descended && self.tangent_kind == TangentKind::Exact {
                 // The exact step was no descent direction: project from now on.
                 self.tangent_kind = TangentKind::Projected;
             }
