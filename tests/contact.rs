@@ -253,3 +253,115 @@ fn hertz_indentation_matches_theory() {
     assert_eq!(summary.frames.len(), 5);
     println!("{report}");
 }
+
+/// Flat cylindrical punch (radius 0.5 mm) pressed 0.02 mm into the Hertz
+/// block: Sneddon's half-space solution F = 2·a·E/(1−ν²)·δ, within 10% (the
+/// rim is a stress singularity resolved by one ring of nodes); the nodes under
+/// the face are all in contact, so the contact area is about πa².
+#[test]
+fn punch_indentation_matches_sneddon() {
+    let (summary, _dir) = common::run_fixture("hertz.toml", |t| {
+        t.replace("shape = \"sphere\"", "shape = \"punch\"")
+            .replace("radius_mm = 2.0", "radius_mm = 0.5")
+            .replace(
+                "[[0.0, 0.0, 0.0, 2.0], [1.0, 0.0, 0.0, 1.8]]",
+                "[[0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.0, -0.04]]",
+            )
+            .replace("frame_rate_hz = 4.0", "frame_rate_hz = 2.0")
+    });
+    let (e_mpa, nu, a): (f64, f64, f64) = (0.1, 0.3, 0.5);
+    let mut report = String::new();
+    for m in &summary.frames[1..] {
+        let delta = 0.04 * m.time_s;
+        let force = 2.0 * a * e_mpa / (1.0 - nu * nu) * delta;
+        let area = std::f64::consts::PI * a * a;
+        report += &format!(
+            "δ {delta:.3} mm: force {:.4e} N vs {force:.4e} ({:+.2}%), area {:.4} mm² vs {area:.4} ({:+.2}%), penetration {:.1e} mm\n",
+            m.probe_force_n[2],
+            100.0 * (m.probe_force_n[2] / force - 1.0),
+            m.contact_area_mm2,
+            100.0 * (m.contact_area_mm2 / area - 1.0),
+            m.max_penetration_mm,
+        );
+        assert!((m.probe_force_n[2] / force - 1.0).abs() < 0.10, "{report}");
+        assert!((m.contact_area_mm2 / area - 1.0).abs() < 0.15, "{report}");
+        assert!(m.max_penetration_mm < 0.01 * 0.11, "{report}");
+    }
+    println!("{report}");
+}
+
+/// Presses a capsule (radius 0.5 mm, 2 mm between end centres) 0.3 mm into
+/// patch_25k with its axis along `axis`; returns the last report and the
+/// extents (x, y) of the contact nodes (mm).
+fn press_capsule(axis: Vector3<f64>) -> (skinpatch::fem::contact::ContactReport, [f64; 2]) {
+    let mut r = rig(patch_25k(), BottomCondition::Fixed, SideCondition::Rollers);
+    let probe = Probe {
+        shape: ProbeShape::Capsule {
+            radius_mm: 0.5,
+            length_mm: 2.0,
+        },
+        path: Keyframes {
+            points: vec![
+                (0.0, Vector3::new(0.0, 0.0, 0.5)),
+                (1.0, Vector3::new(0.0, 0.0, 0.2)),
+            ],
+        },
+        axis: Keyframes {
+            points: vec![(0.0, axis)],
+        },
+        mode: ContactMode::Frictionless,
+    };
+    let mut last = None;
+    for k in 1..=3 {
+        let rep = solve_with_contact(
+            &mut r.sim,
+            (&r.base.0, &r.base.1, &r.base.2),
+            &probe.pose(k as f64 / 3.0),
+            probe.mode,
+            &mut r.state,
+            &format!("step {k}"),
+        )
+        .unwrap();
+        assert!(rep.max_penetration_ratio <= 0.01, "{rep:?}");
+        last = Some(rep);
+    }
+    let rep = last.unwrap();
+    let contact: std::collections::HashSet<usize> = r.state.active.keys().copied().collect();
+    let support: Vec3 = (0..r.mesh.num_vertices())
+        .filter(|v| !contact.contains(v))
+        .map(|v| -r.sim.internal_forces()[v])
+        .sum();
+    assert!(
+        (support - rep.probe_force).norm() < 1e-4 * rep.probe_force.norm(),
+        "{support} vs {}",
+        rep.probe_force
+    );
+    let extent = |k: usize| {
+        let values = contact.iter().map(|&v| r.sim.x[v][k]);
+        values.clone().fold(f64::MIN, f64::max) - values.fold(f64::MAX, f64::min)
+    };
+    (rep, [extent(0), extent(1)])
+}
+
+/// A capsule's contact patch is elongated along its axis and turns with it;
+/// the force does not depend on the axis direction beyond the mesh's
+/// asymmetry, and balances the supports.
+#[test]
+fn capsule_contact_follows_its_axis() {
+    let (along_x, [x1, y1]) = press_capsule(Vector3::x());
+    let (along_y, [x2, y2]) = press_capsule(Vector3::y());
+    // The straight part (2 mm) plus the caps' contact, against a width of
+    // about 2·√(Rδ) ≈ 0.8 mm across.
+    assert!(x1 > 2.0 && x1 > 1.8 * y1, "extents {x1} × {y1}");
+    assert!(y2 > 2.0 && y2 > 1.8 * x2, "extents {x2} × {y2}");
+    let (f1, f2) = (along_x.probe_force.z, along_y.probe_force.z);
+    assert!(f1 > 0.0 && (f1 / f2 - 1.0).abs() < 0.05, "{f1} vs {f2}");
+    for rep in [along_x, along_y] {
+        // Frictionless: tangential force only from the faceting of the
+        // ~30-node contact patch (the sphere's ~100-node patch stays under 2%).
+        let tangential = rep.probe_force.x.hypot(rep.probe_force.y);
+        assert!(tangential < 0.04 * rep.probe_force.z, "{rep:?}");
+    }
+    println!("axis x: {along_x:?}, extents {x1:.3} × {y1:.3} mm");
+    println!("axis y: {along_y:?}, extents {x2:.3} × {y2:.3} mm");
+}
