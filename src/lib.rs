@@ -8,6 +8,10 @@
 //!
 //! * [`scenario`]: TOML scenario → validated [`scenario::Setup`];
 //! * [`mesh`]: tetrahedral meshes — TetGen generation, file I/O, quality;
+//! * [`fem`]: corotational tetrahedral FEM with a rigid probe;
+//! * [`strain`]: principal strains per tet and the surface deformation field
+//!   in texture space;
+//! * [`export`]: frame grids, strain images and metrics;
 //! * [`pipeline`]: runs a setup and writes its outputs.
 //!
 //! Units follow DESIGN §4: millimetres, newtons, MPa, tonnes/mm³ and seconds
@@ -20,5 +24,6 @@ pub mod fem;
 pub mod mesh;
 pub mod pipeline;
 pub mod scenario;
+pub mod strain;
 
 pub use error::{Error, Result};

@@ -1,0 +1,21 @@
+//! Strain fields (DESIGN §5.3): what drives the microstructure.
+//!
+//! * [`element`]: per-tet deformation gradient, principal stretches and
+//!   directions, Biot and Green strains, volume ratio;
+//! * [`surface`]: the 2×2 deformation `T` of the top surface in texture
+//!   space (seed 000 eq. 10), per triangle and per vertex, evaluated at any
+//!   UV point through the closed-form SVD (eq. 11–13);
+//! * [`svd2`]: the closed-form 2×2 SVD (the GPU stage runs the same formulas);
+//! * [`raster`]: the CPU reference raster of the field into a UV grid.
+//!
+//! No I/O here: images and VTU fields are written by [`crate::export`].
+
+pub mod element;
+pub mod raster;
+pub mod surface;
+pub mod svd2;
+
+pub use element::{ElementStrains, PrincipalStrain};
+pub use raster::StrainRaster;
+pub use surface::{SurfaceField, SurfaceStrain, VertexStrain};
+pub use svd2::Svd2;

@@ -1,0 +1,86 @@
+//! CPU reference raster of the surface field into a UV texture (DESIGN §5.3).
+//!
+//! Texel `(i, j)` of a `width × height` raster covers
+//! `u ∈ [i, i+1)/width`, `v ∈ [j, j+1)/height` (row 0 at v = 0) and samples
+//! the field at its centre: the per-vertex `T` and `Q Rᵀ` of the triangle
+//! containing the centre, interpolated barycentrically. Texels whose centre
+//! lies in no triangle are marked outside. Triangles are visited in order and
+//! a texel on a shared edge takes the last triangle's value — the same value
+//! up to round-off, since the interpolation is continuous across edges. The
+//! GPU raster (a render pass with UVs as positions) is compared with this.
+
+use nalgebra::{Matrix2, Vector2};
+
+use super::surface::{barycentric, SurfaceField};
+
+/// A UV raster of the deformation field.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StrainRaster {
+    /// Texels across (u).
+    pub width: usize,
+    /// Texels down (v).
+    pub height: usize,
+    /// Interpolated `T` per texel, row-major (zero outside).
+    pub t: Vec<Matrix2<f64>>,
+    /// Interpolated `Q Rᵀ` per texel (zero outside).
+    pub uv_frame: Vec<Matrix2<f64>>,
+    /// Whether the texel centre lies on the surface.
+    pub inside: Vec<bool>,
+}
+
+impl StrainRaster {
+    /// Rasterises `field` at `width × height` (both ≥ 1).
+    pub fn new(field: &SurfaceField, width: usize, height: usize) -> StrainRaster {
+        let (width, height) = (width.max(1), height.max(1));
+        let n = width * height;
+        let mut raster = StrainRaster {
+            width,
+            height,
+            t: vec![Matrix2::zeros(); n],
+            uv_frame: vec![Matrix2::zeros(); n],
+            inside: vec![false; n],
+        };
+        let (tri, uvs) = field.layout();
+        let size = Vector2::new(width as f64, height as f64);
+        for (k, t) in tri.iter().enumerate() {
+            let w = t.map(|s| uvs[s]);
+            // Texel centres (i + 0.5)/width inside the triangle's UV box.
+            let lo = w[0].inf(&w[1]).inf(&w[2]).component_mul(&size);
+            let hi = w[0].sup(&w[1]).sup(&w[2]).component_mul(&size);
+            let first = |x: f64| (x - 0.5).ceil().max(0.0) as usize;
+            let last = |x: f64, n: usize| ((x - 0.5).floor().min(n as f64 - 1.0)).max(-1.0);
+            let (i1, j1) = (last(hi.x, width), last(hi.y, height));
+            if i1 < 0.0 || j1 < 0.0 {
+                continue;
+            }
+            for j in first(lo.y)..=j1 as usize {
+                for i in first(lo.x)..=i1 as usize {
+                    let p = Vector2::new((i as f64 + 0.5) / size.x, (j as f64 + 0.5) / size.y);
+                    let Some(b) = barycentric(&w, p) else { continue };
+                    if b.iter().any(|&l| l < -1e-12) {
+                        continue;
+                    }
+                    let s = field.interpolate(k, b);
+                    let idx = j * width + i;
+                    raster.t[idx] = s.t;
+                    raster.uv_frame[idx] = s.uv_frame;
+                    raster.inside[idx] = true;
+                }
+            }
+        }
+        raster
+    }
+
+    /// Texel index of `(i, j)`.
+    pub fn index(&self, i: usize, j: usize) -> usize {
+        j * self.width + i
+    }
+
+    /// UV of the centre of texel `(i, j)`.
+    pub fn texel_uv(&self, i: usize, j: usize) -> Vector2<f64> {
+        Vector2::new(
+            (i as f64 + 0.5) / self.width as f64,
+            (j as f64 + 0.5) / self.height as f64,
+        )
+    }
+}
