@@ -117,7 +117,11 @@ mod tests {
         for k in 0..3 {
             // Directions up to sign.
             let rest = s.rest_axes.column(k).dot(&axes.column(k)).abs();
-            let deformed = s.deformed_axes.column(k).dot(&(spin * axes).column(k)).abs();
+            let deformed = s
+                .deformed_axes
+                .column(k)
+                .dot(&(spin * axes).column(k))
+                .abs();
             assert!((rest - 1.0).abs() < 1e-12 && (deformed - 1.0).abs() < 1e-12);
         }
         assert!((s.biot() - Vector3::new(0.4, 0.1, -0.3)).norm() < 1e-12);

@@ -56,7 +56,9 @@ impl StrainRaster {
             for j in first(lo.y)..=j1 as usize {
                 for i in first(lo.x)..=i1 as usize {
                     let p = Vector2::new((i as f64 + 0.5) / size.x, (j as f64 + 0.5) / size.y);
-                    let Some(b) = barycentric(&w, p) else { continue };
+                    let Some(b) = barycentric(&w, p) else {
+                        continue;
+                    };
                     if b.iter().any(|&l| l < -1e-12) {
                         continue;
                     }

@@ -53,7 +53,10 @@ pub struct TriangleStrain {
 
 /// Tangent frame and world → UV map of a triangle with points `p` and UVs
 /// `w`; `None` when the triangle or its UV image is degenerate.
-pub fn tangent_frame(p: &[Vec3; 3], w: &[Vector2<f64>; 3]) -> Option<(Matrix2x3<f64>, Matrix2x3<f64>)> {
+pub fn tangent_frame(
+    p: &[Vec3; 3],
+    w: &[Vector2<f64>; 3],
+) -> Option<(Matrix2x3<f64>, Matrix2x3<f64>)> {
     let e = Matrix3x2::from_columns(&[p[1] - p[0], p[2] - p[0]]);
     let uv = Matrix2::from_columns(&[w[1] - w[0], w[2] - w[0]]);
     let scale = e.norm_squared();
@@ -334,7 +337,10 @@ struct UvLocator {
 
 impl UvLocator {
     fn new(tri: &[[usize; 3]], uvs: &[Vector2<f64>]) -> UvLocator {
-        let (mut lo, mut hi) = (Vector2::repeat(f64::INFINITY), Vector2::repeat(f64::NEG_INFINITY));
+        let (mut lo, mut hi) = (
+            Vector2::repeat(f64::INFINITY),
+            Vector2::repeat(f64::NEG_INFINITY),
+        );
         for w in uvs {
             lo = lo.inf(w);
             hi = hi.sup(w);
@@ -347,7 +353,8 @@ impl UvLocator {
         let n = [side, side];
         let cell = (hi - lo).map(|d| d.max(1e-300)) / side as f64;
         let mut cells = vec![Vec::new(); side * side];
-        let index = |v: f64, o: f64, c: f64| (((v - o) / c).floor().max(0.0) as usize).min(side - 1);
+        let index =
+            |v: f64, o: f64, c: f64| (((v - o) / c).floor().max(0.0) as usize).min(side - 1);
         for (k, t) in tri.iter().enumerate() {
             let w = t.map(|s| uvs[s]);
             let (a, b) = (w[0].inf(&w[1]).inf(&w[2]), w[0].sup(&w[1]).sup(&w[2]));
@@ -367,10 +374,19 @@ impl UvLocator {
 
     /// The first triangle (in index order) containing `p`, with barycentric
     /// coordinates.
-    fn locate(&self, p: Vector2<f64>, tri: &[[usize; 3]], uvs: &[Vector2<f64>]) -> Option<(usize, [f64; 3])> {
+    fn locate(
+        &self,
+        p: Vector2<f64>,
+        tri: &[[usize; 3]],
+        uvs: &[Vector2<f64>],
+    ) -> Option<(usize, [f64; 3])> {
         let rel = (p - self.origin).component_div(&self.cell);
         let tol = 1e-9;
-        if rel.x < -tol || rel.y < -tol || rel.x > self.n[0] as f64 + tol || rel.y > self.n[1] as f64 + tol {
+        if rel.x < -tol
+            || rel.y < -tol
+            || rel.x > self.n[0] as f64 + tol
+            || rel.y > self.n[1] as f64 + tol
+        {
             return None;
         }
         let i = (rel.x.floor().max(0.0) as usize).min(self.n[0] - 1);
