@@ -1,9 +1,10 @@
 //! Runs a validated [`Setup`] frame by frame and writes its outputs.
 //!
 //! Per frame: boundary conditions and probe pose at the frame time (split
-//! into load substeps), quasi-static equilibrium with contact, then the
-//! frame's VTU and a `metrics.csv` row. A failing frame stops the run with
-//! an error naming it; everything written before stays.
+//! into load substeps), quasi-static equilibrium with contact, the strain
+//! fields (per tet and on the top surface), then the frame's VTU, strain
+//! maps and a `metrics.csv` row. A failing frame stops the run with an error
+//! naming it; everything written before stays.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -14,6 +15,7 @@ use crate::fem::contact::{solve_with_contact, ContactState};
 use crate::fem::integrate::Simulation;
 use crate::mesh::{io, QualityReport, Vec3};
 use crate::scenario::Setup;
+use crate::strain::{ElementStrains, StrainRaster, SurfaceField};
 
 /// What a run produced.
 #[derive(Clone, Debug)]
@@ -46,14 +48,30 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Res
     written.push(metrics_path);
     let mut frames = Vec::new();
     let mut collection = Vec::new();
+    if setup.strain_images.is_some() {
+        let folder = dir.join("strain");
+        std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
+    }
+    let mesh = &setup.mesh;
     let result = simulate(setup, |m, sim| {
-        metrics.push(m)?;
+        let mut m = *m;
+        let field = SurfaceField::new(&mesh.top, &mesh.positions, &sim.x);
+        let (rs, rt, folded) = field.extremes();
+        m.rs_range = [rs.0, rs.1];
+        m.rt_range = [rt.0, rt.1];
+        m.folded_vertices = folded;
+        metrics.push(&m)?;
         if setup.write_frames {
-            let grid = export::frame_grid(&setup.mesh, sim);
+            let strains = ElementStrains::compute(mesh, &sim.x);
+            let grid = export::frame_grid(mesh, &sim.x, &strains, &field);
             collection.push((m.time_s, export::write_frame(dir, m.frame, &grid)?));
         }
-        frames.push(*m);
-        on_frame(m, setup.simulation.frames + 1);
+        if let Some(images) = setup.strain_images {
+            let raster = StrainRaster::new(&field, images.px, images.px);
+            export::strain_images::StrainImages::new(&raster, images.range).write(dir, m.frame)?;
+        }
+        frames.push(m);
+        on_frame(&m, setup.simulation.frames + 1);
         Ok(())
     });
     if !collection.is_empty() {

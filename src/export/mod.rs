@@ -10,9 +10,11 @@ use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
-use crate::fem::integrate::Simulation;
 use crate::mesh::io::{self, Field, Grid};
-use crate::mesh::TetMesh;
+use crate::mesh::{TetMesh, Vec3};
+use crate::strain::{ElementStrains, SurfaceField};
+
+pub mod strain_images;
 
 /// One row of `metrics.csv`.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -27,6 +29,12 @@ pub struct FrameMetrics {
     pub contact_nodes: usize,
     /// Skin area in contact (mm², lumped nodal areas of the contact nodes).
     pub contact_area_mm2: f64,
+    /// Smallest and largest r_s over the top-surface vertices.
+    pub rs_range: [f64; 2],
+    /// Smallest and largest r_t over the top-surface vertices.
+    pub rt_range: [f64; 2],
+    /// Top-surface vertices whose averaged T is folded (det T < 0).
+    pub folded_vertices: usize,
     /// Largest penetration (mm).
     pub max_penetration_mm: f64,
     /// Newton iterations over the frame's substeps and contact rounds.
@@ -40,7 +48,8 @@ pub struct FrameMetrics {
 }
 
 const HEADER: &str = "frame,time_s,probe_force_x_n,probe_force_y_n,probe_force_z_n,\
-contact_nodes,contact_area_mm2,max_penetration_mm,newton_iterations,linear_iterations,rel_residual,step_wall_s";
+contact_nodes,contact_area_mm2,max_penetration_mm,newton_iterations,linear_iterations,rel_residual,\
+rs_min,rs_max,rt_min,rt_max,folded_vertices,step_wall_s";
 
 /// `metrics.csv`, appended and flushed per frame.
 pub struct MetricsWriter {
@@ -64,7 +73,7 @@ impl MetricsWriter {
         let [fx, fy, fz] = m.probe_force_n;
         writeln!(
             self.file,
-            "{},{},{fx:e},{fy:e},{fz:e},{},{:e},{:e},{},{},{:e},{:.6}",
+            "{},{},{fx:e},{fy:e},{fz:e},{},{:e},{:e},{},{},{:e},{:e},{:e},{:e},{:e},{},{:.6}",
             m.frame,
             m.time_s,
             m.contact_nodes,
@@ -73,6 +82,11 @@ impl MetricsWriter {
             m.newton_iterations,
             m.linear_iterations,
             m.rel_residual,
+            m.rs_range[0],
+            m.rs_range[1],
+            m.rt_range[0],
+            m.rt_range[1],
+            m.folded_vertices,
             m.step_wall_s
         )
         .and_then(|()| self.file.flush())
@@ -80,30 +94,75 @@ impl MetricsWriter {
     }
 }
 
-/// The deformed mesh of one frame: positions, displacement (point data),
-/// region, principal stretches λ1 ≥ λ2 ≥ λ3 (sign-corrected) and volume
-/// ratio J (cell data).
-pub fn frame_grid(mesh: &TetMesh, sim: &Simulation) -> Grid {
-    let displacement = sim
-        .x
+/// The deformed mesh of one frame at positions `x`.
+///
+/// Point data: `displacement_mm`; on top-surface vertices (NaN elsewhere)
+/// `surface_stretch` (r_s, r_t) and the unit principal axes
+/// `surface_axis_s`, `surface_axis_t` on the deformed surface. Cell data:
+/// `region`, `principal_stretch` (λ1 ≥ λ2 ≥ λ3, sign-corrected),
+/// `principal_biot_strain` (λ − 1), `principal_green_strain` ((λ² − 1)/2),
+/// `volume_ratio` (J), and the principal directions as 3×3 tensors whose
+/// columns match the stretches, `principal_axes_rest` and
+/// `principal_axes_deformed` (components in column order).
+pub fn frame_grid(
+    mesh: &TetMesh,
+    x: &[Vec3],
+    strains: &ElementStrains,
+    field: &SurfaceField,
+) -> Grid {
+    let displacement = x
         .iter()
         .zip(&mesh.positions)
         .flat_map(|(x, p)| (x - p).iter().copied().collect::<Vec<_>>())
         .collect();
-    let mut stretches = Vec::with_capacity(3 * mesh.num_tets());
-    let mut ratio = Vec::with_capacity(mesh.num_tets());
-    for c in sim.corotations() {
-        stretches.extend_from_slice(c.sigma.as_slice());
-        ratio.push(c.sigma.product());
+    let n = mesh.num_tets();
+    let (mut stretch, mut biot, mut green) = (
+        Vec::with_capacity(3 * n),
+        Vec::with_capacity(3 * n),
+        Vec::with_capacity(3 * n),
+    );
+    let (mut ratio, mut rest_axes, mut deformed_axes) = (
+        Vec::with_capacity(n),
+        Vec::with_capacity(9 * n),
+        Vec::with_capacity(9 * n),
+    );
+    for s in &strains.tets {
+        stretch.extend_from_slice(s.stretch.as_slice());
+        biot.extend_from_slice(s.biot().as_slice());
+        green.extend_from_slice(s.green().as_slice());
+        ratio.push(s.volume_ratio());
+        rest_axes.extend_from_slice(s.rest_axes.as_slice());
+        deformed_axes.extend_from_slice(s.deformed_axes.as_slice());
+    }
+    let nv = mesh.num_vertices();
+    let mut surface_stretch = vec![f64::NAN; 2 * nv];
+    let mut axis_s = vec![f64::NAN; 3 * nv];
+    let mut axis_t = vec![f64::NAN; 3 * nv];
+    for (k, &v) in mesh.top.vertices.iter().enumerate() {
+        let vs = &field.vertices[k];
+        let svd = vs.strain().svd;
+        surface_stretch[2 * v..2 * v + 2].copy_from_slice(&[svd.rs, svd.rt]);
+        let [a, b] = vs.deformed_axes();
+        axis_s[3 * v..3 * v + 3].copy_from_slice(a.as_slice());
+        axis_t[3 * v..3 * v + 3].copy_from_slice(b.as_slice());
     }
     Grid {
-        points: sim.x.clone(),
+        points: x.to_vec(),
         tets: mesh.tets.clone(),
-        point_data: vec![Field::f64("displacement_mm", 3, displacement)],
+        point_data: vec![
+            Field::f64("displacement_mm", 3, displacement),
+            Field::f64("surface_stretch", 2, surface_stretch),
+            Field::f64("surface_axis_s", 3, axis_s),
+            Field::f64("surface_axis_t", 3, axis_t),
+        ],
         cell_data: vec![
             Field::i32("region", 1, mesh.tet_region.clone()),
-            Field::f64("principal_stretch", 3, stretches),
+            Field::f64("principal_stretch", 3, stretch),
+            Field::f64("principal_biot_strain", 3, biot),
+            Field::f64("principal_green_strain", 3, green),
             Field::f64("volume_ratio", 1, ratio),
+            Field::f64("principal_axes_rest", 9, rest_axes),
+            Field::f64("principal_axes_deformed", 9, deformed_axes),
         ],
     }
 }

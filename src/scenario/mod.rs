@@ -72,8 +72,16 @@ pub struct OutputSection {
     /// Also write the mesh as TetGen files `mesh.node/.ele/.face`. Default false.
     pub mesh_tetgen: bool,
     /// Write `frames/frame_NNNN.vtu` (deformed mesh, displacement, principal
-    /// stretches) and `frames.pvd` for ParaView. Default true.
+    /// strains and directions, surface stretch ratios and axes) and
+    /// `frames.pvd` for ParaView. Default true.
     pub frames_vtu: bool,
+    /// Write PNG maps of the surface strain per frame under `strain/`
+    /// (`rs_NNNN.png`, `rt_NNNN.png`, `axes_NNNN.png`). Default false.
+    pub strain_images: bool,
+    /// Side of the strain maps in pixels (the UV square). Default 512.
+    pub strain_image_px: usize,
+    /// Stretch ratios `1 ± strain_image_range` saturate the colour map. Default 0.25.
+    pub strain_image_range: f64,
 }
 
 impl Default for OutputSection {
@@ -83,6 +91,9 @@ impl Default for OutputSection {
             mesh_vtu: true,
             mesh_tetgen: false,
             frames_vtu: true,
+            strain_images: false,
+            strain_image_px: 512,
+            strain_image_range: 0.25,
         }
     }
 }
@@ -104,8 +115,41 @@ pub struct Setup {
     pub write_mesh_tetgen: bool,
     /// Write one VTU per frame.
     pub write_frames: bool,
+    /// Strain maps per frame, if asked for.
+    pub strain_images: Option<StrainImageSettings>,
     /// The simulation.
     pub simulation: SimulationSetup,
+}
+
+/// Size and colour range of the per-frame strain maps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StrainImageSettings {
+    /// Side in pixels.
+    pub px: usize,
+    /// Colour-map half range around a stretch ratio of 1.
+    pub range: f64,
+}
+
+impl OutputSection {
+    fn strain_image_settings(&self) -> Result<Option<StrainImageSettings>> {
+        if !(1..=8192).contains(&self.strain_image_px) {
+            return Err(Error::parameter(
+                "output.strain_image_px",
+                format!("must be in 1 … 8192, got {}", self.strain_image_px),
+            ));
+        }
+        let range = self.strain_image_range;
+        if !(range > 0.0 && range <= 1.0) {
+            return Err(Error::parameter(
+                "output.strain_image_range",
+                format!("must be in (0, 1], got {range}"),
+            ));
+        }
+        Ok(self.strain_images.then_some(StrainImageSettings {
+            px: self.strain_image_px,
+            range,
+        }))
+    }
 }
 
 /// Where a setup's mesh comes from.
@@ -253,6 +297,7 @@ impl Setup {
             .unwrap_or_else(|| "scenario".into());
         let base = path.parent().unwrap_or(Path::new("."));
         let mesh_source = scenario.mesh.source(base)?;
+        let strain_images = scenario.output.strain_image_settings()?;
         let output_dir = scenario
             .output
             .dir
@@ -271,6 +316,7 @@ impl Setup {
             write_mesh_vtu: scenario.output.mesh_vtu,
             write_mesh_tetgen: scenario.output.mesh_tetgen,
             write_frames: scenario.output.frames_vtu,
+            strain_images,
             simulation,
         })
     }
