@@ -308,3 +308,146 @@ proptest! {
         prop_assert!((svd.v().determinant() - 1.0).abs() < 1e-12);
     }
 }
+
+/// Hertz consistency: a frictionless sphere (R = 2 mm) pressed δ = 0.1 mm
+/// into the hertz block (E = 100 kPa, ν = 0.3). Outside the contact circle
+/// linear theory gives a surface in in-plane pure shear with hoop strain
+/// u_r/r = −(1+ν)(1−2ν)·p0·a²/(3E·r²), a = √(Rδ), p0 = 2E·a/(π(1−ν²)R).
+/// The hoop stretch is r_t: r_t − 1 within 20% of that at r = 1.25a, 1.5a
+/// and 2a (mean over 16 directions, each direction within 30%), t axis
+/// tangential; r_s > 1 with the s axis radial.
+#[test]
+fn hertz_surface_strain_outside_the_contact() {
+    let (summary, dir) = common::run_fixture("hertz.toml", |t| {
+        t.replace(
+            "[[0.0, 0.0, 0.0, 2.0], [1.0, 0.0, 0.0, 1.8]]",
+            "[[0.0, 0.0, 0.0, 2.0], [1.0, 0.0, 0.0, 1.9]]",
+        )
+        .replace("frame_rate_hz = 4.0", "frame_rate_hz = 2.0")
+        .replace("frames_vtu = false", "frames_vtu = true")
+    });
+    assert_eq!(summary.frames.len(), 3);
+    let mesh = io::read_tetgen(&common::root().join("meshes/hertz_block")).unwrap();
+    let frame = io::read_vtu(&dir.path().join("frames/frame_0002.vtu")).unwrap();
+    let field = SurfaceField::new(&mesh.top, &mesh.positions, &frame.points);
+    let (e, nu, r_sphere, delta): (f64, f64, f64, f64) = (0.1, 0.3, 2.0, 0.1);
+    let a = (r_sphere * delta).sqrt();
+    let p0 = 2.0 * e * a / (std::f64::consts::PI * (1.0 - nu * nu) * r_sphere);
+    let (lo, hi) = mesh.bounds();
+    let mut report = String::new();
+    for k in [1.25, 1.5, 2.0] {
+        let r = k * a;
+        let hoop = -(1.0 + nu) * (1.0 - 2.0 * nu) * p0 * a * a / (3.0 * e * r * r);
+        let (mut sum_t, mut sum_s) = (0.0, 0.0);
+        let n = 16;
+        for j in 0..n {
+            let phi = std::f64::consts::TAU * j as f64 / n as f64;
+            let radial = Vec3::new(phi.cos(), phi.sin(), 0.0);
+            let p = radial * r;
+            let uv = Vector2::new((p.x - lo.x) / (hi.x - lo.x), (p.y - lo.y) / (hi.y - lo.y));
+            let s = field.at(uv).unwrap();
+            let (rs, rt) = (s.rs(), s.rt());
+            assert!(
+                (rt - 1.0) / hoop > 0.7 && (rt - 1.0) / hoop < 1.3,
+                "r = {k}a, φ = {phi:.2}: r_t − 1 = {:.4e} vs {hoop:.4e}",
+                rt - 1.0
+            );
+            assert!(rs > 1.0, "r = {k}a, φ = {phi:.2}: r_s = {rs}");
+            // Axes in the rest world frame: the block's UVs are axis-aligned
+            // and the x and y scales are equal, so UV directions are world ones.
+            let (su, tu) = (s.s_uv(), s.t_uv());
+            let s_world = Vec3::new(su.x, su.y, 0.0);
+            let t_world = Vec3::new(tu.x, tu.y, 0.0);
+            let hoop_dir = Vec3::new(-phi.sin(), phi.cos(), 0.0);
+            assert!(
+                axis_angle(&s_world, &radial) < 0.1,
+                "s axis {s_world} at φ = {phi:.2}"
+            );
+            assert!(
+                axis_angle(&t_world, &hoop_dir) < 0.1,
+                "t axis {t_world} at φ = {phi:.2}"
+            );
+            sum_t += rt - 1.0;
+            sum_s += rs - 1.0;
+        }
+        let (mean_t, mean_s) = (sum_t / n as f64, sum_s / n as f64);
+        report += &format!(
+            "r = {k:.2}a: r_t − 1 = {mean_t:.4e} vs {hoop:.4e} ({:+.1}%), r_s − 1 = {mean_s:.4e} vs linear {:.4e}\n",
+            100.0 * (mean_t / hoop - 1.0),
+            -hoop
+        );
+        assert!((mean_t / hoop - 1.0).abs() < 0.2, "{report}");
+    }
+    println!("{report}");
+}
+
+/// r_s and r_t after the press phase of tests/fixtures/press_small.toml
+/// (sphere R = 1.5 mm, 0.5 mm deep, μ = 0.8) at fixed surface points on
+/// patch_3k, patch_25k and a generated ~80k-tet patch, outside the contact
+/// patch (radius ≈ 1 mm). The differences between successive meshes shrink:
+/// the field converges under refinement. (Under a sticking probe the field
+/// also depends on when each node was caught — on the load steps — and
+/// does not converge with the mesh alone; docs/VERIFICATION.md.)
+#[test]
+fn surface_strain_converges_under_refinement() {
+    let generated_80k = {
+        let text = std::fs::read_to_string(common::root().join("benches/press_80k.toml")).unwrap();
+        let start = text.find("[mesh]").unwrap();
+        let end = text.find("[material.dermis]").unwrap();
+        text[start..end].to_string()
+    };
+    let points = [
+        (1.5, 0.0),
+        (0.0, 2.0),
+        (-2.5, 0.0),
+        (1.5, 1.5),
+        (-1.2, -1.2),
+        (3.5, -1.0),
+    ];
+    let mut values = Vec::new();
+    for mesh_section in [
+        "[mesh]\nfile = \"../../meshes/patch_3k.node\"\n".to_string(),
+        "[mesh]\nfile = \"../../meshes/patch_25k.node\"\n".to_string(),
+        generated_80k,
+    ] {
+        let (summary, dir) = common::run_fixture("press_small.toml", |t| {
+            t.replace(
+                "[mesh]\nfile = \"../../meshes/patch_3k.node\"\n",
+                &mesh_section,
+            )
+            .replace("duration_s = 1.0", "duration_s = 0.5")
+                + "\n[output]\nmesh_vtu = false\nmesh_tetgen = true\n"
+        });
+        let last = summary.frames.len() - 1;
+        let mesh = io::read_tetgen(&dir.path().join("mesh")).unwrap();
+        let frame = io::read_vtu(&dir.path().join(format!("frames/frame_{last:04}.vtu"))).unwrap();
+        let field = SurfaceField::new(&mesh.top, &mesh.positions, &frame.points);
+        let (lo, hi) = mesh.bounds();
+        let at = |x: f64, y: f64| {
+            let uv = Vector2::new((x - lo.x) / (hi.x - lo.x), (y - lo.y) / (hi.y - lo.y));
+            let s = field.at(uv).unwrap();
+            (s.rs(), s.rt())
+        };
+        values.push((mesh.num_tets(), points.map(|(x, y)| at(x, y))));
+    }
+    let mut report = String::new();
+    for (tets, v) in &values {
+        report += &format!("{tets:>6} tets:");
+        for (rs, rt) in v {
+            report += &format!("  ({rs:.4}, {rt:.4})");
+        }
+        report += "\n";
+    }
+    let difference = |a: &[(f64, f64); 6], b: &[(f64, f64); 6]| {
+        a.iter()
+            .zip(b)
+            .map(|(p, q)| (p.0 - q.0).abs().max((p.1 - q.1).abs()))
+            .fold(0.0, f64::max)
+    };
+    let coarse = difference(&values[0].1, &values[1].1);
+    let fine = difference(&values[1].1, &values[2].1);
+    report += &format!("max difference 3k→25k {coarse:.4}, 25k→80k {fine:.4}\n");
+    println!("{report}");
+    assert!(fine < coarse, "{report}");
+    assert!(fine < 0.01, "{report}");
+}
