@@ -315,3 +315,98 @@ fn bench_fem_compares_solvers() {
     );
     assert!(out.contains("direct / cg wall-time ratio"), "{out}");
 }
+
+/// `strain_images = true` writes three PNG maps per frame; the metrics carry
+/// the surface stretch ranges and the frame VTUs the strain fields.
+#[test]
+fn strain_maps_metrics_and_fields() {
+    let dir = tempfile::tempdir().unwrap();
+    let fixture = std::fs::read_to_string(root().join("tests/fixtures/press_small.toml")).unwrap();
+    let mesh_file = root().join("meshes/patch_3k.node");
+    let scenario = fixture.replace(
+        "\"../../meshes/patch_3k.node\"",
+        &format!("{:?}", mesh_file.to_str().unwrap()),
+    )
+        + "\n[output]\nstrain_images = true\nstrain_image_px = 64\nstrain_image_range = 0.1\n";
+    let path = dir.path().join("maps.toml");
+    std::fs::write(&path, scenario).unwrap();
+    let out = dir.path().join("out");
+    let o = skinpatch(&[
+        "run",
+        path.to_str().unwrap(),
+        "--output",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    for frame in 0..7 {
+        for name in ["rs", "rt", "axes"] {
+            let png = out.join(format!("strain/{name}_{frame:04}.png"));
+            let image = image::open(&png).unwrap().to_rgb8();
+            // The UV square plus, for the stretch maps, a gap and a colour bar.
+            let width = if name == "axes" { 64 } else { 64 + 2 + 6 };
+            assert_eq!(image.dimensions(), (width, 64), "{}", png.display());
+            if frame == 0 && name != "axes" {
+                // At rest every texel is neutral grey.
+                assert!(
+                    (0..64).all(|x| (0..64).all(|y| image.get_pixel(x, y).0 == [221, 221, 221])),
+                    "{}",
+                    png.display()
+                );
+            }
+        }
+    }
+    // Under the probe at the end the surface is stretched and compressed:
+    // some r_s texels are red, some r_t texels blue.
+    let rs = image::open(out.join("strain/rs_0006.png"))
+        .unwrap()
+        .to_rgb8();
+    let rt = image::open(out.join("strain/rt_0006.png"))
+        .unwrap()
+        .to_rgb8();
+    assert!((0..64).any(|x| (0..64).any(|y| {
+        let [r, _, b] = rs.get_pixel(x, y).0;
+        r > 200 && b < 150
+    })));
+    assert!((0..64).any(|x| (0..64).any(|y| {
+        let [r, _, b] = rt.get_pixel(x, y).0;
+        b > 200 && r < 150
+    })));
+
+    let metrics = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    let header: Vec<&str> = metrics.lines().next().unwrap().split(',').collect();
+    let column = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let last: Vec<&str> = metrics.lines().last().unwrap().split(',').collect();
+    let value = |name: &str| -> f64 { last[column(name)].parse().unwrap() };
+    assert!(value("rs_min") <= value("rs_max") && value("rs_max") > 1.01);
+    assert!(value("rt_min") < 0.99 && value("rt_min") <= value("rt_max"));
+    assert_eq!(value("folded_vertices"), 0.0);
+
+    let mesh = io::read_tetgen(&root().join("meshes/patch_3k")).unwrap();
+    let grid = io::read_vtu(&out.join("frames/frame_0006.vtu")).unwrap();
+    let field = |name: &str| {
+        let f = grid
+            .point_data
+            .iter()
+            .chain(&grid.cell_data)
+            .find(|f| f.name == name)
+            .unwrap_or_else(|| panic!("no {name}"));
+        match &f.values {
+            io::Values::F64(v) => (f.components, v.clone()),
+            _ => panic!("{name} is not float"),
+        }
+    };
+    let (components, surface) = field("surface_stretch");
+    assert_eq!(components, 2);
+    for v in 0..mesh.num_vertices() {
+        let on_top = mesh.top.surface_vertex(v).is_some();
+        assert_eq!(surface[2 * v].is_finite(), on_top, "vertex {v}");
+    }
+    let (_, stretch) = field("principal_stretch");
+    let (_, biot) = field("principal_biot_strain");
+    assert!(stretch
+        .iter()
+        .zip(&biot)
+        .all(|(l, b)| (l - 1.0 - b).abs() < 1e-15));
+    assert_eq!(field("principal_axes_rest").0, 9);
+    assert_eq!(field("surface_axis_s").0, 3);
+}

@@ -396,4 +396,36 @@ mod tests {
         let err = s.mesh.patch_spec().unwrap_err().to_string();
         assert!(err.contains("strictly inside the patch"), "{err}");
     }
+
+    #[test]
+    fn strain_image_options_are_checked() {
+        let settings = |text: &str| parse(text).unwrap().output.strain_image_settings();
+        assert_eq!(settings("").unwrap(), None);
+        let on = settings("[output]\nstrain_images = true\nstrain_image_px = 128\n").unwrap();
+        assert_eq!(
+            on,
+            Some(StrainImageSettings {
+                px: 128,
+                range: 0.25
+            })
+        );
+        for (text, key) in [
+            ("[output]\nstrain_image_px = 0\n", "output.strain_image_px"),
+            (
+                "[output]\nstrain_image_px = 9000\n",
+                "output.strain_image_px",
+            ),
+            (
+                "[output]\nstrain_image_range = -0.1\n",
+                "output.strain_image_range",
+            ),
+            (
+                "[output]\nstrain_image_range = nan\n",
+                "output.strain_image_range",
+            ),
+        ] {
+            let err = settings(text).unwrap_err().to_string();
+            assert!(err.contains(key), "{text}: {err}");
+        }
+    }
 }
