@@ -62,7 +62,11 @@ pub fn tangent_frame(
     let scale = e.norm_squared();
     let area2 = e.column(0).cross(&e.column(1)).norm();
     let uv_scale = uv.norm_squared();
-    if !(area2 > 1e-12 * scale) || !(uv.determinant().abs() > 1e-12 * uv_scale) {
+    // Written so that NaN coordinates also count as degenerate.
+    let flat = area2.partial_cmp(&(1e-12 * scale)) != Some(std::cmp::Ordering::Greater);
+    let uv_flat = uv.determinant().abs().partial_cmp(&(1e-12 * uv_scale))
+        != Some(std::cmp::Ordering::Greater);
+    if flat || uv_flat {
         return None;
     }
     let gram = e.transpose() * e;
