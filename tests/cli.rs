@@ -257,21 +257,28 @@ fn bad_scenarios_fail_cleanly() {
 
 /// A run whose solver gives up stops with an error naming the frame and the
 /// residual, and keeps every frame written before.
-#[test]
-fn solver_failure_stops_cleanly_and_keeps_outputs() {
-    let dir = tempfile::tempdir().unwrap();
+/// Writes tests/fixtures/press_small.toml with `extra` appended (mesh path
+/// made absolute) into `dir` and runs it with output `dir/out`.
+fn run_press_small_with(dir: &Path, extra: &str) -> (std::path::PathBuf, Output) {
     let scenario = std::fs::read_to_string(root().join("tests/fixtures/press_small.toml")).unwrap();
-    let scenario = scenario.replace("../../meshes", root().join("meshes").to_str().unwrap())
-        + "\n[solver]\nmax_newton_iterations = 1\n";
-    let path = dir.path().join("starved.toml");
+    let scenario =
+        scenario.replace("../../meshes", root().join("meshes").to_str().unwrap()) + extra;
+    let path = dir.join("scenario.toml");
     std::fs::write(&path, scenario).unwrap();
-    let out = dir.path().join("out");
+    let out = dir.join("out");
     let o = skinpatch(&[
         "run",
         path.to_str().unwrap(),
         "--output",
         out.to_str().unwrap(),
     ]);
+    (out, o)
+}
+
+#[test]
+fn solver_failure_stops_cleanly_and_keeps_outputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let (out, o) = run_press_small_with(dir.path(), "\n[solver]\nmax_newton_iterations = 1\n");
     assert!(!o.status.success());
     let stderr = text(&o.stderr);
     assert!(stderr.contains("frame 1 (t = 0.1667 s)"), "{stderr}");
@@ -321,22 +328,10 @@ fn bench_fem_compares_solvers() {
 #[test]
 fn strain_maps_metrics_and_fields() {
     let dir = tempfile::tempdir().unwrap();
-    let fixture = std::fs::read_to_string(root().join("tests/fixtures/press_small.toml")).unwrap();
-    let mesh_file = root().join("meshes/patch_3k.node");
-    let scenario = fixture.replace(
-        "\"../../meshes/patch_3k.node\"",
-        &format!("{:?}", mesh_file.to_str().unwrap()),
-    )
-        + "\n[output]\nstrain_images = true\nstrain_image_px = 64\nstrain_image_range = 0.1\n";
-    let path = dir.path().join("maps.toml");
-    std::fs::write(&path, scenario).unwrap();
-    let out = dir.path().join("out");
-    let o = skinpatch(&[
-        "run",
-        path.to_str().unwrap(),
-        "--output",
-        out.to_str().unwrap(),
-    ]);
+    let (out, o) = run_press_small_with(
+        dir.path(),
+        "\n[output]\nstrain_images = true\nstrain_image_px = 64\nstrain_image_range = 0.1\n",
+    );
     assert!(o.status.success(), "stderr: {}", text(&o.stderr));
     for frame in 0..7 {
         for name in ["rs", "rt", "axes"] {

@@ -62,6 +62,40 @@ fn sphere(path: Vec<(f64, Vector3<f64>)>, mode: ContactMode) -> Probe {
     }
 }
 
+/// Solves the probe at times k/steps, k = 1 … steps, checking the
+/// penetration bound at each; returns the last report.
+fn press(r: &mut Rig, probe: &Probe, steps: usize) -> skinpatch::fem::contact::ContactReport {
+    let mut last = None;
+    for k in 1..=steps {
+        let rep = solve_with_contact(
+            &mut r.sim,
+            (&r.base.0, &r.base.1, &r.base.2),
+            &probe.pose(k as f64 / steps as f64),
+            probe.mode,
+            &mut r.state,
+            &format!("step {k}"),
+        )
+        .unwrap();
+        assert!(rep.max_penetration_ratio <= 0.01, "{rep:?}");
+        last = Some(rep);
+    }
+    last.unwrap()
+}
+
+/// The probe force equals the total support reaction (within 1e-4).
+fn assert_force_balance(r: &Rig, rep: &skinpatch::fem::contact::ContactReport) {
+    let contact: std::collections::HashSet<usize> = r.state.active.keys().copied().collect();
+    let support: Vec3 = (0..r.mesh.num_vertices())
+        .filter(|v| !contact.contains(v))
+        .map(|v| -r.sim.internal_forces()[v])
+        .sum();
+    assert!(
+        (support - rep.probe_force).norm() < 1e-4 * rep.probe_force.norm(),
+        "{support} vs {}",
+        rep.probe_force
+    );
+}
+
 #[test]
 fn press_balances_forces_and_respects_penetration_bound() {
     let _ = env_logger::builder().is_test(true).try_init();
@@ -73,39 +107,13 @@ fn press_balances_forces_and_respects_penetration_bound() {
         ],
         ContactMode::Frictionless,
     );
-    let mut last = None;
-    for k in 1..=4 {
-        let t = k as f64 / 4.0;
-        let pose = probe.pose(t);
-        let rep = solve_with_contact(
-            &mut r.sim,
-            (&r.base.0, &r.base.1, &r.base.2),
-            &pose,
-            probe.mode,
-            &mut r.state,
-            &format!("step {k}"),
-        )
-        .unwrap();
-        assert!(rep.max_penetration_ratio <= 0.01, "{rep:?}");
-        last = Some(rep);
-    }
-    let rep = last.unwrap();
+    let rep = press(&mut r, &probe, 4);
     assert!(rep.contact_nodes >= 3, "{rep:?}");
     // The probe is pushed up; frictionless and centred: no tangential force.
     assert!(rep.probe_force.z > 0.0);
     let tangential = (rep.probe_force.x.powi(2) + rep.probe_force.y.powi(2)).sqrt();
     assert!(tangential < 0.02 * rep.probe_force.z, "{rep:?}");
-    // Probe force equals the total support reaction.
-    let contact: std::collections::HashSet<usize> = r.state.active.keys().copied().collect();
-    let support: Vec3 = (0..r.mesh.num_vertices())
-        .filter(|v| !contact.contains(v))
-        .map(|v| -r.sim.internal_forces()[v])
-        .sum();
-    assert!(
-        (support - rep.probe_force).norm() < 1e-4 * rep.probe_force.norm(),
-        "{support} vs {}",
-        rep.probe_force
-    );
+    assert_force_balance(&r, &rep);
     println!("{rep:?}");
 }
 
@@ -311,31 +319,9 @@ fn press_capsule(axis: Vector3<f64>) -> (skinpatch::fem::contact::ContactReport,
         },
         mode: ContactMode::Frictionless,
     };
-    let mut last = None;
-    for k in 1..=3 {
-        let rep = solve_with_contact(
-            &mut r.sim,
-            (&r.base.0, &r.base.1, &r.base.2),
-            &probe.pose(k as f64 / 3.0),
-            probe.mode,
-            &mut r.state,
-            &format!("step {k}"),
-        )
-        .unwrap();
-        assert!(rep.max_penetration_ratio <= 0.01, "{rep:?}");
-        last = Some(rep);
-    }
-    let rep = last.unwrap();
-    let contact: std::collections::HashSet<usize> = r.state.active.keys().copied().collect();
-    let support: Vec3 = (0..r.mesh.num_vertices())
-        .filter(|v| !contact.contains(v))
-        .map(|v| -r.sim.internal_forces()[v])
-        .sum();
-    assert!(
-        (support - rep.probe_force).norm() < 1e-4 * rep.probe_force.norm(),
-        "{support} vs {}",
-        rep.probe_force
-    );
+    let rep = press(&mut r, &probe, 3);
+    assert_force_balance(&r, &rep);
+    let contact: Vec<usize> = r.state.active.keys().copied().collect();
     let extent = |k: usize| {
         let values = contact.iter().map(|&v| r.sim.x[v][k]);
         values.clone().fold(f64::MIN, f64::max) - values.fold(f64::MAX, f64::min)
