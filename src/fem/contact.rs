@@ -415,7 +415,7 @@ fn update_active_set(
     state: &mut ContactState,
     tight: bool,
 ) -> bool {
-    // Friction forces are settled to 1e-4 of their size in tight rounds, 1e-2 before.
+    // Friction forces are settled to 1e-3 of their size in tight rounds, 1e-2 before.
     let friction_tol = if tight { 1e-3 } else { 1e-2 };
     let mut changed = false;
     let forces: Vec<(usize, Vec3)> = state
