@@ -22,6 +22,7 @@ pub mod error;
 pub mod export;
 pub mod fem;
 pub mod mesh;
+pub mod micro;
 pub mod pipeline;
 pub mod scenario;
 pub mod strain;

@@ -1,0 +1,175 @@
+//! CPU reference of the spatially varying separable convolution (DESIGN
+//! §5.4, seed 000 eq. 3–6, 13).
+//!
+//! Two 1D passes: along each texel's s axis into an intermediate map
+//! (`D^s`, eq. 5), then along its t axis into the output (`D′`, eq. 4). A
+//! pass at texel `p` with unit axis `a` (in texel units), strength α and
+//! σ (texels) computes
+//! `(1 − α)·D(p) + α·Σ_k g_k·D(p − k·a) / Σ_k g_k`, `k = −N … N`,
+//! `N = ⌈3σ⌉`, `g_k = exp(−k²/2σ²)`, reading D bilinearly with the map's edge
+//! handling. The Gaussian weights come from the recurrence
+//! `g_{k+1} = g_k·q^{2k+1}`, `q = exp(−1/2σ²)`. Arithmetic is f32 in the
+//! order the GPU shader uses, so the two compare texel by texel; texels are
+//! independent, so the parallel loop gives the same bits on any thread count.
+//!
+//! Per-texel parameters come from the strain raster ([`KernelField`]): the
+//! axes `S = Q Rᵀ V` (UV per millimetre) scaled to texels give each axis's
+//! direction in the map and its texels per millimetre, which converts σ from
+//! micrometres to texels (eq. 13); α and σ come from the kernel model at
+//! r_s along s and r_t along t. Texels off the surface are left unchanged.
+
+use rayon::prelude::*;
+
+use super::kernel::{KernelModel, KernelParams};
+use super::map::DisplacementMap;
+use crate::strain::{StrainRaster, Svd2};
+
+/// Kernel parameters of one pass at one texel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PassParams {
+    /// Unit axis in texel units (x along u, y along v).
+    pub axis: [f32; 2],
+    /// Strength α.
+    pub alpha: f32,
+    /// Standard deviation in texels.
+    pub sigma: f32,
+}
+
+impl PassParams {
+    /// The identity pass.
+    pub const IDENTITY: PassParams = PassParams {
+        axis: [1.0, 0.0],
+        alpha: 0.0,
+        sigma: 0.0,
+    };
+}
+
+/// Per-texel parameters of both passes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct KernelField {
+    /// Texels along u.
+    pub width: usize,
+    /// Texels along v.
+    pub height: usize,
+    /// First pass (along s).
+    pub s: Vec<PassParams>,
+    /// Second pass (along t).
+    pub t: Vec<PassParams>,
+}
+
+impl KernelField {
+    /// Parameters from a strain raster of the map's size and a kernel model.
+    ///
+    /// # Panics
+    /// If the raster and the map differ in size (the pipeline rasterises at
+    /// the map's size).
+    pub fn from_strain(
+        raster: &StrainRaster,
+        model: &KernelModel,
+        map: &DisplacementMap,
+    ) -> KernelField {
+        assert_eq!((raster.width, raster.height), (map.width, map.height));
+        let (w, h) = (map.width as f64, map.height as f64);
+        let texel = |idx: usize| {
+            if !raster.inside[idx] {
+                return (PassParams::IDENTITY, PassParams::IDENTITY);
+            }
+            let svd = Svd2::of(&raster.t[idx]);
+            let s_matrix = raster.uv_frame[idx] * svd.v();
+            let pass = |col: usize, r: f64| {
+                // Texels per millimetre along the axis, and its direction.
+                let a = nalgebra::Vector2::new(s_matrix[(0, col)] * w, s_matrix[(1, col)] * h);
+                let per_mm = a.norm();
+                let KernelParams { alpha, sigma_um } = model.params(r);
+                if per_mm <= 0.0 || !per_mm.is_finite() {
+                    return PassParams::IDENTITY;
+                }
+                PassParams {
+                    axis: [(a.x / per_mm) as f32, (a.y / per_mm) as f32],
+                    alpha: alpha as f32,
+                    sigma: (sigma_um * 1e-3 * per_mm) as f32,
+                }
+            };
+            (pass(0, svd.rs), pass(1, svd.rt))
+        };
+        let (s, t) = (0..map.width * map.height)
+            .into_par_iter()
+            .map(texel)
+            .unzip();
+        KernelField {
+            width: map.width,
+            height: map.height,
+            s,
+            t,
+        }
+    }
+
+    /// The same parameters at every texel: α and σ (µm, converted with the
+    /// map's texel size) along the unit axis `s` (texel units) and along `t`
+    /// perpendicular to it.
+    pub fn constant(
+        map: &DisplacementMap,
+        s: [f64; 2],
+        along_s: KernelParams,
+        along_t: KernelParams,
+    ) -> KernelField {
+        let n = map.width * map.height;
+        let len = s[0].hypot(s[1]);
+        let s_axis = [(s[0] / len) as f32, (s[1] / len) as f32];
+        let t_axis = [-s_axis[1], s_axis[0]];
+        let pass = |axis: [f32; 2], p: KernelParams| PassParams {
+            axis,
+            alpha: p.alpha as f32,
+            sigma: (p.sigma_um / map.texel_um) as f32,
+        };
+        KernelField {
+            width: map.width,
+            height: map.height,
+            s: vec![pass(s_axis, along_s); n],
+            t: vec![pass(t_axis, along_t); n],
+        }
+    }
+}
+
+/// One pass of the convolution (see the module docs).
+pub fn convolve_pass(src: &DisplacementMap, params: &[PassParams]) -> DisplacementMap {
+    assert_eq!(params.len(), src.data.len());
+    let mut data = vec![0.0f32; src.data.len()];
+    let width = src.width.max(1);
+    data.par_chunks_mut(width).enumerate().for_each(|(j, row)| {
+        for (i, out) in row.iter_mut().enumerate() {
+            *out = convolve_texel(src, i, j, &params[j * width + i]);
+        }
+    });
+    src.with_data(data)
+}
+
+/// One texel of a pass.
+#[inline]
+pub fn convolve_texel(src: &DisplacementMap, i: usize, j: usize, p: &PassParams) -> f32 {
+    let centre = src.data[j * src.width + i];
+    if p.alpha == 0.0 || p.sigma.is_nan() || p.sigma <= 0.0 {
+        return centre;
+    }
+    let n = (3.0 * p.sigma).ceil() as i32;
+    let q = (-0.5 / (p.sigma * p.sigma)).exp();
+    let (x, y) = (i as f32, j as f32);
+    let mut sum = centre;
+    let mut norm = 1.0f32;
+    let mut g = 1.0f32;
+    let mut step = q;
+    for k in 1..=n {
+        g *= step;
+        step *= q * q;
+        let (dx, dy) = (k as f32 * p.axis[0], k as f32 * p.axis[1]);
+        sum += g * (src.bilinear(x - dx, y - dy) + src.bilinear(x + dx, y + dy));
+        norm += 2.0 * g;
+    }
+    (1.0 - p.alpha) * centre + p.alpha * (sum / norm)
+}
+
+/// Both passes: along s, then along t (eq. 4–5).
+pub fn convolve(map: &DisplacementMap, field: &KernelField) -> DisplacementMap {
+    let first = convolve_pass(map, &field.s);
+    convolve_pass(&first, &field.t)
+}

@@ -1,0 +1,311 @@
+//! Displacement map files: 16-bit greyscale PNG and single-channel f32 EXR.
+//!
+//! PNG stores `round((h − offset)/scale)` in 0 … 65535 with `offset` the
+//! smallest height and `scale = (max − min)/65535`, so reading back is exact
+//! to half a quantisation step (`scale/2`). The metadata rides in tEXt
+//! chunks: `skinpatch:texel_um`, `skinpatch:height_offset`,
+//! `skinpatch:height_scale`, `skinpatch:height_unit_um` and `skinpatch:edge`.
+//! A PNG from elsewhere (no such chunks) is read as heights 0 … 1 in units
+//! given by the caller, with the caller's texel size.
+//!
+//! EXR stores the heights as one f32 channel `Y` (exact round trip) with the
+//! metadata as layer attributes of the same names (`skinpatch:edge` as 0 =
+//! wrap, 1 = clamp).
+//!
+//! Rows are written top to bottom with v decreasing, so the image shows v up
+//! like the strain maps. Writes are atomic (temporary file, then rename).
+
+use std::path::Path;
+
+use super::map::{DisplacementMap, Edge};
+use crate::error::{Error, Result};
+use crate::mesh::io::write_atomically;
+
+/// What to assume for a file that does not carry skinpatch metadata.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MapDefaults {
+    /// Texel side (µm).
+    pub texel_um: f64,
+    /// Micrometres per stored unit (PNG: per full 0 … 65535 range).
+    pub height_unit_um: f64,
+    /// Edge handling.
+    pub edge: Edge,
+}
+
+const TEXEL: &str = "skinpatch:texel_um";
+const OFFSET: &str = "skinpatch:height_offset";
+const SCALE: &str = "skinpatch:height_scale";
+const UNIT: &str = "skinpatch:height_unit_um";
+const EDGE: &str = "skinpatch:edge";
+
+fn edge_name(edge: Edge) -> &'static str {
+    match edge {
+        Edge::Wrap => "wrap",
+        Edge::Clamp => "clamp",
+    }
+}
+
+/// Writes `map` as a 16-bit greyscale PNG with its metadata.
+pub fn write_png16(path: &Path, map: &DisplacementMap) -> Result<()> {
+    let (lo, hi) = map.range();
+    let (lo, hi) = if lo.is_finite() {
+        (lo as f64, hi as f64)
+    } else {
+        (0.0, 0.0)
+    };
+    let scale = if hi > lo { (hi - lo) / 65535.0 } else { 1.0 };
+    let mut bytes = Vec::with_capacity(2 * map.data.len());
+    for row in (0..map.height).rev() {
+        for &h in &map.data[row * map.width..(row + 1) * map.width] {
+            let q = ((h as f64 - lo) / scale).round().clamp(0.0, 65535.0) as u16;
+            bytes.extend_from_slice(&q.to_be_bytes());
+        }
+    }
+    let mut out = Vec::new();
+    let failed = |e: png::EncodingError| Error::io(path, std::io::Error::other(e));
+    {
+        let mut encoder = png::Encoder::new(&mut out, map.width as u32, map.height as u32);
+        encoder.set_color(png::ColorType::Grayscale);
+        encoder.set_depth(png::BitDepth::Sixteen);
+        for (key, value) in [
+            (TEXEL, format!("{:e}", map.texel_um)),
+            (OFFSET, format!("{lo:e}")),
+            (SCALE, format!("{scale:e}")),
+            (UNIT, format!("{:e}", map.height_unit_um)),
+            (EDGE, edge_name(map.edge).to_string()),
+        ] {
+            encoder.add_text_chunk(key.into(), value).map_err(failed)?;
+        }
+        let mut writer = encoder.write_header().map_err(failed)?;
+        writer.write_image_data(&bytes).map_err(failed)?;
+        writer.finish().map_err(failed)?;
+    }
+    write_atomically(path, &out)
+}
+
+/// Reads a 16-bit (or 8-bit) greyscale PNG.
+pub fn read_png16(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap> {
+    let bad = |message: String| Error::Parse {
+        path: path.to_path_buf(),
+        line: 0,
+        message,
+    };
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let decoder = png::Decoder::new(std::io::BufReader::new(file));
+    let mut reader = decoder
+        .read_info()
+        .map_err(|e| bad(format!("not a readable PNG: {e}")))?;
+    let info = reader.info();
+    let (width, height) = (info.width as usize, info.height as usize);
+    if info.color_type != png::ColorType::Grayscale {
+        return Err(bad(format!(
+            "a displacement map must be greyscale, this PNG is {:?}",
+            info.color_type
+        )));
+    }
+    let depth = info.bit_depth;
+    let text: std::collections::HashMap<String, String> = info
+        .uncompressed_latin1_text
+        .iter()
+        .map(|c| (c.keyword.clone(), c.text.clone()))
+        .collect();
+    let number = |key: &str| -> Result<Option<f64>> {
+        text.get(key)
+            .map(|v| {
+                v.trim()
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|x| x.is_finite())
+                    .ok_or_else(|| bad(format!("metadata {key} = {v:?} is not a finite number")))
+            })
+            .transpose()
+    };
+    let full = match depth {
+        png::BitDepth::Sixteen => 65535.0,
+        png::BitDepth::Eight => 255.0,
+        other => {
+            return Err(bad(format!(
+                "unsupported bit depth {other:?} (use 8 or 16)"
+            )))
+        }
+    };
+    let offset = number(OFFSET)?.unwrap_or(0.0);
+    let scale = number(SCALE)?.unwrap_or(1.0 / full);
+    let texel_um = number(TEXEL)?.unwrap_or(defaults.texel_um);
+    let height_unit_um = number(UNIT)?.unwrap_or(defaults.height_unit_um);
+    if [texel_um, height_unit_um, scale]
+        .iter()
+        .any(|v| v.is_nan() || *v <= 0.0)
+    {
+        return Err(bad(format!(
+            "texel size ({texel_um} µm), height unit ({height_unit_um} µm) and scale ({scale}) must be > 0"
+        )));
+    }
+    let edge = match text.get(EDGE).map(String::as_str) {
+        None => defaults.edge,
+        Some("wrap") => Edge::Wrap,
+        Some("clamp") => Edge::Clamp,
+        Some(other) => {
+            return Err(bad(format!(
+                "metadata {EDGE} = {other:?}, expected wrap or clamp"
+            )))
+        }
+    };
+    let size = reader
+        .output_buffer_size()
+        .ok_or_else(|| bad("image too large".into()))?;
+    let mut buf = vec![0u8; size];
+    let frame = reader
+        .next_frame(&mut buf)
+        .map_err(|e| bad(format!("corrupt PNG data: {e}")))?;
+    let stride = frame.line_size;
+    let mut data = vec![0.0f32; width * height];
+    for row in 0..height {
+        let line = &buf[row * stride..(row + 1) * stride];
+        let j = height - 1 - row;
+        for i in 0..width {
+            let q = match depth {
+                png::BitDepth::Sixteen => u16::from_be_bytes([line[2 * i], line[2 * i + 1]]) as f64,
+                _ => line[i] as f64,
+            };
+            data[j * width + i] = (offset + q * scale) as f32;
+        }
+    }
+    Ok(DisplacementMap {
+        width,
+        height,
+        texel_um,
+        height_unit_um,
+        edge,
+        data,
+    })
+}
+
+/// Writes `map` as a single-channel f32 EXR with its metadata.
+pub fn write_exr(path: &Path, map: &DisplacementMap) -> Result<()> {
+    use exr::prelude::{
+        AnyChannel, AnyChannels, AttributeValue, Encoding, FlatSamples, Image, Layer,
+        LayerAttributes, SmallVec, Text, WritableImage,
+    };
+    let mut flipped = Vec::with_capacity(map.data.len());
+    for row in (0..map.height).rev() {
+        flipped.extend_from_slice(&map.data[row * map.width..(row + 1) * map.width]);
+    }
+    let channel = AnyChannel::new("Y", FlatSamples::F32(flipped));
+    let mut attributes = LayerAttributes::named("height");
+    for (key, value) in [
+        (TEXEL, map.texel_um),
+        (UNIT, map.height_unit_um),
+        (EDGE, if map.edge == Edge::Wrap { 0.0 } else { 1.0 }),
+    ] {
+        attributes
+            .other
+            .insert(Text::from(key), AttributeValue::F64(value));
+    }
+    let layer = Layer::new(
+        (map.width, map.height),
+        attributes,
+        Encoding::FAST_LOSSLESS,
+        AnyChannels::sort(SmallVec::from_vec(vec![channel])),
+    );
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    Image::from_layer(layer)
+        .write()
+        .to_buffered(&mut bytes)
+        .map_err(|e| Error::io(path, std::io::Error::other(e)))?;
+    write_atomically(path, bytes.get_ref())
+}
+
+/// Reads a single-channel EXR (channel `Y`, or the only channel).
+pub fn read_exr(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap> {
+    use exr::prelude::{read_first_flat_layer_from_file, AttributeValue, Text};
+    let bad = |message: String| Error::Parse {
+        path: path.to_path_buf(),
+        line: 0,
+        message,
+    };
+    if !path.exists() {
+        return Err(Error::io(
+            path,
+            std::io::Error::from(std::io::ErrorKind::NotFound),
+        ));
+    }
+    let image = read_first_flat_layer_from_file(path)
+        .map_err(|e| bad(format!("not a readable EXR: {e}")))?;
+    let layer = &image.layer_data;
+    let channels = &layer.channel_data.list;
+    let channel = channels
+        .iter()
+        .find(|c| c.name.eq("Y"))
+        .or(if channels.len() == 1 {
+            channels.first()
+        } else {
+            None
+        })
+        .ok_or_else(|| {
+            bad(format!(
+                "expected one channel or a channel Y, found {}",
+                channels.len()
+            ))
+        })?;
+    let (width, height) = (layer.size.width(), layer.size.height());
+    let values: Vec<f32> = channel.sample_data.values_as_f32().collect();
+    let number = |key: &str| match layer.attributes.other.get(&Text::from(key)) {
+        Some(&AttributeValue::F64(v)) => Some(v),
+        Some(&AttributeValue::F32(v)) => Some(v as f64),
+        _ => None,
+    };
+    let texel_um = number(TEXEL).unwrap_or(defaults.texel_um);
+    let height_unit_um = number(UNIT).unwrap_or(defaults.height_unit_um);
+    if [texel_um, height_unit_um]
+        .iter()
+        .any(|v| v.is_nan() || *v <= 0.0)
+    {
+        return Err(bad(format!(
+            "texel size ({texel_um} µm) and height unit ({height_unit_um} µm) must be > 0"
+        )));
+    }
+    let edge = match number(EDGE) {
+        None => defaults.edge,
+        Some(0.0) => Edge::Wrap,
+        Some(_) => Edge::Clamp,
+    };
+    if let Some(k) = values.iter().position(|v| !v.is_finite()) {
+        return Err(bad(format!(
+            "height at texel ({}, {}) is not finite",
+            k % width.max(1),
+            height - 1 - k / width.max(1)
+        )));
+    }
+    let mut data = vec![0.0f32; width * height];
+    for row in 0..height {
+        let j = height - 1 - row;
+        data[j * width..(j + 1) * width].copy_from_slice(&values[row * width..(row + 1) * width]);
+    }
+    Ok(DisplacementMap {
+        width,
+        height,
+        texel_um,
+        height_unit_um,
+        edge,
+        data,
+    })
+}
+
+/// Reads a map by extension: `.png` or `.exr`.
+pub fn read_map(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap> {
+    match path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .as_deref()
+    {
+        Some("png") => read_png16(path, defaults),
+        Some("exr") => read_exr(path, defaults),
+        _ => Err(Error::Parse {
+            path: path.to_path_buf(),
+            line: 0,
+            message: "unknown displacement map format (expected .png or .exr)".into(),
+        }),
+    }
+}

@@ -1,0 +1,27 @@
+//! Microstructure on the CPU (DESIGN §5.4, seed 000 §3–5): the reference
+//! implementation the GPU stages are compared with.
+//!
+//! * [`map`]: displacement maps (f32 heights, texel size, edge handling);
+//! * [`procedural`]: the seeded neutral skin generator;
+//! * [`kernel`]: the 1D kernel `(1 − α)δ + αG(σ)` and the kernel model
+//!   (stretch ratio → α, σ; the forehead model built in);
+//! * [`convolve`]: the spatially varying two-pass convolution along the
+//!   strain axes, and its constant-kernel form;
+//! * [`normals`]: normal maps, 64 × 64 normal histograms, slope variance.
+//!
+//! * [`io`]: 16-bit PNG and f32 EXR files.
+//!
+//! File I/O lives in [`io`] only; the rest is numeric.
+
+pub mod convolve;
+pub mod io;
+pub mod kernel;
+pub mod map;
+pub mod normals;
+pub mod procedural;
+
+pub use convolve::{convolve, KernelField, PassParams};
+pub use kernel::{KernelModel, KernelParams, PiecewiseLinear};
+pub use map::{DisplacementMap, Edge};
+pub use normals::NormalHistogram;
+pub use procedural::SkinParams;

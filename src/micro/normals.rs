@@ -1,0 +1,158 @@
+//! Normals, normal histograms and slope statistics of a displacement map
+//! (DESIGN §5.4).
+//!
+//! Slopes are central differences in micrometres:
+//! `∂h/∂x ≈ (h(i+1, j) − h(i−1, j))·unit / (2·texel)` (edge handling of the
+//! map at the border), the normal is `normalize(−∂h/∂x, −∂h/∂y, 1)` in the
+//! tangent frame (x along u, y along v, z out of the skin). The histogram
+//! bins the tangent-plane components `(n_x, n_y)` of every texel's normal
+//! into `bins × bins` cells over `[−range, range]²` (values beyond fall into
+//! the edge cells) and is normalised to sum 1.
+
+use rayon::prelude::*;
+
+use super::map::DisplacementMap;
+
+/// Default histogram size (64 × 64 buckets, seed 000).
+pub const HISTOGRAM_BINS: usize = 64;
+/// Default histogram half range of the tangent-plane normal components:
+/// ±0.5, a slope of about 27°, beyond which skin microstructure rarely goes.
+pub const HISTOGRAM_RANGE: f64 = 0.5;
+
+/// Slope `(∂h/∂x, ∂h/∂y)` at texel `(i, j)`, dimensionless (µm per µm).
+/// `stretch` scales the texel spacing along (x, y): slopes of the map as
+/// it would look stretched by those ratios.
+#[inline]
+pub fn slope(map: &DisplacementMap, i: usize, j: usize, stretch: [f64; 2]) -> [f64; 2] {
+    let (i, j) = (i as isize, j as isize);
+    let k = map.height_unit_um / (2.0 * map.texel_um);
+    let dx = (map.texel(i + 1, j) - map.texel(i - 1, j)) as f64 * k / stretch[0];
+    let dy = (map.texel(i, j + 1) - map.texel(i, j - 1)) as f64 * k / stretch[1];
+    [dx, dy]
+}
+
+/// Unit normal from a slope.
+#[inline]
+pub fn normal_of(s: [f64; 2]) -> [f64; 3] {
+    let n = (s[0] * s[0] + s[1] * s[1] + 1.0).sqrt();
+    [-s[0] / n, -s[1] / n, 1.0 / n]
+}
+
+/// The normal map (row-major, like the map).
+pub fn normal_map(map: &DisplacementMap) -> Vec<[f32; 3]> {
+    (0..map.width * map.height)
+        .into_par_iter()
+        .map(|idx| {
+            let n = normal_of(slope(map, idx % map.width, idx / map.width, [1.0, 1.0]));
+            n.map(|c| c as f32)
+        })
+        .collect()
+}
+
+/// A normalised 2D histogram of normal tangent components.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NormalHistogram {
+    /// Cells per side.
+    pub bins: usize,
+    /// Half range of `n_x`, `n_y`.
+    pub range: f64,
+    /// Cell weights, row-major by `n_y` then `n_x`; they sum to 1.
+    pub cells: Vec<f64>,
+}
+
+impl NormalHistogram {
+    /// The histogram of `map`'s normals with the map stretched by `stretch`
+    /// along (x, y) (`[1, 1]` for the map as it is).
+    pub fn of(
+        map: &DisplacementMap,
+        bins: usize,
+        range: f64,
+        stretch: [f64; 2],
+    ) -> NormalHistogram {
+        let bins = bins.max(1);
+        let width = map.width.max(1);
+        // Per-row partial histograms added in row order: deterministic.
+        let rows: Vec<Vec<u32>> = (0..map.height)
+            .into_par_iter()
+            .map(|j| {
+                let mut counts = vec![0u32; bins * bins];
+                for i in 0..width {
+                    let n = normal_of(slope(map, i, j, stretch));
+                    let cell = |c: f64| {
+                        let x = ((c + range) / (2.0 * range) * bins as f64).floor();
+                        x.clamp(0.0, bins as f64 - 1.0) as usize
+                    };
+                    counts[cell(n[1]) * bins + cell(n[0])] += 1;
+                }
+                counts
+            })
+            .collect();
+        let mut cells = vec![0.0; bins * bins];
+        for row in rows {
+            for (c, n) in cells.iter_mut().zip(row) {
+                *c += n as f64;
+            }
+        }
+        let total: f64 = cells.iter().sum();
+        if total > 0.0 {
+            cells.iter_mut().for_each(|c| *c /= total);
+        }
+        NormalHistogram { bins, range, cells }
+    }
+
+    /// Total variation `Σ_b |H_b − Ĥ_b|` to another histogram of the same
+    /// size (seed 000 eq. 7); in [0, 2].
+    pub fn distance(&self, other: &NormalHistogram) -> f64 {
+        self.cells
+            .iter()
+            .zip(&other.cells)
+            .map(|(a, b)| (a - b).abs())
+            .sum()
+    }
+}
+
+/// Variance of the slope along the unit axis `axis` (texel units) over the
+/// whole map (µm²/µm², dimensionless).
+pub fn slope_variance(map: &DisplacementMap, axis: [f64; 2]) -> f64 {
+    let len = axis[0].hypot(axis[1]);
+    let a = [axis[0] / len, axis[1] / len];
+    let rows: Vec<(f64, f64)> = (0..map.height)
+        .into_par_iter()
+        .map(|j| {
+            (0..map.width).fold((0.0, 0.0), |(s, s2), i| {
+                let g = slope(map, i, j, [1.0, 1.0]);
+                let d = g[0] * a[0] + g[1] * a[1];
+                (s + d, s2 + d * d)
+            })
+        })
+        .collect();
+    let (s, s2) = rows
+        .iter()
+        .fold((0.0, 0.0), |acc, r| (acc.0 + r.0, acc.1 + r.1));
+    let n = (map.width * map.height) as f64;
+    s2 / n - (s / n) * (s / n)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::micro::map::Edge;
+
+    #[test]
+    fn a_tilted_plane_has_one_normal() {
+        // h = 0.2 µm per µm along x: slope 0.2 everywhere (wrapping would
+        // break the plane, so clamp and look inside).
+        let map = DisplacementMap::from_fn(16, 8, 2.0, Edge::Clamp, |i, _| 0.4 * i as f32);
+        let s = slope(&map, 5, 3, [1.0, 1.0]);
+        assert!((s[0] - 0.2).abs() < 1e-6 && s[1] == 0.0);
+        let n = normal_of(s);
+        assert!((n[0] + 0.2 / 1.04f64.sqrt()).abs() < 1e-6);
+        // Stretching by 2 along x halves the slope.
+        assert!((slope(&map, 5, 3, [2.0, 1.0])[0] - 0.1).abs() < 1e-6);
+        let h = NormalHistogram::of(&map, 64, 0.5, [1.0, 1.0]);
+        assert!((h.cells.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        // Interior texels: n_x = −0.196 → cell ⌊(−0.196 + 0.5)/1·64⌋ = 19; n_y = 0 → 32.
+        assert!(h.cells[32 * 64 + 19] > 0.7, "{}", h.cells[32 * 64 + 19]);
+        assert!(slope_variance(&map, [0.0, 1.0]) < 1e-20);
+    }
+}

@@ -1,0 +1,261 @@
+//! Microstructure on the CPU: map files, the procedural generator, and the
+//! reference convolution's invariants.
+
+mod common;
+
+use nalgebra::{Matrix2, Matrix3};
+use skinpatch::mesh::{io, Vec3};
+use skinpatch::micro::convolve::{convolve, KernelField};
+use skinpatch::micro::io::{read_exr, read_map, read_png16, write_exr, write_png16, MapDefaults};
+use skinpatch::micro::normals::{slope_variance, NormalHistogram};
+use skinpatch::micro::procedural::{generate, SkinParams};
+use skinpatch::micro::{DisplacementMap, Edge, KernelModel, KernelParams};
+use skinpatch::strain::{StrainRaster, SurfaceField};
+
+const DEFAULTS: MapDefaults = MapDefaults {
+    texel_um: 5.0,
+    height_unit_um: 1.0,
+    edge: Edge::Clamp,
+};
+
+/// A small skin-like map: 256² texels of 5 µm (1.28 mm).
+fn skin(seed: u64) -> DisplacementMap {
+    generate(&SkinParams {
+        size_px: 256,
+        extent_mm: 1.28,
+        seed,
+        groove_spacing_um: 150.0,
+        ..SkinParams::default()
+    })
+    .unwrap()
+}
+
+fn params(alpha: f64, sigma_um: f64) -> KernelParams {
+    KernelParams { alpha, sigma_um }
+}
+
+/// Largest |a − b| relative to a's height range.
+fn relative_difference(a: &DisplacementMap, b: &DisplacementMap) -> f64 {
+    let (lo, hi) = a.range();
+    let worst = a
+        .data
+        .iter()
+        .zip(&b.data)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0f32, f32::max);
+    worst as f64 / (hi - lo) as f64
+}
+
+#[test]
+fn png16_round_trip_is_exact_to_the_quantisation_step() {
+    let map = skin(3);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("skin.png");
+    write_png16(&path, &map).unwrap();
+    let back = read_png16(&path, &DEFAULTS).unwrap();
+    assert_eq!(
+        (back.width, back.height, back.edge),
+        (map.width, map.height, Edge::Wrap)
+    );
+    assert_eq!(back.texel_um, map.texel_um);
+    let (lo, hi) = map.range();
+    let step = (hi - lo) as f64 / 65535.0;
+    for (a, b) in map.data.iter().zip(&back.data) {
+        assert!(
+            ((a - b).abs() as f64) <= 0.5 * step + 1e-6 * (hi - lo) as f64,
+            "{a} vs {b}"
+        );
+    }
+    // Writing the read-back map again gives the same quantised values.
+    let again = dir.path().join("again.png");
+    write_png16(&again, &back).unwrap();
+    let third = read_png16(&again, &DEFAULTS).unwrap();
+    assert!(relative_difference(&back, &third) < 1e-6);
+}
+
+#[test]
+fn exr_round_trip_is_exact() {
+    let mut map = skin(4);
+    map.edge = Edge::Clamp;
+    map.height_unit_um = 0.5;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("skin.exr");
+    write_exr(&path, &map).unwrap();
+    let back = read_map(&path, &DEFAULTS).unwrap();
+    assert_eq!(back, map);
+}
+
+#[test]
+fn bad_map_files_are_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let garbage = dir.path().join("garbage.png");
+    std::fs::write(&garbage, b"not a png at all").unwrap();
+    let err = read_png16(&garbage, &DEFAULTS).unwrap_err().to_string();
+    assert!(err.contains("garbage.png") && err.contains("PNG"), "{err}");
+    let exr = dir.path().join("garbage.exr");
+    std::fs::write(&exr, b"\x76\x2f\x31\x01 broken").unwrap();
+    let err = read_exr(&exr, &DEFAULTS).unwrap_err().to_string();
+    assert!(err.contains("garbage.exr"), "{err}");
+    let rgb = dir.path().join("colour.png");
+    image::RgbImage::new(4, 4).save(&rgb).unwrap();
+    let err = read_png16(&rgb, &DEFAULTS).unwrap_err().to_string();
+    assert!(err.contains("greyscale"), "{err}");
+    let err = read_map(&dir.path().join("map.tif"), &DEFAULTS)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains(".png or .exr"), "{err}");
+    let err = read_map(&dir.path().join("missing.exr"), &DEFAULTS)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("missing.exr"), "{err}");
+    // An 8-bit greyscale PNG from elsewhere reads with the caller's defaults.
+    let grey = dir.path().join("grey.png");
+    image::GrayImage::from_fn(3, 2, |x, _| image::Luma([(x * 100) as u8]))
+        .save(&grey)
+        .unwrap();
+    let m = read_png16(&grey, &DEFAULTS).unwrap();
+    assert_eq!((m.width, m.height, m.texel_um), (3, 2, 5.0));
+    assert!((m.data[2] - 200.0 / 255.0).abs() < 1e-6);
+}
+
+#[test]
+fn generator_is_deterministic_skin_like_and_tiles() {
+    let a = skin(11);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let b = pool.install(|| skin(11));
+    assert!(a
+        .data
+        .iter()
+        .zip(&b.data)
+        .all(|(x, y)| x.to_bits() == y.to_bits()));
+    assert_ne!(a.data, skin(12).data);
+    // Grooves reach well below the plateaus; the fine noise alone would not.
+    let (lo, hi) = a.range();
+    assert!(lo < -20.0 && hi > -5.0, "range {lo} … {hi}");
+    // Tiling: the change across the wrap seam (column 0 against the last
+    // column) is no larger than between any two neighbouring columns inside.
+    let column_jump = |i: isize| -> f32 {
+        (0..a.height as isize)
+            .map(|j| (a.texel(i, j) - a.texel(i - 1, j)).abs())
+            .sum()
+    };
+    let inside = (1..a.width as isize)
+        .map(column_jump)
+        .fold(0.0f32, f32::max);
+    assert!(
+        column_jump(0) <= inside,
+        "seam {} vs at most {inside} inside",
+        column_jump(0)
+    );
+    assert!(SkinParams {
+        groove_width_um: -1.0,
+        ..SkinParams::default()
+    }
+    .validate("p")
+    .unwrap_err()
+    .to_string()
+    .contains("p.groove_width_um"));
+}
+
+#[test]
+fn alpha_zero_is_the_identity_and_constants_stay_constant() {
+    let map = skin(5);
+    let field = KernelField::constant(&map, [0.6, 0.8], params(0.0, 20.0), params(0.0, 7.0));
+    assert_eq!(convolve(&map, &field).data, map.data);
+    let flat = DisplacementMap::from_fn(64, 48, 5.0, Edge::Clamp, |_, _| 3.25);
+    let field = KernelField::constant(&flat, [1.0, 0.3], params(-1.5, 15.0), params(0.9, 30.0));
+    let out = convolve(&flat, &field);
+    assert!(
+        out.data.iter().all(|h| (h - 3.25).abs() < 1e-5),
+        "kernels sum to 1"
+    );
+}
+
+#[test]
+fn a_kernel_across_a_one_dimensional_map_changes_nothing() {
+    // Heights vary along u only; the t kernel runs along v.
+    let map = DisplacementMap::from_fn(96, 64, 5.0, Edge::Wrap, |i, _| {
+        (i as f32 * 0.37).sin() * 10.0 + (i as f32 * 1.3).cos()
+    });
+    let field = KernelField::constant(&map, [1.0, 0.0], params(0.0, 10.0), params(0.8, 25.0));
+    let out = convolve(&map, &field);
+    assert!(relative_difference(&map, &out) < 1e-6);
+    let field = KernelField::constant(&map, [1.0, 0.0], params(0.0, 10.0), params(-2.0, 25.0));
+    assert!(relative_difference(&map, &convolve(&map, &field)) < 1e-6);
+}
+
+#[test]
+fn blur_and_sharpen_change_slope_variance_along_their_axis() {
+    let map = skin(6);
+    let ratio = |m: &DisplacementMap| slope_variance(m, [1.0, 0.0]) / slope_variance(m, [0.0, 1.0]);
+    let before = ratio(&map);
+    let blur = KernelField::constant(&map, [1.0, 0.0], params(0.8, 15.0), params(0.0, 1.0));
+    let blurred = ratio(&convolve(&map, &blur));
+    let sharpen = KernelField::constant(&map, [1.0, 0.0], params(-1.5, 10.0), params(0.0, 1.0));
+    let sharpened = ratio(&convolve(&map, &sharpen));
+    assert!(blurred < 0.8 * before, "blur: {before} → {blurred}");
+    assert!(sharpened > 1.2 * before, "sharpen: {before} → {sharpened}");
+    // The histogram of normals narrows along u when blurred along u.
+    let h0 = NormalHistogram::of(&map, 64, 0.5, [1.0, 1.0]);
+    let h1 = NormalHistogram::of(&convolve(&map, &blur), 64, 0.5, [1.0, 1.0]);
+    assert!(h0.distance(&h1) > 0.05);
+}
+
+#[test]
+fn uniform_stretch_applies_the_model_everywhere() {
+    // patch_3k stretched 1.2 along x and compressed 0.85 along y: a uniform
+    // surface field; every texel gets α(r), σ(r) of the forehead model.
+    let mesh = io::read_tetgen(&common::root().join("meshes/patch_3k")).unwrap();
+    let a = Matrix3::new(1.2, 0.0, 0.0, 0.0, 0.85, 0.0, 0.0, 0.0, 1.0);
+    let x: Vec<Vec3> = mesh.positions.iter().map(|p| a * p).collect();
+    let field = SurfaceField::new(&mesh.top, &mesh.positions, &x);
+    // The map spans the 10 mm patch: 200 texels of 50 µm.
+    let map = DisplacementMap::from_fn(200, 200, 50.0, Edge::Wrap, |i, j| {
+        ((i * 7 + j * 13) % 17) as f32
+    });
+    let raster = StrainRaster::new(&field, map.width, map.height);
+    assert!(raster
+        .t
+        .iter()
+        .all(|t| (t - Matrix2::new(1.2, 0.0, 0.0, 0.85)).norm() < 1e-9));
+    let model = KernelModel::forehead();
+    let varying = KernelField::from_strain(&raster, &model, &map);
+    let constant = KernelField::constant(&map, [1.0, 0.0], model.params(1.2), model.params(0.85));
+    for (v, c) in varying
+        .s
+        .iter()
+        .chain(&varying.t)
+        .zip(constant.s.iter().chain(&constant.t))
+    {
+        assert!(
+            (v.alpha - c.alpha).abs() < 1e-6 && (v.sigma - c.sigma).abs() < 1e-4 * c.sigma,
+            "{v:?} vs {c:?}"
+        );
+        assert!(
+            (v.axis[0].abs() - c.axis[0].abs()).abs() < 1e-6
+                && (v.axis[1].abs() - c.axis[1].abs()).abs() < 1e-6
+        );
+    }
+    assert!(relative_difference(&convolve(&map, &constant), &convolve(&map, &varying)) < 1e-5);
+}
+
+#[test]
+fn rotating_map_and_axes_by_ninety_degrees_commutes_with_the_convolution() {
+    let map = skin(8);
+    let (c, s) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
+    let field = KernelField::constant(&map, [c, s], params(0.7, 20.0), params(-1.2, 12.0));
+    let turned = map.rotated_90();
+    // A direction (x, y) turns into (−y, x).
+    let turned_field =
+        KernelField::constant(&turned, [-s, c], params(0.7, 20.0), params(-1.2, 12.0));
+    let a = convolve(&map, &field).rotated_90();
+    let b = convolve(&turned, &turned_field);
+    assert!(
+        relative_difference(&a, &b) < 1e-4,
+        "{}",
+        relative_difference(&a, &b)
+    );
+}
