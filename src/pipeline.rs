@@ -14,7 +14,7 @@ use crate::export::{self, FrameMetrics, MetricsWriter};
 use crate::fem::contact::{solve_with_contact, ContactState};
 use crate::fem::integrate::Simulation;
 use crate::mesh::{io, QualityReport, Vec3};
-use crate::scenario::Setup;
+use crate::scenario::{MicroSetup, Setup};
 use crate::strain::{ElementStrains, StrainRaster, SurfaceField};
 
 /// What a run produced.
@@ -52,6 +52,9 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Res
         let folder = dir.join("strain");
         std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
     }
+    if let Some(micro) = &setup.micro {
+        written.extend(write_neutral(dir, setup, micro)?);
+    }
     let mesh = &setup.mesh;
     let result = simulate(setup, |m, sim| {
         let mut m = *m;
@@ -70,6 +73,9 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Res
             let raster = StrainRaster::new(&field, images.px, images.px);
             export::strain_images::StrainImages::new(&raster, images.range).write(dir, m.frame)?;
         }
+        if let Some(micro) = &setup.micro {
+            deform_microstructure(dir, m.frame, micro, &field)?;
+        }
         frames.push(m);
         on_frame(&m, setup.simulation.frames + 1);
         Ok(())
@@ -83,6 +89,69 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Res
         quality: QualityReport::of(&setup.mesh),
         frames,
     })
+}
+
+/// Writes the neutral map (and its normals) under `micro/`; warns when the
+/// map's texel size disagrees with the patch it is stretched over.
+fn write_neutral(dir: &std::path::Path, setup: &Setup, micro: &MicroSetup) -> Result<Vec<PathBuf>> {
+    let folder = dir.join("micro");
+    std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
+    let map = &micro.neutral;
+    let (lo, hi) = setup.mesh.bounds();
+    let patch_texel_um = (hi.x - lo.x) * 1000.0 / map.width as f64;
+    if (map.texel_um / patch_texel_um - 1.0).abs() > 0.01 {
+        log::warn!(
+            "the microstructure map has {:.3} µm texels but spans the {:.1} mm patch at {:.3} µm per texel; \
+             kernel widths follow the patch",
+            map.texel_um,
+            hi.x - lo.x,
+            patch_texel_um
+        );
+    }
+    write_micro_frame(&folder, "neutral", micro, map)
+}
+
+/// The frame's deformed microstructure: the strain raster at the map's size,
+/// per-texel kernels from the model, the two-pass convolution; written as
+/// `micro/height_NNNN.{png,exr}` and `micro/normal_NNNN.png`.
+fn deform_microstructure(
+    dir: &std::path::Path,
+    frame: usize,
+    micro: &MicroSetup,
+    field: &SurfaceField,
+) -> Result<Vec<PathBuf>> {
+    let map = &micro.neutral;
+    let raster = StrainRaster::new(field, map.width, map.height);
+    let kernels = crate::micro::KernelField::from_strain(&raster, &micro.model, map);
+    let deformed = crate::micro::convolve(map, &kernels);
+    write_micro_frame(&dir.join("micro"), &format!("{frame:04}"), micro, &deformed)
+}
+
+fn write_micro_frame(
+    folder: &std::path::Path,
+    tag: &str,
+    micro: &MicroSetup,
+    map: &crate::micro::DisplacementMap,
+) -> Result<Vec<PathBuf>> {
+    use crate::micro::io;
+    let mut written = Vec::new();
+    if micro.png16 {
+        let path = folder.join(format!("height_{tag}.png"));
+        io::write_png16(&path, map)?;
+        written.push(path);
+    }
+    if micro.exr {
+        let path = folder.join(format!("height_{tag}.exr"));
+        io::write_exr(&path, map)?;
+        written.push(path);
+    }
+    if micro.normal_maps {
+        let path = folder.join(format!("normal_{tag}.png"));
+        let normals = crate::micro::normals::normal_map(map);
+        io::write_normal_png16(&path, &normals, map.width, map.height)?;
+        written.push(path);
+    }
+    Ok(written)
 }
 
 /// Figures of one benchmark run (see [`bench_fem`]).

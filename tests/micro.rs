@@ -6,14 +6,16 @@ mod common;
 use nalgebra::{Matrix2, Matrix3};
 use skinpatch::mesh::{io, Vec3};
 use skinpatch::micro::convolve::{convolve, KernelField};
-use skinpatch::micro::io::{read_exr, read_map, read_png16, write_exr, write_png16, MapDefaults};
+use skinpatch::micro::io::{
+    read_exr, read_map, read_png16, write_exr, write_png16, MapDefaults, TexelSize,
+};
 use skinpatch::micro::normals::{slope_variance, NormalHistogram};
 use skinpatch::micro::procedural::{generate, SkinParams};
 use skinpatch::micro::{DisplacementMap, Edge, KernelModel, KernelParams};
 use skinpatch::strain::{StrainRaster, SurfaceField};
 
 const DEFAULTS: MapDefaults = MapDefaults {
-    texel_um: 5.0,
+    texel: TexelSize::Um(5.0),
     height_unit_um: 1.0,
     edge: Edge::Clamp,
 };

@@ -21,11 +21,29 @@ use super::map::{DisplacementMap, Edge};
 use crate::error::{Error, Result};
 use crate::mesh::io::write_atomically;
 
+/// Texel size of a file without metadata.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TexelSize {
+    /// This many micrometres.
+    Um(f64),
+    /// The map spans this many millimetres along u.
+    Extent(f64),
+}
+
+impl TexelSize {
+    fn of(self, width: usize) -> f64 {
+        match self {
+            TexelSize::Um(t) => t,
+            TexelSize::Extent(mm) => mm * 1000.0 / width.max(1) as f64,
+        }
+    }
+}
+
 /// What to assume for a file that does not carry skinpatch metadata.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MapDefaults {
-    /// Texel side (µm).
-    pub texel_um: f64,
+    /// Texel side.
+    pub texel: TexelSize,
     /// Micrometres per stored unit (PNG: per full 0 … 65535 range).
     pub height_unit_um: f64,
     /// Edge handling.
@@ -131,7 +149,7 @@ pub fn read_png16(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap
     };
     let offset = number(OFFSET)?.unwrap_or(0.0);
     let scale = number(SCALE)?.unwrap_or(1.0 / full);
-    let texel_um = number(TEXEL)?.unwrap_or(defaults.texel_um);
+    let texel_um = number(TEXEL)?.unwrap_or_else(|| defaults.texel.of(width));
     let height_unit_um = number(UNIT)?.unwrap_or(defaults.height_unit_um);
     if [texel_um, height_unit_um, scale]
         .iter()
@@ -255,7 +273,7 @@ pub fn read_exr(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap> 
         Some(&AttributeValue::F32(v)) => Some(v as f64),
         _ => None,
     };
-    let texel_um = number(TEXEL).unwrap_or(defaults.texel_um);
+    let texel_um = number(TEXEL).unwrap_or_else(|| defaults.texel.of(width));
     let height_unit_um = number(UNIT).unwrap_or(defaults.height_unit_um);
     if [texel_um, height_unit_um]
         .iter()
@@ -308,4 +326,35 @@ pub fn read_map(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap> 
             message: "unknown displacement map format (expected .png or .exr)".into(),
         }),
     }
+}
+
+/// Writes a normal map as a 16-bit RGB PNG, each component `n` stored as
+/// `round((n + 1)/2 · 65535)` (the usual tangent-space encoding; x along u,
+/// y along v, z out of the skin), rows with v up like the height maps.
+pub fn write_normal_png16(
+    path: &Path,
+    normals: &[[f32; 3]],
+    width: usize,
+    height: usize,
+) -> Result<()> {
+    let mut bytes = Vec::with_capacity(6 * normals.len());
+    for row in (0..height).rev() {
+        for n in &normals[row * width..(row + 1) * width] {
+            for c in n {
+                let q = ((c.clamp(-1.0, 1.0) + 1.0) * 0.5 * 65535.0).round() as u16;
+                bytes.extend_from_slice(&q.to_be_bytes());
+            }
+        }
+    }
+    let mut out = Vec::new();
+    let failed = |e: png::EncodingError| Error::io(path, std::io::Error::other(e));
+    {
+        let mut encoder = png::Encoder::new(&mut out, width as u32, height as u32);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Sixteen);
+        let mut writer = encoder.write_header().map_err(failed)?;
+        writer.write_image_data(&bytes).map_err(failed)?;
+        writer.finish().map_err(failed)?;
+    }
+    write_atomically(path, &out)
 }

@@ -22,9 +22,11 @@ use crate::mesh::generate::PatchSpec;
 use crate::mesh::{io, TetMesh};
 
 mod mesh;
+mod micro;
 mod simulation;
 
 pub use mesh::{MeshSection, RefineSection, ZoneKind};
+pub use micro::{KernelSection, MicroSetup, MicrostructureSection, ProceduralSection};
 pub use simulation::{
     BoundarySection, CaliperSection, MaterialSection, PrescribedSection, ProbeSection,
     SimulationSetup, SolverSection, TimeSection,
@@ -59,6 +61,8 @@ pub struct Scenario {
     /// Where and what to write.
     #[serde(default)]
     pub output: OutputSection,
+    /// The microstructure driven by the surface strain (none: not computed).
+    pub microstructure: Option<MicrostructureSection>,
 }
 
 /// `[output]`: where results go.
@@ -117,6 +121,8 @@ pub struct Setup {
     pub write_frames: bool,
     /// Strain maps per frame, if asked for.
     pub strain_images: Option<StrainImageSettings>,
+    /// The microstructure stage, if the scenario has one.
+    pub micro: Option<MicroSetup>,
     /// The simulation.
     pub simulation: SimulationSetup,
 }
@@ -308,6 +314,13 @@ impl Setup {
             MeshSource::File(file) => io::read_mesh(file)?,
         };
         let simulation = scenario.simulation(&mesh)?;
+        let micro = match &scenario.microstructure {
+            Some(m) => {
+                let (lo, hi) = mesh.bounds();
+                Some(m.setup(base, hi.x - lo.x)?)
+            }
+            None => None,
+        };
         Ok(Setup {
             name,
             mesh,
@@ -317,6 +330,7 @@ impl Setup {
             write_mesh_tetgen: scenario.output.mesh_tetgen,
             write_frames: scenario.output.frames_vtu,
             strain_images,
+            micro,
             simulation,
         })
     }

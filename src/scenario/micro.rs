@@ -1,0 +1,240 @@
+//! `[microstructure]`: the neutral displacement map, the kernel model and
+//! what to write per frame.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::micro::io::{read_map, MapDefaults, TexelSize};
+use crate::micro::procedural::{generate, SkinParams};
+use crate::micro::{DisplacementMap, Edge, KernelModel, PiecewiseLinear};
+
+/// `[microstructure]`.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct MicrostructureSection {
+    /// Neutral map file (`.png` 16-bit greyscale or `.exr`), relative to the
+    /// scenario file. Default: none, generate one (`[microstructure.procedural]`).
+    pub map: Option<PathBuf>,
+    /// Texel size (µm) of a map file without skinpatch metadata. Default:
+    /// the patch width divided by the map width.
+    pub texel_um: Option<f64>,
+    /// Micrometres per height unit of a map file without metadata. Default 1.
+    pub height_unit_um: f64,
+    /// Edge handling of a map file without metadata: `wrap` or `clamp`. Default `wrap`.
+    pub edge: String,
+    /// The procedural generator's parameters (used when `map` is not set).
+    pub procedural: ProceduralSection,
+    /// Custom kernel model tables. Default: the forehead model (seed 000 eq. 8–9).
+    pub kernel: Option<KernelSection>,
+    /// Per-frame map formats: any of `png16`, `exr`. Default `["png16"]`.
+    pub formats: Vec<String>,
+    /// Also write the normal map of each deformed map. Default true.
+    pub normal_maps: bool,
+}
+
+impl Default for MicrostructureSection {
+    fn default() -> Self {
+        MicrostructureSection {
+            map: None,
+            texel_um: None,
+            height_unit_um: 1.0,
+            edge: "wrap".into(),
+            procedural: ProceduralSection::default(),
+            kernel: None,
+            formats: vec!["png16".into()],
+            normal_maps: true,
+        }
+    }
+}
+
+/// `[microstructure.procedural]`: every [`SkinParams`] field, optional.
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct ProceduralSection {
+    /// Texels per side. Default 1024 here (the generator's own default is 2048).
+    pub size_px: Option<usize>,
+    /// Random seed. Default 1.
+    pub seed: Option<u64>,
+    /// Mean primary groove spacing (µm). Default 250.
+    pub groove_spacing_um: Option<f64>,
+    /// Mean primary groove depth (µm). Default 30.
+    pub groove_depth_um: Option<f64>,
+    /// Primary groove width (µm). Default 18.
+    pub groove_width_um: Option<f64>,
+    /// Relative spread of groove depths, [0, 1]. Default 0.5.
+    pub depth_spread: Option<f64>,
+    /// 1: grooves in every direction; 0: mostly along u. Default 0.6.
+    pub orientation_spread: Option<f64>,
+    /// Pores per mm². Default 12.
+    pub pore_density_per_mm2: Option<f64>,
+    /// Pore radius (µm). Default 25.
+    pub pore_radius_um: Option<f64>,
+    /// Pore depth (µm). Default 20.
+    pub pore_depth_um: Option<f64>,
+    /// Fine noise amplitude (µm). Default 1.5.
+    pub noise_amplitude_um: Option<f64>,
+    /// Fine noise feature size (µm). Default 40.
+    pub noise_scale_um: Option<f64>,
+}
+
+/// `[microstructure.kernel]`: piecewise-linear tables `[[r, value], …]`.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct KernelSection {
+    /// α(r), through (1, 0), values in [−2, 1].
+    pub alpha: Vec<[f64; 2]>,
+    /// σ(r) in µm for r < 1.
+    pub sigma_compression_um: Vec<[f64; 2]>,
+    /// σ(r) in µm for r ≥ 1.
+    pub sigma_stretch_um: Vec<[f64; 2]>,
+}
+
+/// Validated microstructure settings.
+#[derive(Clone, Debug)]
+pub struct MicroSetup {
+    /// The neutral map.
+    pub neutral: DisplacementMap,
+    /// Stretch ratio → kernel parameters.
+    pub model: KernelModel,
+    /// Write 16-bit PNG maps.
+    pub png16: bool,
+    /// Write EXR maps.
+    pub exr: bool,
+    /// Write normal maps.
+    pub normal_maps: bool,
+}
+
+fn table(points: &[[f64; 2]]) -> PiecewiseLinear {
+    PiecewiseLinear {
+        points: points.iter().map(|p| (p[0], p[1])).collect(),
+    }
+}
+
+impl MicrostructureSection {
+    /// Builds the neutral map and kernel model. `base` resolves `map`;
+    /// `patch_width_mm` is the default extent of a generated map and the
+    /// default texel size of a loaded one.
+    pub fn setup(&self, base: &Path, patch_width_mm: f64) -> Result<MicroSetup> {
+        let edge = match self.edge.as_str() {
+            "wrap" => Edge::Wrap,
+            "clamp" => Edge::Clamp,
+            other => {
+                return Err(Error::parameter(
+                    "microstructure.edge",
+                    format!("must be \"wrap\" or \"clamp\", got \"{other}\""),
+                ))
+            }
+        };
+        let (mut png16, mut exr) = (false, false);
+        for (k, f) in self.formats.iter().enumerate() {
+            match f.as_str() {
+                "png16" => png16 = true,
+                "exr" => exr = true,
+                other => {
+                    return Err(Error::parameter(
+                        format!("microstructure.formats[{k}]"),
+                        format!("must be \"png16\" or \"exr\", got \"{other}\""),
+                    ))
+                }
+            }
+        }
+        let unit = self.height_unit_um;
+        if !(unit.is_finite() && unit > 0.0) {
+            return Err(Error::parameter(
+                "microstructure.height_unit_um",
+                format!("must be finite and > 0, got {unit}"),
+            ));
+        }
+        let model = match &self.kernel {
+            None => KernelModel::forehead(),
+            Some(k) => KernelModel {
+                alpha: table(&k.alpha),
+                sigma_compression_um: table(&k.sigma_compression_um),
+                sigma_stretch_um: table(&k.sigma_stretch_um),
+            },
+        };
+        model.validate("microstructure.kernel")?;
+        let neutral = match &self.map {
+            Some(file) => {
+                if let Some(k) = self.procedural_keys_set().first() {
+                    return Err(Error::parameter(
+                        format!("microstructure.procedural.{k}"),
+                        "has no effect when microstructure.map is set; remove one of them",
+                    ));
+                }
+                let texel = match self.texel_um {
+                    Some(t) if t.is_finite() && t > 0.0 => TexelSize::Um(t),
+                    Some(t) => {
+                        return Err(Error::parameter(
+                            "microstructure.texel_um",
+                            format!("must be finite and > 0, got {t}"),
+                        ))
+                    }
+                    None => TexelSize::Extent(patch_width_mm),
+                };
+                let defaults = MapDefaults {
+                    texel,
+                    height_unit_um: unit,
+                    edge,
+                };
+                read_map(&base.join(file), &defaults)?
+            }
+            None => generate(&self.procedural.params(patch_width_mm))?,
+        };
+        Ok(MicroSetup {
+            neutral,
+            model,
+            png16,
+            exr,
+            normal_maps: self.normal_maps,
+        })
+    }
+
+    fn procedural_keys_set(&self) -> Vec<&'static str> {
+        let p = &self.procedural;
+        let mut keys = Vec::new();
+        macro_rules! check {
+            ($($f:ident),*) => { $( if p.$f.is_some() { keys.push(stringify!($f)); } )* };
+        }
+        check!(
+            size_px,
+            seed,
+            groove_spacing_um,
+            groove_depth_um,
+            groove_width_um,
+            depth_spread,
+            orientation_spread,
+            pore_density_per_mm2,
+            pore_radius_um,
+            pore_depth_um,
+            noise_amplitude_um,
+            noise_scale_um
+        );
+        keys
+    }
+}
+
+impl ProceduralSection {
+    /// Generator parameters: these values over the defaults, the map spanning
+    /// the patch width.
+    pub fn params(&self, patch_width_mm: f64) -> SkinParams {
+        let d = SkinParams::default();
+        SkinParams {
+            size_px: self.size_px.unwrap_or(1024),
+            extent_mm: patch_width_mm,
+            seed: self.seed.unwrap_or(d.seed),
+            groove_spacing_um: self.groove_spacing_um.unwrap_or(d.groove_spacing_um),
+            groove_depth_um: self.groove_depth_um.unwrap_or(d.groove_depth_um),
+            groove_width_um: self.groove_width_um.unwrap_or(d.groove_width_um),
+            depth_spread: self.depth_spread.unwrap_or(d.depth_spread),
+            orientation_spread: self.orientation_spread.unwrap_or(d.orientation_spread),
+            pore_density_per_mm2: self.pore_density_per_mm2.unwrap_or(d.pore_density_per_mm2),
+            pore_radius_um: self.pore_radius_um.unwrap_or(d.pore_radius_um),
+            pore_depth_um: self.pore_depth_um.unwrap_or(d.pore_depth_um),
+            noise_amplitude_um: self.noise_amplitude_um.unwrap_or(d.noise_amplitude_um),
+            noise_scale_um: self.noise_scale_um.unwrap_or(d.noise_scale_um),
+        }
+    }
+}
