@@ -73,7 +73,11 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Res
             let raster = StrainRaster::new(&field, images.px, images.px);
             export::strain_images::StrainImages::new(&raster, images.range).write(dir, m.frame)?;
         }
-        if let Some(micro) = &setup.micro {
+        if let Some(micro) = setup
+            .micro
+            .as_ref()
+            .filter(|mi| m.frame % mi.frame_stride == 0)
+        {
             deform_microstructure(dir, m.frame, micro, &field)?;
         }
         frames.push(m);

@@ -405,3 +405,59 @@ fn strain_maps_metrics_and_fields() {
     assert_eq!(field("principal_axes_rest").0, 9);
     assert_eq!(field("surface_axis_s").0, 3);
 }
+
+/// `[microstructure]` writes the neutral map and, every `frame_stride`
+/// frames, the deformed height and normal maps; at rest the deformed map is
+/// the neutral one, under the probe it differs.
+#[test]
+fn microstructure_maps_per_frame() {
+    use skinpatch::micro::io::{read_png16, MapDefaults, TexelSize};
+    let dir = tempfile::tempdir().unwrap();
+    let (out, o) = run_press_small_with(
+        dir.path(),
+        "\n[microstructure]\nframe_stride = 3\nformats = [\"png16\", \"exr\"]\n[microstructure.procedural]\nsize_px = 400\n",
+    );
+    assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    let micro = out.join("micro");
+    let mut names: Vec<String> = std::fs::read_dir(&micro)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    let mut expected: Vec<String> = ["neutral", "0000", "0003", "0006"]
+        .iter()
+        .flat_map(|t| {
+            [
+                format!("height_{t}.png"),
+                format!("height_{t}.exr"),
+                format!("normal_{t}.png"),
+            ]
+        })
+        .collect();
+    expected.sort();
+    assert_eq!(names, expected);
+    let defaults = MapDefaults {
+        texel: TexelSize::Um(1.0),
+        height_unit_um: 1.0,
+        edge: skinpatch::micro::Edge::Wrap,
+    };
+    let read = |name: &str| read_png16(&micro.join(name), &defaults).unwrap();
+    let neutral = read("height_neutral.png");
+    assert_eq!((neutral.width, neutral.height), (400, 400));
+    assert!((neutral.texel_um - 25.0).abs() < 1e-9);
+    let rest = read("height_0000.png");
+    let (lo, hi) = neutral.range();
+    let diff = |m: &skinpatch::micro::DisplacementMap| {
+        m.data
+            .iter()
+            .zip(&neutral.data)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max)
+            / (hi - lo)
+    };
+    assert!(diff(&rest) < 1e-4, "frame 0 is neutral: {}", diff(&rest));
+    let pressed = diff(&read("height_0006.png"));
+    assert!(pressed > 0.01, "the pressed frame differs: {pressed}");
+    let normals = image::open(micro.join("normal_0006.png")).unwrap();
+    assert_eq!(normals.color(), image::ColorType::Rgb16);
+}

@@ -261,3 +261,67 @@ fn rotating_map_and_axes_by_ninety_degrees_commutes_with_the_convolution() {
         relative_difference(&a, &b)
     );
 }
+
+/// tests/fixtures/press_small.toml with `extra` appended, validated.
+fn setup_with(extra: &str) -> skinpatch::Result<skinpatch::scenario::Setup> {
+    let fixture = common::root().join("tests/fixtures/press_small.toml");
+    let text = std::fs::read_to_string(&fixture).unwrap() + extra;
+    let scenario = skinpatch::scenario::Scenario::parse(&text, &fixture)?;
+    skinpatch::scenario::Setup::from_scenario(&scenario, &fixture)
+}
+
+#[test]
+fn microstructure_section_is_validated() {
+    let ok = setup_with("\n[microstructure]\n[microstructure.procedural]\nsize_px = 32\n").unwrap();
+    let micro = ok.micro.unwrap();
+    assert_eq!(
+        (micro.neutral.width, micro.neutral.texel_um),
+        (32, 10_000.0 / 32.0)
+    );
+    assert!(micro.png16 && !micro.exr && micro.normal_maps);
+    for (extra, expected) in [
+        ("edge = \"mirror\"\n", "microstructure.edge"),
+        ("formats = [\"png16\", \"tiff\"]\n", "microstructure.formats[1]"),
+        ("frame_stride = 0\n", "microstructure.frame_stride"),
+        ("height_unit_um = -1.0\n", "microstructure.height_unit_um"),
+        ("map = \"nowhere.png\"\n", "nowhere.png"),
+        ("map = \"x.png\"\n[microstructure.procedural]\nseed = 3\n", "microstructure.procedural.seed"),
+        ("[microstructure.procedural]\ndepth_spread = 2.0\n", "depth_spread"),
+        ("colour = 1\n", "unknown key microstructure.colour"),
+        (
+            "[microstructure.kernel]\nalpha = [[0.8, -1.0], [1.0, 0.2]]\nsigma_compression_um = [[0.8, 5.0]]\nsigma_stretch_um = [[1.2, 9.0]]\n",
+            "microstructure.kernel.alpha",
+        ),
+        (
+            "[microstructure.kernel]\nalpha = [[0.8, -1.0], [1.0, 0.0]]\nsigma_compression_um = [[0.8, 0.0]]\nsigma_stretch_um = [[1.2, 9.0]]\n",
+            "microstructure.kernel.sigma_compression_um[0]",
+        ),
+    ] {
+        let err = setup_with(&format!("\n[microstructure]\n{extra}")).unwrap_err().to_string();
+        assert!(err.contains(expected), "{extra}: {err}");
+    }
+}
+
+#[test]
+fn a_loaded_map_takes_the_patch_texel_size_unless_told() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("plain.png");
+    image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(50, 40, |x, y| {
+        image::Luma([(x * 1000 + y) as u16])
+    })
+    .save(&path)
+    .unwrap();
+    let text = format!(
+        "\n[microstructure]\nmap = {:?}\nheight_unit_um = 65535.0\n",
+        path.to_str().unwrap()
+    );
+    let micro = setup_with(&text).unwrap().micro.unwrap();
+    // 10 mm patch over 50 texels; heights 0 … 1 per full range × 65535 µm.
+    assert_eq!(micro.neutral.texel_um, 200.0);
+    assert_eq!(micro.neutral.height_unit_um, 65535.0);
+    let told = setup_with(&format!("{text}texel_um = 7.5\n"))
+        .unwrap()
+        .micro
+        .unwrap();
+    assert_eq!(told.neutral.texel_um, 7.5);
+}

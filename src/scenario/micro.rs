@@ -32,6 +32,8 @@ pub struct MicrostructureSection {
     pub formats: Vec<String>,
     /// Also write the normal map of each deformed map. Default true.
     pub normal_maps: bool,
+    /// Write the maps of every n-th frame (frame 0 always). Default 1.
+    pub frame_stride: usize,
 }
 
 impl Default for MicrostructureSection {
@@ -45,6 +47,7 @@ impl Default for MicrostructureSection {
             kernel: None,
             formats: vec!["png16".into()],
             normal_maps: true,
+            frame_stride: 1,
         }
     }
 }
@@ -104,6 +107,8 @@ pub struct MicroSetup {
     pub exr: bool,
     /// Write normal maps.
     pub normal_maps: bool,
+    /// Deform and write every n-th frame.
+    pub frame_stride: usize,
 }
 
 fn table(points: &[[f64; 2]]) -> PiecewiseLinear {
@@ -139,6 +144,12 @@ impl MicrostructureSection {
                     ))
                 }
             }
+        }
+        if self.frame_stride == 0 {
+            return Err(Error::parameter(
+                "microstructure.frame_stride",
+                "must be ≥ 1, got 0",
+            ));
         }
         let unit = self.height_unit_um;
         if !(unit.is_finite() && unit > 0.0) {
@@ -189,6 +200,7 @@ impl MicrostructureSection {
             png16,
             exr,
             normal_maps: self.normal_maps,
+            frame_stride: self.frame_stride,
         })
     }
 
