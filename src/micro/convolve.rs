@@ -154,6 +154,13 @@ pub fn convolve_texel(src: &DisplacementMap, i: usize, j: usize, p: &PassParams)
     let n = (3.0 * p.sigma).ceil() as i32;
     let q = (-0.5 / (p.sigma * p.sigma)).exp();
     let (x, y) = (i as f32, j as f32);
+    // Whether every sample's four texels lie inside the grid (then no edge
+    // handling is needed; the values are the same).
+    let (rx, ry) = (n as f32 * p.axis[0].abs(), n as f32 * p.axis[1].abs());
+    let interior = x - rx >= 0.0
+        && y - ry >= 0.0
+        && x + rx < (src.width - 1) as f32
+        && y + ry < (src.height - 1) as f32;
     let mut sum = centre;
     let mut norm = 1.0f32;
     let mut g = 1.0f32;
@@ -162,7 +169,12 @@ pub fn convolve_texel(src: &DisplacementMap, i: usize, j: usize, p: &PassParams)
         g *= step;
         step *= q * q;
         let (dx, dy) = (k as f32 * p.axis[0], k as f32 * p.axis[1]);
-        sum += g * (src.bilinear(x - dx, y - dy) + src.bilinear(x + dx, y + dy));
+        let pair = if interior {
+            src.bilinear_interior(x - dx, y - dy) + src.bilinear_interior(x + dx, y + dy)
+        } else {
+            src.bilinear(x - dx, y - dy) + src.bilinear(x + dx, y + dy)
+        };
+        sum += g * pair;
         norm += 2.0 * g;
     }
     (1.0 - p.alpha) * centre + p.alpha * (sum / norm)

@@ -127,6 +127,26 @@ impl DisplacementMap {
         top + (bottom - top) * fy
     }
 
+    /// [`DisplacementMap::bilinear`] for points whose four texels all lie in
+    /// the grid (`0 ≤ x < width − 1`, `0 ≤ y < height − 1`): the same value
+    /// without edge handling.
+    #[inline]
+    pub fn bilinear_interior(&self, x: f32, y: f32) -> f32 {
+        // Non-negative here, so truncation is the floor (and cheaper than a
+        // floor call on CPUs without SSE4.1).
+        let (x0, y0) = (x as usize, y as usize);
+        let (fx, fy) = (x - x0 as f32, y - y0 as f32);
+        let k = y0 * self.width + x0;
+        let (upper, lower) = (
+            &self.data[k..k + 2],
+            &self.data[k + self.width..k + self.width + 2],
+        );
+        let (a, b, c, d) = (upper[0], upper[1], lower[0], lower[1]);
+        let top = a + (b - a) * fx;
+        let bottom = c + (d - c) * fx;
+        top + (bottom - top) * fy
+    }
+
     /// Smallest and largest height (units).
     pub fn range(&self) -> (f32, f32) {
         self.data
