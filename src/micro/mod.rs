@@ -7,13 +7,16 @@
 //!   (stretch ratio → α, σ; the forehead model built in);
 //! * [`convolve`]: the spatially varying two-pass convolution along the
 //!   strain axes, and its constant-kernel form;
-//! * [`normals`]: normal maps, 64 × 64 normal histograms, slope variance.
+//! * [`normals`]: normal maps, 64 × 64 normal histograms, slope variance;
+//! * [`fit`]: fitting (α, σ) to measured deformations (eq. 7) and the
+//!   piecewise-linear model to fitted points;
 //!
 //! * [`io`]: 16-bit PNG and f32 EXR files.
 //!
 //! File I/O lives in [`io`] only; the rest is numeric.
 
 pub mod convolve;
+pub mod fit;
 pub mod io;
 pub mod kernel;
 pub mod map;
