@@ -43,6 +43,16 @@ enum Command {
     /// (TetGen), BASE.vtu and BASE.poly (the TetGen input that regenerates the
     /// mesh). It always prints the quality report.
     Mesh(Box<MeshArgs>),
+    /// Fit kernel parameters (α, σ) to measured deformed maps and a
+    /// piecewise-linear kernel model to them (seed 000 eq. 7, Fig. 11–12).
+    ///
+    /// The samples file names the neutral map, each deformed map with its
+    /// stretch ratio and axis, and/or already fitted points; with `output`
+    /// set it writes a kernel file for `[microstructure] kernel_file`.
+    Fit {
+        /// Samples file (TOML).
+        samples: PathBuf,
+    },
     /// Benchmark a stage and print its figures.
     ///
     /// `bench fem` simulates the first frames of a scenario (default the
@@ -117,6 +127,39 @@ struct MeshArgs {
     edges_within: Option<Vec<f64>>,
 }
 
+fn fit(samples: &Path) -> anyhow::Result<()> {
+    let report = skinpatch::pipeline::fit(samples)?;
+    let mut text = String::new();
+    let mut line = |s: String| {
+        text.push_str(&s);
+        text.push('\n');
+    };
+    line(format!(
+        "{:>8}  {:>6}  {:>8}  {:>9}  source",
+        "r", "α", "σ (µm)", "distance"
+    ));
+    for row in &report.rows {
+        let distance = row.distance.map_or("-".to_string(), |d| format!("{d:.4}"));
+        line(format!(
+            "{:>8.3}  {:>6.2}  {:>8.1}  {distance:>9}  {}",
+            row.r, row.alpha, row.sigma_um, row.source
+        ));
+    }
+    let l = &report.lines;
+    line(format!(
+        "model: α = {:.3}·(r − 1) for r < 1, {:.3}·(r − 1) for r ≥ 1, clamped to [−2, 1]",
+        l.alpha_compression_slope, l.alpha_stretch_slope
+    ));
+    line(format!(
+        "       σ = {:.2}·r {:+.2} µm for r < 1, {:.2}·r {:+.2} µm for r ≥ 1 (at least 1 µm)",
+        l.sigma_compression.0, l.sigma_compression.1, l.sigma_stretch.0, l.sigma_stretch.1
+    ));
+    if let Some(path) = &report.written {
+        line(format!("wrote {}", path.display()));
+    }
+    print_stdout(&text)
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let level = match cli.verbose {
@@ -131,6 +174,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run { scenario, output } => run(&scenario, output),
         Command::Mesh(args) => mesh(*args),
+        Command::Fit { samples } => fit(&samples),
         Command::Bench {
             stage,
             scenario,

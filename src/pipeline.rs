@@ -264,3 +264,148 @@ fn simulate(
     }
     Ok(sim.timings)
 }
+
+/// One row of a fit: a sample's stretch ratio and fitted parameters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FitRow {
+    /// Where the row came from (map file or `point`).
+    pub source: String,
+    /// Stretch ratio.
+    pub r: f64,
+    /// α.
+    pub alpha: f64,
+    /// σ (µm).
+    pub sigma_um: f64,
+    /// Histogram distance at the optimum (fitted samples only).
+    pub distance: Option<f64>,
+}
+
+/// What `skinpatch fit` found.
+#[derive(Clone, Debug)]
+pub struct FitReport {
+    /// Per sample, in file order (samples, then points).
+    pub rows: Vec<FitRow>,
+    /// The fitted model.
+    pub model: crate::micro::KernelModel,
+    /// Its lines, for the report.
+    pub lines: crate::micro::fit::ModelLines,
+    /// The kernel file written, if the samples file names one.
+    pub written: Option<PathBuf>,
+}
+
+/// Runs a `skinpatch fit` samples file (see [`crate::scenario::FitSamples`]).
+pub fn fit(path: &std::path::Path) -> Result<FitReport> {
+    use crate::micro::fit::{fit_model, fit_params, Axis, FittedPoint, HistogramSettings};
+    use crate::micro::io::{read_map, MapDefaults, TexelSize};
+    use crate::micro::NormalHistogram;
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let samples: crate::scenario::FitSamples = toml::from_str(&text).map_err(|e| Error::Parse {
+        path: path.to_path_buf(),
+        line: e
+            .span()
+            .map_or(0, |s| 1 + text[..s.start].matches('\n').count()),
+        message: e.message().trim().to_string(),
+    })?;
+    let base = path.parent().unwrap_or(std::path::Path::new("."));
+    let hist = HistogramSettings {
+        bins: samples
+            .bins
+            .unwrap_or(crate::micro::normals::HISTOGRAM_BINS),
+        range: samples
+            .range
+            .unwrap_or(crate::micro::normals::HISTOGRAM_RANGE),
+    };
+    if hist.bins < 2 || hist.range.is_nan() || hist.range <= 0.0 {
+        return Err(Error::parameter(
+            "bins, range",
+            "need bins ≥ 2 and range > 0",
+        ));
+    }
+    let defaults = MapDefaults {
+        texel: TexelSize::Um(samples.texel_um.unwrap_or(1.0)),
+        height_unit_um: 1.0,
+        edge: crate::micro::Edge::Clamp,
+    };
+    let mut rows = Vec::new();
+    if !samples.sample.is_empty() {
+        let neutral_path = samples
+            .neutral
+            .as_ref()
+            .ok_or_else(|| Error::parameter("neutral", "is required to fit [[sample]] maps"))?;
+        let neutral = read_map(&base.join(neutral_path), &defaults)?;
+        for (k, s) in samples.sample.iter().enumerate() {
+            let axis = match s.axis.as_str() {
+                "u" => Axis::U,
+                "v" => Axis::V,
+                other => {
+                    return Err(Error::parameter(
+                        format!("sample[{k}].axis"),
+                        format!("must be \"u\" or \"v\", got \"{other}\""),
+                    ))
+                }
+            };
+            if !(s.r.is_finite() && s.r > 0.0) {
+                return Err(Error::parameter(
+                    format!("sample[{k}].r"),
+                    format!("must be > 0, got {}", s.r),
+                ));
+            }
+            let deformed = read_map(&base.join(&s.map), &defaults)?;
+            let target = NormalHistogram::of(&deformed, hist.bins, hist.range, [1.0, 1.0]);
+            let result = fit_params(&neutral, &target, axis, s.r, hist);
+            log::info!(
+                "fitted {}: α {:.2}, σ {:.1} µm",
+                s.map.display(),
+                result.alpha,
+                result.sigma_um
+            );
+            rows.push(FitRow {
+                source: s.map.display().to_string(),
+                r: s.r,
+                alpha: result.alpha,
+                sigma_um: result.sigma_um,
+                distance: Some(result.distance),
+            });
+        }
+    }
+    for p in &samples.point {
+        rows.push(FitRow {
+            source: "point".into(),
+            r: p.r,
+            alpha: p.alpha,
+            sigma_um: p.sigma_um,
+            distance: None,
+        });
+    }
+    let points: Vec<FittedPoint> = rows
+        .iter()
+        .map(|r| FittedPoint {
+            r: r.r,
+            alpha: r.alpha,
+            sigma_um: r.sigma_um,
+        })
+        .collect();
+    let (model, lines) = fit_model(&points)?;
+    let written = match &samples.output {
+        Some(out) => {
+            let out = base.join(out);
+            let section = crate::scenario::KernelSection::of(&model);
+            let body =
+                toml::to_string(&section).map_err(|e| Error::io(&out, std::io::Error::other(e)))?;
+            let text = format!(
+                "# Kernel model fitted by `skinpatch fit` from {}.\n\
+                 # Use it with [microstructure] kernel_file = \"…\".\n{body}",
+                path.display()
+            );
+            io::write_atomically(&out, text.as_bytes())?;
+            Some(out)
+        }
+        None => None,
+    };
+    Ok(FitReport {
+        rows,
+        model,
+        lines,
+        written,
+    })
+}

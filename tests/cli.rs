@@ -461,3 +461,73 @@ fn microstructure_maps_per_frame() {
     let normals = image::open(micro.join("normal_0006.png")).unwrap();
     assert_eq!(normals.color(), image::ColorType::Rgb16);
 }
+
+/// `skinpatch fit`: fits a deformed map, adds given points, prints the
+/// table and model, and writes a kernel file a scenario can use.
+#[test]
+fn fit_prints_the_table_and_writes_a_usable_kernel_file() {
+    use skinpatch::micro::convolve::convolve_pass;
+    use skinpatch::micro::io::write_png16;
+    use skinpatch::micro::procedural::{generate, SkinParams};
+    use skinpatch::micro::PassParams;
+    let dir = tempfile::tempdir().unwrap();
+    let neutral = generate(&SkinParams {
+        size_px: 128,
+        extent_mm: 0.64,
+        groove_spacing_um: 120.0,
+        ..SkinParams::default()
+    })
+    .unwrap();
+    write_png16(&dir.path().join("neutral.png"), &neutral).unwrap();
+    // Blurred along u with α 0.5, σ 15 µm (3 texels), not stretched.
+    let pass = PassParams {
+        axis: [1.0, 0.0],
+        alpha: 0.5,
+        sigma: 3.0,
+    };
+    let blurred = convolve_pass(&neutral, &vec![pass; neutral.data.len()]);
+    write_png16(&dir.path().join("blurred.png"), &blurred).unwrap();
+    let samples = "neutral = \"neutral.png\"\noutput = \"kernel.toml\"\n\
+        [[sample]]\nmap = \"blurred.png\"\nr = 1.0\naxis = \"u\"\n\
+        [[point]]\nr = 0.8\nalpha = -1.5\nsigma_um = 8.0\n\
+        [[point]]\nr = 1.2\nalpha = 0.8\nsigma_um = 18.0\n";
+    std::fs::write(dir.path().join("samples.toml"), samples).unwrap();
+    let o = skinpatch(&["fit", dir.path().join("samples.toml").to_str().unwrap()]);
+    assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    let out = text(&o.stdout);
+    let row = out
+        .lines()
+        .find(|l| l.ends_with("blurred.png"))
+        .expect(&out);
+    let cols: Vec<f64> = row
+        .split_whitespace()
+        .take(3)
+        .map(|v| v.parse().unwrap())
+        .collect();
+    // The PNG round trip quantises the heights, so allow a little more than the grid.
+    assert!(
+        (cols[1] - 0.5).abs() <= 0.05 && (cols[2] - 15.0).abs() <= 1.0,
+        "{out}"
+    );
+    assert!(out.contains("model: α ="), "{out}");
+    // The kernel file drives a scenario.
+    let kernel = dir.path().join("kernel.toml");
+    let (_, o) = run_press_small_with(
+        dir.path(),
+        &format!(
+            "\n[microstructure]\nkernel_file = {:?}\n[microstructure.procedural]\nsize_px = 32\n",
+            kernel.to_str().unwrap()
+        ),
+    );
+    assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    // A broken samples file names itself and the line.
+    std::fs::write(
+        dir.path().join("bad.toml"),
+        "neutral = \"neutral.png\"\n[[sample]]\nmap = 3\n",
+    )
+    .unwrap();
+    let o = skinpatch(&["fit", dir.path().join("bad.toml").to_str().unwrap()]);
+    assert!(!o.status.success());
+    let err = text(&o.stderr);
+    assert!(err.contains("bad.toml:3"), "{err}");
+}

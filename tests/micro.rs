@@ -339,16 +339,28 @@ fn fitting_recovers_known_kernels() {
         ..SkinParams::default()
     })
     .unwrap();
-    let hist = HistogramSettings { bins: 64, range: 0.5 };
+    let hist = HistogramSettings {
+        bins: 64,
+        range: 0.5,
+    };
     let mut report = String::new();
-    for (alpha, sigma) in [(0.6, 20.0), (-1.2, 10.0), (0.9, 32.5), (-0.5, 15.0), (0.3, 8.0)] {
+    for (alpha, sigma) in [
+        (0.6, 20.0),
+        (-1.2, 10.0),
+        (0.9, 32.5),
+        (-0.5, 15.0),
+        (0.3, 8.0),
+    ] {
         let target = candidate_histogram(&neutral, Axis::U, 1.0, params(alpha, sigma), hist);
         let fit = fit_params(&neutral, &target, Axis::U, 1.0, hist);
         report += &format!(
             "({alpha}, {sigma}) → ({:.2}, {:.1}), distance {:.2e}, {} evaluations\n",
             fit.alpha, fit.sigma_um, fit.distance, fit.evaluations
         );
-        assert!((fit.alpha - alpha).abs() <= 0.02 + 1e-9 && (fit.sigma_um - sigma).abs() <= 0.5 + 1e-9, "{report}");
+        assert!(
+            (fit.alpha - alpha).abs() <= 0.02 + 1e-9 && (fit.sigma_um - sigma).abs() <= 0.5 + 1e-9,
+            "{report}"
+        );
     }
     println!("{report}");
 }
@@ -362,13 +374,26 @@ fn fitting_the_seed_points_gives_a_neutral_model() {
     let alpha = [-2.0, -1.76, -0.2, -0.02, 0.54, 0.27, 1.0, 1.0];
     let sigma = [6.5, 6.5, 13.0, 22.0, 14.5, 19.0, 17.0, 24.0];
     let points: Vec<FittedPoint> = (0..8)
-        .map(|k| FittedPoint { r: r[k], alpha: alpha[k], sigma_um: sigma[k] })
+        .map(|k| FittedPoint {
+            r: r[k],
+            alpha: alpha[k],
+            sigma_um: sigma[k],
+        })
         .collect();
     let (model, lines) = fit_model(&points).unwrap();
     assert_eq!(model.params(1.0).alpha, 0.0);
-    assert!(model.params(0.8).alpha < -0.5 && model.params(1.25).alpha > 0.5, "{lines:?}");
+    assert!(
+        model.params(0.8).alpha < -0.5 && model.params(1.25).alpha > 0.5,
+        "{lines:?}"
+    );
     assert!(model.params(0.6).alpha == -2.0 && model.params(1.5).alpha == 1.0);
     // σ grows with r on both sides, like eq. 9.
-    assert!(lines.sigma_compression.0 > 0.0 && lines.sigma_stretch.0 > 0.0, "{lines:?}");
-    assert!(fit_model(&points[..4]).is_err(), "stretch points are needed too");
+    assert!(
+        lines.sigma_compression.0 > 0.0 && lines.sigma_stretch.0 > 0.0,
+        "{lines:?}"
+    );
+    assert!(
+        fit_model(&points[..4]).is_err(),
+        "stretch points are needed too"
+    );
 }

@@ -100,7 +100,11 @@ pub fn fit_params(
     let mut cache = std::collections::HashMap::new();
     let mut evaluate = |alpha_step: i64, sigma_step: i64| -> f64 {
         // Grid indices: α = −2 + 0.01·a, σ = 1 + 0.5·s.
-        let key = if alpha_step == 200 { (200, 0) } else { (alpha_step, sigma_step) };
+        let key = if alpha_step == 200 {
+            (200, 0)
+        } else {
+            (alpha_step, sigma_step)
+        };
         *cache.entry(key).or_insert_with(|| {
             let params = KernelParams {
                 alpha: -2.0 + 0.01 * key.0 as f64,
@@ -112,7 +116,11 @@ pub fn fit_params(
     let (a_max, s_max) = (300i64, 198i64);
     let mut best = (f64::INFINITY, 200i64, 0i64);
     // (α step, σ step, half-width of the window in steps) per stage.
-    for (da, ds, window) in [(25i64, 10i64, None), (5, 2, Some((25i64, 10i64))), (1, 1, Some((5, 2)))] {
+    for (da, ds, window) in [
+        (25i64, 10i64, None),
+        (5, 2, Some((25i64, 10i64))),
+        (1, 1, Some((5, 2))),
+    ] {
         let (a_range, s_range) = match window {
             None => ((0, a_max), (0, s_max)),
             Some((wa, ws)) => (
@@ -168,9 +176,9 @@ pub struct ModelLines {
 
 /// Least-squares slope of y = k·(r − 1).
 fn slope_through_one(points: &[(f64, f64)]) -> Option<f64> {
-    let (num, den) = points
-        .iter()
-        .fold((0.0, 0.0), |(n, d), &(r, y)| (n + (r - 1.0) * y, d + (r - 1.0) * (r - 1.0)));
+    let (num, den) = points.iter().fold((0.0, 0.0), |(n, d), &(r, y)| {
+        (n + (r - 1.0) * y, d + (r - 1.0) * (r - 1.0))
+    });
     (den > 0.0).then(|| num / den)
 }
 
@@ -180,11 +188,13 @@ fn line(points: &[(f64, f64)]) -> Option<(f64, f64)> {
     if points.is_empty() {
         return None;
     }
-    let (sr, sy) = points.iter().fold((0.0, 0.0), |(a, b), &(r, y)| (a + r, b + y));
-    let (mr, my) = (sr / n, sy / n);
-    let (sxx, sxy) = points
+    let (sr, sy) = points
         .iter()
-        .fold((0.0, 0.0), |(a, b), &(r, y)| (a + (r - mr).powi(2), b + (r - mr) * (y - my)));
+        .fold((0.0, 0.0), |(a, b), &(r, y)| (a + r, b + y));
+    let (mr, my) = (sr / n, sy / n);
+    let (sxx, sxy) = points.iter().fold((0.0, 0.0), |(a, b), &(r, y)| {
+        (a + (r - mr).powi(2), b + (r - mr) * (y - my))
+    });
     if sxx <= 0.0 {
         return Some((0.0, my));
     }
@@ -210,15 +220,26 @@ pub fn fit_model(points: &[FittedPoint]) -> Result<(KernelModel, ModelLines)> {
     let ks = slope_through_one(&side(false, |p| p.alpha)).ok_or_else(need)?;
     let sc = line(&side(true, |p| p.sigma_um)).ok_or_else(need)?;
     let ss = line(&side(false, |p| p.sigma_um)).ok_or_else(need)?;
-    let r_min = points.iter().map(|p| p.r).fold(f64::INFINITY, f64::min).min(0.5);
-    let r_max = points.iter().map(|p| p.r).fold(f64::NEG_INFINITY, f64::max).max(1.5);
+    let r_min = points
+        .iter()
+        .map(|p| p.r)
+        .fold(f64::INFINITY, f64::min)
+        .min(0.5);
+    let r_max = points
+        .iter()
+        .map(|p| p.r)
+        .fold(f64::NEG_INFINITY, f64::max)
+        .max(1.5);
     // α: where each line reaches its clamp (if inside the range), then ends.
     let mut alpha = vec![(1.0, 0.0)];
     let mut push_side = |k: f64, end: f64| {
         let clamp_at = |v: f64| 1.0 + v / k;
         let limit = if (k > 0.0) == (end > 1.0) { 1.0 } else { -2.0 };
         let corner = if k != 0.0 { clamp_at(limit) } else { f64::NAN };
-        if corner.is_finite() && (corner - 1.0) * (end - 1.0) > 0.0 && (corner - 1.0).abs() < (end - 1.0).abs() {
+        if corner.is_finite()
+            && (corner - 1.0) * (end - 1.0) > 0.0
+            && (corner - 1.0).abs() < (end - 1.0).abs()
+        {
             alpha.push((corner, limit));
         } else {
             alpha.push((end, (k * (end - 1.0)).clamp(-2.0, 1.0)));

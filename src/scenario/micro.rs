@@ -28,6 +28,9 @@ pub struct MicrostructureSection {
     pub procedural: ProceduralSection,
     /// Custom kernel model tables. Default: the forehead model (seed 000 eq. 8–9).
     pub kernel: Option<KernelSection>,
+    /// A kernel model file written by `skinpatch fit` (its tables, as in
+    /// `[microstructure.kernel]`), relative to the scenario file.
+    pub kernel_file: Option<PathBuf>,
     /// Per-frame map formats: any of `png16`, `exr`. Default `["png16"]`.
     pub formats: Vec<String>,
     /// Also write the normal map of each deformed map. Default true.
@@ -45,6 +48,7 @@ impl Default for MicrostructureSection {
             edge: "wrap".into(),
             procedural: ProceduralSection::default(),
             kernel: None,
+            kernel_file: None,
             formats: vec!["png16".into()],
             normal_maps: true,
             frame_stride: 1,
@@ -158,15 +162,29 @@ impl MicrostructureSection {
                 format!("must be finite and > 0, got {unit}"),
             ));
         }
-        let model = match &self.kernel {
-            None => KernelModel::forehead(),
-            Some(k) => KernelModel {
-                alpha: table(&k.alpha),
-                sigma_compression_um: table(&k.sigma_compression_um),
-                sigma_stretch_um: table(&k.sigma_stretch_um),
-            },
+        let (model, key) = match (&self.kernel, &self.kernel_file) {
+            (Some(_), Some(_)) => {
+                return Err(Error::parameter(
+                    "microstructure.kernel_file",
+                    "and [microstructure.kernel] both give a model; keep one",
+                ))
+            }
+            (None, None) => (KernelModel::forehead(), "microstructure.kernel".to_string()),
+            (Some(k), None) => (k.model(), "microstructure.kernel".to_string()),
+            (None, Some(file)) => {
+                let path = base.join(file);
+                let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+                let section: KernelSection = toml::from_str(&text).map_err(|e| Error::Parse {
+                    path: path.clone(),
+                    line: e
+                        .span()
+                        .map_or(0, |s| 1 + text[..s.start].matches('\n').count()),
+                    message: e.message().trim().to_string(),
+                })?;
+                (section.model(), path.display().to_string())
+            }
         };
-        model.validate("microstructure.kernel")?;
+        model.validate(&key)?;
         let neutral = match &self.map {
             Some(file) => {
                 if let Some(k) = self.procedural_keys_set().first() {
@@ -247,6 +265,91 @@ impl ProceduralSection {
             pore_depth_um: self.pore_depth_um.unwrap_or(d.pore_depth_um),
             noise_amplitude_um: self.noise_amplitude_um.unwrap_or(d.noise_amplitude_um),
             noise_scale_um: self.noise_scale_um.unwrap_or(d.noise_scale_um),
+        }
+    }
+}
+
+/// A `skinpatch fit` samples file.
+///
+/// ```toml
+/// neutral = "neutral.png"       # the undeformed map (relative to this file)
+/// texel_um = 5.0                # for maps without skinpatch metadata
+/// bins = 64                     # histogram cells per side (default 64)
+/// range = 0.5                   # histogram half range (default 0.5)
+/// output = "kernel.toml"        # where to write the model (default: none)
+///
+/// [[sample]]                    # a measured deformed map …
+/// map = "stretched_115.png"
+/// r = 1.15
+/// axis = "u"                    # "u" or "v"
+///
+/// [[point]]                     # … or an already fitted point
+/// r = 0.73
+/// alpha = -2.0
+/// sigma_um = 6.5
+/// ```
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FitSamples {
+    /// The neutral map (required with `[[sample]]`s).
+    pub neutral: Option<PathBuf>,
+    /// Texel size of maps without metadata (µm).
+    pub texel_um: Option<f64>,
+    /// Histogram cells per side.
+    pub bins: Option<usize>,
+    /// Histogram half range.
+    pub range: Option<f64>,
+    /// Where to write the fitted model, relative to this file.
+    pub output: Option<PathBuf>,
+    /// Deformed maps to fit.
+    #[serde(default)]
+    pub sample: Vec<FitSample>,
+    /// Points fitted elsewhere.
+    #[serde(default)]
+    pub point: Vec<FitPoint>,
+}
+
+/// `[[sample]]`.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FitSample {
+    /// Deformed map file.
+    pub map: PathBuf,
+    /// Stretch ratio along `axis`.
+    pub r: f64,
+    /// `u` or `v`.
+    pub axis: String,
+}
+
+/// `[[point]]`.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FitPoint {
+    /// Stretch ratio.
+    pub r: f64,
+    /// Fitted α.
+    pub alpha: f64,
+    /// Fitted σ (µm).
+    pub sigma_um: f64,
+}
+
+impl KernelSection {
+    /// The model of these tables (not yet validated).
+    pub fn model(&self) -> KernelModel {
+        KernelModel {
+            alpha: table(&self.alpha),
+            sigma_compression_um: table(&self.sigma_compression_um),
+            sigma_stretch_um: table(&self.sigma_stretch_um),
+        }
+    }
+
+    /// The tables of `model`, for a kernel file.
+    pub fn of(model: &KernelModel) -> KernelSection {
+        let rows = |t: &PiecewiseLinear| t.points.iter().map(|&(r, v)| [r, v]).collect();
+        KernelSection {
+            alpha: rows(&model.alpha),
+            sigma_compression_um: rows(&model.sigma_compression_um),
+            sigma_stretch_um: rows(&model.sigma_stretch_um),
         }
     }
 }

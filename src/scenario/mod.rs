@@ -26,7 +26,10 @@ mod micro;
 mod simulation;
 
 pub use mesh::{MeshSection, RefineSection, ZoneKind};
-pub use micro::{KernelSection, MicroSetup, MicrostructureSection, ProceduralSection};
+pub use micro::{
+    FitPoint, FitSample, FitSamples, KernelSection, MicroSetup, MicrostructureSection,
+    ProceduralSection,
+};
 pub use simulation::{
     BoundarySection, CaliperSection, MaterialSection, PrescribedSection, ProbeSection,
     SimulationSetup, SolverSection, TimeSection,
