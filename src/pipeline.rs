@@ -112,7 +112,19 @@ fn write_neutral(dir: &std::path::Path, setup: &Setup, micro: &MicroSetup) -> Re
             patch_texel_um
         );
     }
-    write_micro_frame(&folder, "neutral", micro, map)
+    let mut written = write_micro_frame(&folder, "neutral", micro, map)?;
+    if micro.roughness_table {
+        let ratios: Vec<f64> = (0..=14).map(|k| 0.7 + 0.05 * k as f64).collect();
+        let table = crate::micro::roughness::tabulate(map, &micro.model, &ratios);
+        let mut csv = String::from("stretch_ratio,beckmann_m\n");
+        for (r, m) in &table.points {
+            csv.push_str(&format!("{r:.2},{m:e}\n"));
+        }
+        let path = folder.join("roughness.csv");
+        io::write_atomically(&path, csv.as_bytes())?;
+        written.push(path);
+    }
+    Ok(written)
 }
 
 /// The frame's deformed microstructure: the strain raster at the map's size,

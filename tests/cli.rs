@@ -415,7 +415,7 @@ fn microstructure_maps_per_frame() {
     let dir = tempfile::tempdir().unwrap();
     let (out, o) = run_press_small_with(
         dir.path(),
-        "\n[microstructure]\nframe_stride = 3\nformats = [\"png16\", \"exr\"]\n[microstructure.procedural]\nsize_px = 400\n",
+        "\n[microstructure]\nframe_stride = 3\nroughness_table = true\nformats = [\"png16\", \"exr\"]\n[microstructure.procedural]\nsize_px = 400\n",
     );
     assert!(o.status.success(), "stderr: {}", text(&o.stderr));
     let micro = out.join("micro");
@@ -434,6 +434,7 @@ fn microstructure_maps_per_frame() {
             ]
         })
         .collect();
+    expected.push("roughness.csv".into());
     expected.sort();
     assert_eq!(names, expected);
     let defaults = MapDefaults {
@@ -458,6 +459,12 @@ fn microstructure_maps_per_frame() {
     assert!(diff(&rest) < 1e-4, "frame 0 is neutral: {}", diff(&rest));
     let pressed = diff(&read("height_0006.png"));
     assert!(pressed > 0.01, "the pressed frame differs: {pressed}");
+    let roughness = std::fs::read_to_string(micro.join("roughness.csv")).unwrap();
+    assert_eq!(roughness.lines().count(), 16, "{roughness}");
+    assert!(
+        roughness.starts_with("stretch_ratio,beckmann_m\n0.70,"),
+        "{roughness}"
+    );
     let normals = image::open(micro.join("normal_0006.png")).unwrap();
     assert_eq!(normals.color(), image::ColorType::Rgb16);
 }

@@ -397,3 +397,23 @@ fn fitting_the_seed_points_gives_a_neutral_model() {
         "stretch points are needed too"
     );
 }
+
+/// Roughness from the forehead model: rougher when compressed, smoother
+/// when stretched; at r = 1 it is the neutral map's own √(2·Var(slope)).
+#[test]
+fn roughness_follows_the_stretch() {
+    use skinpatch::micro::roughness::tabulate;
+    let map = skin(9);
+    let table = tabulate(&map, &KernelModel::forehead(), &[0.8, 0.9, 1.0, 1.1, 1.25]);
+    let m: Vec<f64> = table.points.iter().map(|p| p.1).collect();
+    assert!(m.windows(2).all(|w| w[0] > w[1]), "{m:?}");
+    let neutral = 0.5
+        * ((2.0 * slope_variance(&map, [1.0, 0.0])).sqrt()
+            + (2.0 * slope_variance(&map, [0.0, 1.0])).sqrt());
+    assert!(
+        (m[2] - neutral).abs() < 1e-9 * neutral,
+        "{} vs {neutral}",
+        m[2]
+    );
+    assert!((table.at(0.95) - 0.5 * (m[1] + m[2])).abs() < 1e-12);
+}

@@ -11,6 +11,8 @@
 //! * [`fit`]: fitting (α, σ) to measured deformations (eq. 7) and the
 //!   piecewise-linear model to fitted points;
 //!
+//! * [`roughness`]: per-axis Beckmann roughness m(r) from the kernel model
+//!   (seed 003), for the renderer;
 //! * [`io`]: 16-bit PNG and f32 EXR files.
 //!
 //! File I/O lives in [`io`] only; the rest is numeric.
@@ -22,6 +24,7 @@ pub mod kernel;
 pub mod map;
 pub mod normals;
 pub mod procedural;
+pub mod roughness;
 
 pub use convolve::{convolve, KernelField, PassParams};
 pub use kernel::{KernelModel, KernelParams, PiecewiseLinear};

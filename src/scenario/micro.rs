@@ -37,6 +37,9 @@ pub struct MicrostructureSection {
     pub normal_maps: bool,
     /// Write the maps of every n-th frame (frame 0 always). Default 1.
     pub frame_stride: usize,
+    /// Write `micro/roughness.csv`: Beckmann roughness m(r) of the neutral map
+    /// under the kernel model for r = 0.70 … 1.40 (seed 003). Default false.
+    pub roughness_table: bool,
 }
 
 impl Default for MicrostructureSection {
@@ -52,6 +55,7 @@ impl Default for MicrostructureSection {
             formats: vec!["png16".into()],
             normal_maps: true,
             frame_stride: 1,
+            roughness_table: false,
         }
     }
 }
@@ -113,6 +117,8 @@ pub struct MicroSetup {
     pub normal_maps: bool,
     /// Deform and write every n-th frame.
     pub frame_stride: usize,
+    /// Write the roughness table.
+    pub roughness_table: bool,
 }
 
 fn table(points: &[[f64; 2]]) -> PiecewiseLinear {
@@ -219,6 +225,7 @@ impl MicrostructureSection {
             exr,
             normal_maps: self.normal_maps,
             frame_stride: self.frame_stride,
+            roughness_table: self.roughness_table,
         })
     }
 
