@@ -82,6 +82,24 @@ impl Error {
         }
     }
 
+    /// A file that is malformed as a whole (no line to point at, e.g. a
+    /// binary format).
+    pub fn malformed(path: &std::path::Path, message: impl Into<String>) -> Self {
+        Error::Parse {
+            path: path.to_path_buf(),
+            line: 0,
+            message: message.into(),
+        }
+    }
+
+    /// A missing file.
+    pub fn not_found(path: &std::path::Path) -> Self {
+        Error::io(
+            path,
+            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
+        )
+    }
+
     /// A range error for the scenario key `key`.
     pub fn parameter(key: impl Into<String>, reason: impl Into<String>) -> Self {
         Error::Parameter {

@@ -103,11 +103,7 @@ pub fn write_png16(path: &Path, map: &DisplacementMap) -> Result<()> {
 
 /// Reads a 16-bit (or 8-bit) greyscale PNG.
 pub fn read_png16(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap> {
-    let bad = |message: String| Error::Parse {
-        path: path.to_path_buf(),
-        line: 0,
-        message,
-    };
+    let bad = |message: String| Error::malformed(path, message);
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let decoder = png::Decoder::new(std::io::BufReader::new(file));
     let mut reader = decoder
@@ -237,16 +233,9 @@ pub fn write_exr(path: &Path, map: &DisplacementMap) -> Result<()> {
 /// Reads a single-channel EXR (channel `Y`, or the only channel).
 pub fn read_exr(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap> {
     use exr::prelude::{read_first_flat_layer_from_file, AttributeValue, Text};
-    let bad = |message: String| Error::Parse {
-        path: path.to_path_buf(),
-        line: 0,
-        message,
-    };
+    let bad = |message: String| Error::malformed(path, message);
     if !path.exists() {
-        return Err(Error::io(
-            path,
-            std::io::Error::from(std::io::ErrorKind::NotFound),
-        ));
+        return Err(Error::not_found(path));
     }
     let image = read_first_flat_layer_from_file(path)
         .map_err(|e| bad(format!("not a readable EXR: {e}")))?;
@@ -320,11 +309,10 @@ pub fn read_map(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap> 
     {
         Some("png") => read_png16(path, defaults),
         Some("exr") => read_exr(path, defaults),
-        _ => Err(Error::Parse {
-            path: path.to_path_buf(),
-            line: 0,
-            message: "unknown displacement map format (expected .png or .exr)".into(),
-        }),
+        _ => Err(Error::malformed(
+            path,
+            "unknown displacement map format (expected .png or .exr)",
+        )),
     }
 }
 

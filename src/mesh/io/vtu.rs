@@ -178,16 +178,9 @@ pub fn write_vtu(path: &Path, grid: &Grid) -> Result<()> {
 /// Reads a `.vtu` file written by [`write_vtu`] (or any single-piece
 /// unstructured grid of tetrahedra).
 pub fn read_vtu(path: &Path) -> Result<Grid> {
-    let bad = |message: String| Error::Parse {
-        path: path.to_path_buf(),
-        line: 0,
-        message,
-    };
+    let bad = |message: String| Error::malformed(path, message);
     if !path.exists() {
-        return Err(Error::io(
-            path,
-            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
-        ));
+        return Err(Error::not_found(path));
     }
     let vtk = Vtk::import(path).map_err(|e| bad(format!("not a readable VTK file: {e}")))?;
     let DataSet::UnstructuredGrid { pieces, .. } = vtk.data else {
