@@ -3,8 +3,9 @@
 //! Per frame: boundary conditions and probe pose at the frame time (split
 //! into load substeps), quasi-static equilibrium with contact, the strain
 //! fields (per tet and on the top surface), then the frame's VTU, strain
-//! maps and a `metrics.csv` row. A failing frame stops the run with an error
-//! naming it; everything written before stays.
+//! maps, deformed microstructure and a `metrics.csv` row. A failing frame
+//! stops the run with an error naming it; everything written before stays.
+//! [`fit`] runs a `skinpatch fit` samples file.
 
 use std::path::PathBuf;
 use std::time::Instant;
