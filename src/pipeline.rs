@@ -167,6 +167,11 @@ fn write_micro_frame(
         let normals = crate::micro::normals::normal_map(map);
         io::write_normal_png16(&path, &normals, map.width, map.height)?;
         written.push(path);
+        if micro.exr {
+            let path = folder.join(format!("normal_{tag}.exr"));
+            io::write_normal_exr(&path, &normals, map.width, map.height)?;
+            written.push(path);
+        }
     }
     Ok(written)
 }
@@ -363,17 +368,31 @@ pub fn fit(path: &std::path::Path) -> Result<FitReport> {
                     format!("must be > 0, got {}", s.r),
                 ));
             }
-            let deformed = read_map(&base.join(&s.map), &defaults)?;
-            let target = NormalHistogram::of(&deformed, hist.bins, hist.range, [1.0, 1.0]);
+            let (target, source) = match (&s.map, &s.histogram) {
+                (Some(map), None) => {
+                    let deformed = read_map(&base.join(map), &defaults)?;
+                    let h = NormalHistogram::of(&deformed, hist.bins, hist.range, [1.0, 1.0]);
+                    (h, map.display().to_string())
+                }
+                (None, Some(file)) => (
+                    read_histogram(&base.join(file), hist)?,
+                    file.display().to_string(),
+                ),
+                _ => {
+                    return Err(Error::parameter(
+                        format!("sample[{k}]"),
+                        "needs exactly one of map and histogram",
+                    ))
+                }
+            };
             let result = fit_params(&neutral, &target, axis, s.r, hist);
             log::info!(
-                "fitted {}: α {:.2}, σ {:.1} µm",
-                s.map.display(),
+                "fitted {source}: α {:.2}, σ {:.1} µm",
                 result.alpha,
                 result.sigma_um
             );
             rows.push(FitRow {
-                source: s.map.display().to_string(),
+                source,
                 r: s.r,
                 alpha: result.alpha,
                 sigma_um: result.sigma_um,
@@ -420,5 +439,64 @@ pub fn fit(path: &std::path::Path) -> Result<FitReport> {
         model,
         lines,
         written,
+    })
+}
+
+/// Reads a target histogram: `bins` lines of `bins` comma-separated
+/// non-negative weights, normalised to sum 1.
+fn read_histogram(
+    path: &std::path::Path,
+    hist: crate::micro::fit::HistogramSettings,
+) -> Result<crate::micro::NormalHistogram> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let bad = |line: usize, message: String| Error::Parse {
+        path: path.to_path_buf(),
+        line,
+        message,
+    };
+    let rows: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
+    if rows.len() != hist.bins {
+        return Err(bad(
+            0,
+            format!(
+                "expected {} rows of weights, found {}",
+                hist.bins,
+                rows.len()
+            ),
+        ));
+    }
+    let mut cells = Vec::with_capacity(hist.bins * hist.bins);
+    for (k, row) in rows.iter().enumerate() {
+        let values: Vec<&str> = row.split(',').collect();
+        if values.len() != hist.bins {
+            return Err(bad(
+                k + 1,
+                format!("expected {} weights, found {}", hist.bins, values.len()),
+            ));
+        }
+        for v in values {
+            let w: f64 = v
+                .trim()
+                .parse()
+                .ok()
+                .filter(|w: &f64| w.is_finite() && *w >= 0.0)
+                .ok_or_else(|| {
+                    bad(
+                        k + 1,
+                        format!("{:?} is not a non-negative number", v.trim()),
+                    )
+                })?;
+            cells.push(w);
+        }
+    }
+    let total: f64 = cells.iter().sum();
+    if total <= 0.0 {
+        return Err(bad(0, "the histogram is empty (all weights 0)".into()));
+    }
+    cells.iter_mut().for_each(|c| *c /= total);
+    Ok(crate::micro::NormalHistogram {
+        bins: hist.bins,
+        range: hist.range,
+        cells,
     })
 }

@@ -431,6 +431,7 @@ fn microstructure_maps_per_frame() {
                 format!("height_{t}.png"),
                 format!("height_{t}.exr"),
                 format!("normal_{t}.png"),
+                format!("normal_{t}.exr"),
             ]
         })
         .collect();
@@ -494,8 +495,23 @@ fn fit_prints_the_table_and_writes_a_usable_kernel_file() {
     };
     let blurred = convolve_pass(&neutral, &vec![pass; neutral.data.len()]);
     write_png16(&dir.path().join("blurred.png"), &blurred).unwrap();
+    // The same target as a histogram file (64 rows of 64 weights).
+    let h = skinpatch::micro::NormalHistogram::of(&blurred, 64, 0.5, [1.0, 1.0]);
+    let csv: String = h
+        .cells
+        .chunks(64)
+        .map(|row| {
+            row.iter()
+                .map(|w| format!("{w:e}"))
+                .collect::<Vec<_>>()
+                .join(",")
+                + "\n"
+        })
+        .collect();
+    std::fs::write(dir.path().join("target.csv"), csv).unwrap();
     let samples = "neutral = \"neutral.png\"\noutput = \"kernel.toml\"\n\
         [[sample]]\nmap = \"blurred.png\"\nr = 1.0\naxis = \"u\"\n\
+        [[sample]]\nhistogram = \"target.csv\"\nr = 1.0\naxis = \"u\"\n\
         [[point]]\nr = 0.8\nalpha = -1.5\nsigma_um = 8.0\n\
         [[point]]\nr = 1.2\nalpha = 0.8\nsigma_um = 18.0\n";
     std::fs::write(dir.path().join("samples.toml"), samples).unwrap();
@@ -527,6 +543,14 @@ fn fit_prints_the_table_and_writes_a_usable_kernel_file() {
         ),
     );
     assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    // A sample needs exactly one of map and histogram.
+    std::fs::write(
+        dir.path().join("both.toml"),
+        "neutral = \"neutral.png\"\n[[sample]]\nmap = \"blurred.png\"\nhistogram = \"target.csv\"\nr = 1.0\naxis = \"u\"\n",
+    )
+    .unwrap();
+    let o = skinpatch(&["fit", dir.path().join("both.toml").to_str().unwrap()]);
+    assert!(text(&o.stderr).contains("sample[0]"), "{}", text(&o.stderr));
     // A broken samples file names itself and the line.
     std::fs::write(
         dir.path().join("bad.toml"),

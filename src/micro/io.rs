@@ -346,3 +346,44 @@ pub fn write_normal_png16(
     }
     write_atomically(path, &out)
 }
+
+/// Writes a normal map as an f32 EXR with channels `R`, `G`, `B` = the
+/// normal's x (along u), y (along v) and z, rows with v up.
+pub fn write_normal_exr(
+    path: &Path,
+    normals: &[[f32; 3]],
+    width: usize,
+    height: usize,
+) -> Result<()> {
+    use exr::prelude::{
+        AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, SmallVec,
+        WritableImage,
+    };
+    let component = |c: usize| -> Vec<f32> {
+        (0..height)
+            .rev()
+            .flat_map(|row| {
+                normals[row * width..(row + 1) * width]
+                    .iter()
+                    .map(move |n| n[c])
+            })
+            .collect()
+    };
+    let channels = ["R", "G", "B"]
+        .iter()
+        .enumerate()
+        .map(|(c, name)| AnyChannel::new(*name, FlatSamples::F32(component(c))))
+        .collect::<Vec<_>>();
+    let layer = Layer::new(
+        (width, height),
+        LayerAttributes::named("normal"),
+        Encoding::FAST_LOSSLESS,
+        AnyChannels::sort(SmallVec::from_vec(channels)),
+    );
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    Image::from_layer(layer)
+        .write()
+        .to_buffered(&mut bytes)
+        .map_err(|e| Error::io(path, std::io::Error::other(e)))?;
+    write_atomically(path, bytes.get_ref())
+}

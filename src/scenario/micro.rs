@@ -286,7 +286,7 @@ impl ProceduralSection {
 /// output = "kernel.toml"        # where to write the model (default: none)
 ///
 /// [[sample]]                    # a measured deformed map …
-/// map = "stretched_115.png"
+/// map = "stretched_115.png"     # … or histogram = "target.csv" (bins × bins)
 /// r = 1.15
 /// axis = "u"                    # "u" or "v"
 ///
@@ -316,12 +316,15 @@ pub struct FitSamples {
     pub point: Vec<FitPoint>,
 }
 
-/// `[[sample]]`.
+/// `[[sample]]`: a deformed map or a target histogram (one of them).
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct FitSample {
     /// Deformed map file.
-    pub map: PathBuf,
+    pub map: Option<PathBuf>,
+    /// Target normal histogram: CSV of `bins` rows (n_y ascending) of `bins`
+    /// comma-separated weights (n_x ascending) over `[−range, range]²`.
+    pub histogram: Option<PathBuf>,
     /// Stretch ratio along `axis`.
     pub r: f64,
     /// `u` or `v`.
