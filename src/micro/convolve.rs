@@ -161,23 +161,37 @@ pub fn convolve_texel(src: &DisplacementMap, i: usize, j: usize, p: &PassParams)
         && y - ry >= 0.0
         && x + rx < (src.width - 1) as f32
         && y + ry < (src.height - 1) as f32;
-    let mut sum = centre;
-    let mut norm = 1.0f32;
-    let mut g = 1.0f32;
-    let mut step = q;
-    for k in 1..=n {
-        g *= step;
-        step *= q * q;
-        let (dx, dy) = (k as f32 * p.axis[0], k as f32 * p.axis[1]);
-        let pair = if interior {
-            src.bilinear_interior(x - dx, y - dy) + src.bilinear_interior(x + dx, y + dy)
-        } else {
-            src.bilinear(x - dx, y - dy) + src.bilinear(x + dx, y + dy)
-        };
-        sum += g * pair;
-        norm += 2.0 * g;
+    // The normalised Gaussian sum, with a reader chosen once per texel.
+    fn taps(
+        centre: f32,
+        n: i32,
+        q: f32,
+        at: (f32, f32),
+        axis: [f32; 2],
+        read: impl Fn(f32, f32) -> f32,
+    ) -> f32 {
+        let (x, y) = at;
+        let mut sum = centre;
+        let mut norm = 1.0f32;
+        let mut g = 1.0f32;
+        let mut step = q;
+        for k in 1..=n {
+            g *= step;
+            step *= q * q;
+            let (dx, dy) = (k as f32 * axis[0], k as f32 * axis[1]);
+            sum += g * (read(x - dx, y - dy) + read(x + dx, y + dy));
+            norm += 2.0 * g;
+        }
+        sum / norm
     }
-    (1.0 - p.alpha) * centre + p.alpha * (sum / norm)
+    let blurred = if interior {
+        taps(centre, n, q, (x, y), p.axis, |u, v| {
+            src.bilinear_interior(u, v)
+        })
+    } else {
+        taps(centre, n, q, (x, y), p.axis, |u, v| src.bilinear(u, v))
+    };
+    (1.0 - p.alpha) * centre + p.alpha * blurred
 }
 
 /// Both passes: along s, then along t (eq. 4–5).
