@@ -316,14 +316,7 @@ pub fn fit(path: &std::path::Path) -> Result<FitReport> {
     use crate::micro::fit::{fit_model, fit_params, Axis, FittedPoint, HistogramSettings};
     use crate::micro::io::{read_map, MapDefaults, TexelSize};
     use crate::micro::NormalHistogram;
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-    let samples: crate::scenario::FitSamples = toml::from_str(&text).map_err(|e| Error::Parse {
-        path: path.to_path_buf(),
-        line: e
-            .span()
-            .map_or(0, |s| 1 + text[..s.start].matches('\n').count()),
-        message: e.message().trim().to_string(),
-    })?;
+    let samples: crate::scenario::FitSamples = crate::scenario::read_toml_file(path)?;
     let base = path.parent().unwrap_or(std::path::Path::new("."));
     let hist = HistogramSettings {
         bins: samples

@@ -179,14 +179,7 @@ impl MicrostructureSection {
             (Some(k), None) => (k.model(), "microstructure.kernel".to_string()),
             (None, Some(file)) => {
                 let path = base.join(file);
-                let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
-                let section: KernelSection = toml::from_str(&text).map_err(|e| Error::Parse {
-                    path: path.clone(),
-                    line: e
-                        .span()
-                        .map_or(0, |s| 1 + text[..s.start].matches('\n').count()),
-                    message: e.message().trim().to_string(),
-                })?;
+                let section: KernelSection = super::read_toml_file(&path)?;
                 (section.model(), path.display().to_string())
             }
         };

@@ -209,6 +209,17 @@ impl Scenario {
     }
 }
 
+/// Reads and deserialises a small TOML file (kernel files, fit samples);
+/// errors name the file and line.
+pub fn read_toml_file<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    toml::from_str(&text).map_err(|e| Error::Parse {
+        path: path.to_path_buf(),
+        line: e.span().map_or(0, |s| line_of(&text, s.start)),
+        message: e.message().trim().to_string(),
+    })
+}
+
 fn line_of(text: &str, offset: usize) -> usize {
     1 + text[..offset.min(text.len())].matches('\n').count()
 }
