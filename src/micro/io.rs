@@ -73,11 +73,9 @@ pub fn write_png16(path: &Path, map: &DisplacementMap) -> Result<()> {
     };
     let scale = if hi > lo { (hi - lo) / 65535.0 } else { 1.0 };
     let mut bytes = Vec::with_capacity(2 * map.data.len());
-    for row in (0..map.height).rev() {
-        for &h in &map.data[row * map.width..(row + 1) * map.width] {
-            let q = ((h as f64 - lo) / scale).round().clamp(0.0, 65535.0) as u16;
-            bytes.extend_from_slice(&q.to_be_bytes());
-        }
+    for h in flip_rows(&map.data, map.width, map.height) {
+        let q = ((h as f64 - lo) / scale).round().clamp(0.0, 65535.0) as u16;
+        bytes.extend_from_slice(&q.to_be_bytes());
     }
     let mut out = Vec::new();
     let failed = |e: png::EncodingError| Error::io(path, std::io::Error::other(e));
@@ -173,26 +171,29 @@ pub fn read_png16(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap
         .next_frame(&mut buf)
         .map_err(|e| bad(format!("corrupt PNG data: {e}")))?;
     let stride = frame.line_size;
-    let mut data = vec![0.0f32; width * height];
+    let mut top_down = Vec::with_capacity(width * height);
     for row in 0..height {
         let line = &buf[row * stride..(row + 1) * stride];
-        let j = height - 1 - row;
         for i in 0..width {
             let q = match depth {
                 png::BitDepth::Sixteen => u16::from_be_bytes([line[2 * i], line[2 * i + 1]]) as f64,
                 _ => line[i] as f64,
             };
-            data[j * width + i] = (offset + q * scale) as f32;
+            top_down.push((offset + q * scale) as f32);
         }
     }
-    Ok(DisplacementMap {
-        width,
-        height,
-        texel_um,
-        height_unit_um,
-        edge,
-        data,
-    })
+    let mut map = DisplacementMap::zeros(width, height, texel_um, edge);
+    map.height_unit_um = height_unit_um;
+    map.data = flip_rows(&top_down, width, height);
+    Ok(map)
+}
+
+/// Row order reversed: file rows run top to bottom (v down), map rows v up.
+fn flip_rows<T: Copy>(values: &[T], width: usize, height: usize) -> Vec<T> {
+    (0..height)
+        .rev()
+        .flat_map(|row| values[row * width..(row + 1) * width].iter().copied())
+        .collect()
 }
 
 /// Writes `map` as a single-channel f32 EXR with its metadata.
@@ -201,11 +202,10 @@ pub fn write_exr(path: &Path, map: &DisplacementMap) -> Result<()> {
         AnyChannel, AnyChannels, AttributeValue, Encoding, FlatSamples, Image, Layer,
         LayerAttributes, SmallVec, Text, WritableImage,
     };
-    let mut flipped = Vec::with_capacity(map.data.len());
-    for row in (0..map.height).rev() {
-        flipped.extend_from_slice(&map.data[row * map.width..(row + 1) * map.width]);
-    }
-    let channel = AnyChannel::new("Y", FlatSamples::F32(flipped));
+    let channel = AnyChannel::new(
+        "Y",
+        FlatSamples::F32(flip_rows(&map.data, map.width, map.height)),
+    );
     let mut attributes = LayerAttributes::named("height");
     for (key, value) in [
         (TEXEL, map.texel_um),
@@ -284,19 +284,10 @@ pub fn read_exr(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap> 
             height - 1 - k / width.max(1)
         )));
     }
-    let mut data = vec![0.0f32; width * height];
-    for row in 0..height {
-        let j = height - 1 - row;
-        data[j * width..(j + 1) * width].copy_from_slice(&values[row * width..(row + 1) * width]);
-    }
-    Ok(DisplacementMap {
-        width,
-        height,
-        texel_um,
-        height_unit_um,
-        edge,
-        data,
-    })
+    let mut map = DisplacementMap::zeros(width, height, texel_um, edge);
+    map.height_unit_um = height_unit_um;
+    map.data = flip_rows(&values, width, height);
+    Ok(map)
 }
 
 /// Reads a map by extension: `.png` or `.exr`.
@@ -326,12 +317,10 @@ pub fn write_normal_png16(
     height: usize,
 ) -> Result<()> {
     let mut bytes = Vec::with_capacity(6 * normals.len());
-    for row in (0..height).rev() {
-        for n in &normals[row * width..(row + 1) * width] {
-            for c in n {
-                let q = ((c.clamp(-1.0, 1.0) + 1.0) * 0.5 * 65535.0).round() as u16;
-                bytes.extend_from_slice(&q.to_be_bytes());
-            }
+    for n in flip_rows(normals, width, height) {
+        for c in n {
+            let q = ((c.clamp(-1.0, 1.0) + 1.0) * 0.5 * 65535.0).round() as u16;
+            bytes.extend_from_slice(&q.to_be_bytes());
         }
     }
     let mut out = Vec::new();
