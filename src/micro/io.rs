@@ -198,10 +198,7 @@ fn flip_rows<T: Copy>(values: &[T], width: usize, height: usize) -> Vec<T> {
 
 /// Writes `map` as a single-channel f32 EXR with its metadata.
 pub fn write_exr(path: &Path, map: &DisplacementMap) -> Result<()> {
-    use exr::prelude::{
-        AnyChannel, AnyChannels, AttributeValue, Encoding, FlatSamples, Image, Layer,
-        LayerAttributes, SmallVec, Text, WritableImage,
-    };
+    use exr::prelude::{AnyChannel, AttributeValue, FlatSamples, LayerAttributes, Text};
     let channel = AnyChannel::new(
         "Y",
         FlatSamples::F32(flip_rows(&map.data, map.width, map.height)),
@@ -216,11 +213,22 @@ pub fn write_exr(path: &Path, map: &DisplacementMap) -> Result<()> {
             .other
             .insert(Text::from(key), AttributeValue::F64(value));
     }
+    write_exr_channels(path, (map.width, map.height), attributes, vec![channel])
+}
+
+/// Writes one EXR layer of f32 channels, atomically.
+fn write_exr_channels(
+    path: &Path,
+    size: (usize, usize),
+    attributes: exr::prelude::LayerAttributes,
+    channels: Vec<exr::prelude::AnyChannel<exr::prelude::FlatSamples>>,
+) -> Result<()> {
+    use exr::prelude::{AnyChannels, Encoding, Image, Layer, SmallVec, WritableImage};
     let layer = Layer::new(
-        (map.width, map.height),
+        size,
         attributes,
         Encoding::FAST_LOSSLESS,
-        AnyChannels::sort(SmallVec::from_vec(vec![channel])),
+        AnyChannels::sort(SmallVec::from_vec(channels)),
     );
     let mut bytes = std::io::Cursor::new(Vec::new());
     Image::from_layer(layer)
@@ -344,10 +352,7 @@ pub fn write_normal_exr(
     width: usize,
     height: usize,
 ) -> Result<()> {
-    use exr::prelude::{
-        AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, SmallVec,
-        WritableImage,
-    };
+    use exr::prelude::{AnyChannel, FlatSamples, LayerAttributes};
     let component = |c: usize| -> Vec<f32> {
         (0..height)
             .rev()
@@ -363,16 +368,10 @@ pub fn write_normal_exr(
         .enumerate()
         .map(|(c, name)| AnyChannel::new(*name, FlatSamples::F32(component(c))))
         .collect::<Vec<_>>();
-    let layer = Layer::new(
+    write_exr_channels(
+        path,
         (width, height),
         LayerAttributes::named("normal"),
-        Encoding::FAST_LOSSLESS,
-        AnyChannels::sort(SmallVec::from_vec(channels)),
-    );
-    let mut bytes = std::io::Cursor::new(Vec::new());
-    Image::from_layer(layer)
-        .write()
-        .to_buffered(&mut bytes)
-        .map_err(|e| Error::io(path, std::io::Error::other(e)))?;
-    write_atomically(path, bytes.get_ref())
+        channels,
+    )
 }
