@@ -32,12 +32,12 @@ const OUTSIDE: Rgb<u8> = Rgb([128, 128, 128]);
 /// Diverging colour of stretch ratio `r`: `1 ± range` saturate.
 pub fn diverging(r: f64, range: f64) -> Rgb<u8> {
     let x = ((r - 1.0) / range).clamp(-1.0, 1.0);
-    let (from, to, k) = if x < 0.0 {
-        (NEUTRAL, COMPRESSION, -x)
+    let (to, k) = if x < 0.0 {
+        (COMPRESSION, -x)
     } else {
-        (NEUTRAL, STRETCH, x)
+        (STRETCH, x)
     };
-    Rgb([0, 1, 2].map(|c| (from[c] + (to[c] - from[c]) * k).round() as u8))
+    Rgb([0, 1, 2].map(|c| (NEUTRAL[c] + (to[c] - NEUTRAL[c]) * k).round() as u8))
 }
 
 /// Colour of the s axis `(du, dv)` with stretch ratios `svd`.

@@ -114,13 +114,19 @@ impl NormalHistogram {
 /// Variance of the slope along the unit axis `axis` (texel units) over the
 /// whole map (µm²/µm², dimensionless).
 pub fn slope_variance(map: &DisplacementMap, axis: [f64; 2]) -> f64 {
+    slope_variance_stretched(map, axis, [1.0, 1.0])
+}
+
+/// [`slope_variance`] of the map as it would look stretched by `stretch`
+/// along (x, y) (see [`slope`]). Per-row sums are added in row order.
+pub fn slope_variance_stretched(map: &DisplacementMap, axis: [f64; 2], stretch: [f64; 2]) -> f64 {
     let len = axis[0].hypot(axis[1]);
     let a = [axis[0] / len, axis[1] / len];
     let rows: Vec<(f64, f64)> = (0..map.height)
         .into_par_iter()
         .map(|j| {
             (0..map.width).fold((0.0, 0.0), |(s, s2), i| {
-                let g = slope(map, i, j, [1.0, 1.0]);
+                let g = slope(map, i, j, stretch);
                 let d = g[0] * a[0] + g[1] * a[1];
                 (s + d, s2 + d * d)
             })

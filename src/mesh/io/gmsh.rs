@@ -56,11 +56,7 @@ pub fn read_gmsh(path: &Path) -> Result<TetMesh> {
         }
     }
     if !saw_format {
-        return Err(Error::Parse {
-            path: path.to_path_buf(),
-            line: 0,
-            message: "empty file: no $MeshFormat section".into(),
-        });
+        return Err(Error::malformed(path, "empty file: no $MeshFormat section"));
     }
     state.finish(path)
 }

@@ -167,11 +167,8 @@ pub fn write_vtu(path: &Path, grid: &Grid) -> Result<()> {
         }),
     };
     let mut bytes = Vec::new();
-    vtk.write_xml(&mut bytes).map_err(|e| Error::Parse {
-        path: path.to_path_buf(),
-        line: 0,
-        message: format!("VTU encoding failed: {e}"),
-    })?;
+    vtk.write_xml(&mut bytes)
+        .map_err(|e| Error::malformed(path, format!("VTU encoding failed: {e}")))?;
     write_atomically(path, &bytes)
 }
 
