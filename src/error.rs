@@ -68,6 +68,11 @@ pub enum Error {
     /// A feature needed for the request was disabled at build time.
     #[error("{0}")]
     FeatureDisabled(String),
+
+    /// No usable GPU adapter, a limit a stage needs, or a failed GPU
+    /// operation (what failed and on which adapter).
+    #[error("GPU: {0}")]
+    Gpu(String),
 }
 
 /// Shorthand for results with the library error type.

@@ -11,6 +11,9 @@
 //! * [`fem`]: corotational tetrahedral FEM with a rigid probe;
 //! * [`strain`]: principal strains per tet and the surface deformation field
 //!   in texture space;
+//! * [`micro`]: displacement maps, kernel model, CPU reference convolution,
+//!   normals, histograms and fitting;
+//! * [`gpu`]: wgpu compute stages mirroring `strain` and `micro`;
 //! * [`export`]: frame grids, strain images and metrics;
 //! * [`pipeline`]: runs a setup and writes its outputs.
 //!
@@ -21,6 +24,7 @@
 pub mod error;
 pub mod export;
 pub mod fem;
+pub mod gpu;
 pub mod mesh;
 pub mod micro;
 pub mod pipeline;

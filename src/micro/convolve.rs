@@ -194,6 +194,19 @@ pub fn convolve_texel(src: &DisplacementMap, i: usize, j: usize, p: &PassParams)
     (1.0 - p.alpha) * centre + p.alpha * blurred
 }
 
+/// One frame on the CPU: the strain raster at the map's size dilated by
+/// [`crate::strain::raster::DILATE_TEXELS`], its kernel field, both passes.
+/// The reference of the GPU chain (`gpu::micro`).
+pub fn deform(
+    map: &DisplacementMap,
+    model: &KernelModel,
+    field: &crate::strain::SurfaceField,
+) -> DisplacementMap {
+    let raster = StrainRaster::new(field, map.width, map.height)
+        .dilated(crate::strain::raster::DILATE_TEXELS);
+    convolve(map, &KernelField::from_strain(&raster, model, map))
+}
+
 /// Both passes: along s, then along t (eq. 4–5).
 pub fn convolve(map: &DisplacementMap, field: &KernelField) -> DisplacementMap {
     let first = convolve_pass(map, &field.s);

@@ -33,7 +33,8 @@ pub enum Axis {
 }
 
 impl Axis {
-    fn unit(self) -> [f32; 2] {
+    /// Unit vector of the axis in texel units.
+    pub fn unit(self) -> [f32; 2] {
         match self {
             Axis::U => [1.0, 0.0],
             Axis::V => [0.0, 1.0],
@@ -41,7 +42,7 @@ impl Axis {
     }
 
     /// Stretch factors along (x, y) for a ratio `r` along this axis.
-    fn stretch(self, r: f64) -> [f64; 2] {
+    pub fn stretch(self, r: f64) -> [f64; 2] {
         match self {
             Axis::U => [r, 1.0],
             Axis::V => [1.0, r],
@@ -97,22 +98,34 @@ pub fn fit_params(
     r: f64,
     hist: HistogramSettings,
 ) -> FitResult {
-    let mut cache = std::collections::HashMap::new();
-    let mut evaluate = |alpha_step: i64, sigma_step: i64| -> f64 {
-        // Grid indices: α = −2 + 0.01·a, σ = 1 + 0.5·s.
-        let key = if alpha_step == 200 {
-            (200, 0)
-        } else {
-            (alpha_step, sigma_step)
-        };
-        *cache.entry(key).or_insert_with(|| {
-            let params = KernelParams {
-                alpha: -2.0 + 0.01 * key.0 as f64,
-                sigma_um: 1.0 + 0.5 * key.1 as f64,
-            };
-            candidate_histogram(neutral, axis, r, params, hist).distance(target)
-        })
+    let evaluate = |batch: &[KernelParams]| -> Result<Vec<f64>> {
+        Ok(batch
+            .iter()
+            .map(|&p| candidate_histogram(neutral, axis, r, p, hist).distance(target))
+            .collect())
     };
+    search(evaluate).expect("the CPU evaluation does not fail")
+}
+
+/// The candidate of grid indices `(a, s)`: α = −2 + 0.01·a, σ = 1 + 0.5·s µm.
+fn grid_params((a, s): (i64, i64)) -> KernelParams {
+    KernelParams {
+        alpha: -2.0 + 0.01 * a as f64,
+        sigma_um: 1.0 + 0.5 * s as f64,
+    }
+}
+
+/// The coarse-to-fine search of [`fit_params`] with any evaluator of the
+/// objective: `evaluate` gets each stage's new candidates as one batch and
+/// returns their distances in order (the GPU evaluates a batch in one
+/// submission). Ties keep the first candidate in (α, σ) order, so equal
+/// objectives give the same optimum on every evaluator.
+pub fn search(
+    mut evaluate: impl FnMut(&[KernelParams]) -> Result<Vec<f64>>,
+) -> Result<FitResult> {
+    let mut cache: std::collections::HashMap<(i64, i64), f64> = std::collections::HashMap::new();
+    // α = 0 makes every σ equal: one key for all.
+    let key = |a: i64, s: i64| if a == 200 { (200, 0) } else { (a, s) };
     let (a_max, s_max) = (300i64, 198i64);
     let mut best = (f64::INFINITY, 200i64, 0i64);
     // (α step, σ step, half-width of the window in steps) per stage.
@@ -128,25 +141,38 @@ pub fn fit_params(
                 ((best.2 - ws).max(0), (best.2 + ws).min(s_max)),
             ),
         };
-        let mut a = a_range.0;
-        while a <= a_range.1 {
-            let mut s = s_range.0;
-            while s <= s_range.1 {
-                let d = evaluate(a, s);
-                if d < best.0 {
-                    best = (d, a, s);
-                }
-                s += ds;
+        let grid: Vec<(i64, i64)> = (a_range.0..=a_range.1)
+            .step_by(da as usize)
+            .flat_map(|a| {
+                (s_range.0..=s_range.1)
+                    .step_by(ds as usize)
+                    .map(move |s| (a, s))
+            })
+            .collect();
+        let mut fresh: Vec<(i64, i64)> = Vec::new();
+        for &(a, s) in &grid {
+            let k = key(a, s);
+            if !cache.contains_key(&k) && !fresh.contains(&k) {
+                fresh.push(k);
             }
-            a += da;
+        }
+        let params: Vec<KernelParams> = fresh.iter().map(|&k| grid_params(k)).collect();
+        let distances = evaluate(&params)?;
+        cache.extend(fresh.into_iter().zip(distances));
+        for &(a, s) in &grid {
+            let d = cache[&key(a, s)];
+            if d < best.0 {
+                best = (d, a, s);
+            }
         }
     }
-    FitResult {
-        alpha: -2.0 + 0.01 * best.1 as f64,
-        sigma_um: 1.0 + 0.5 * best.2 as f64,
+    let p = grid_params((best.1, best.2));
+    Ok(FitResult {
+        alpha: p.alpha,
+        sigma_um: p.sigma_um,
         distance: best.0,
         evaluations: cache.len(),
-    }
+    })
 }
 
 /// One fitted sample: stretch ratio and parameters.

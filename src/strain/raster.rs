@@ -8,10 +8,17 @@
 //! a texel on a shared edge takes the last triangle's value — the same value
 //! up to round-off, since the interpolation is continuous across edges. The
 //! GPU raster (a render pass with UVs as positions) is compared with this.
+//!
+//! [`StrainRaster::dilated`] extends the field a few texels past the surface
+//! edge (each outside texel copies its nearest inside texel), so kernels
+//! and bilinear reads near a UV seam see surface values, not the identity.
 
 use nalgebra::{Matrix2, Vector2};
 
 use super::surface::{barycentric, SurfaceField};
+
+/// How far (texels) the pipeline dilates the raster past the surface edge.
+pub const DILATE_TEXELS: usize = 4;
 
 /// A UV raster of the deformation field.
 #[derive(Clone, Debug, PartialEq)]
@@ -71,6 +78,45 @@ impl StrainRaster {
             }
         }
         raster
+    }
+
+    /// The raster with every outside texel within `radius` texels (square
+    /// window) of an inside one filled from the nearest inside texel of
+    /// this raster (Euclidean distance in texels; ties go to the first in
+    /// row-major order of the window). Those texels count as inside. The
+    /// GPU kernel-field stage applies the same rule when it reads the raster.
+    pub fn dilated(&self, radius: usize) -> StrainRaster {
+        let mut out = self.clone();
+        let r = radius as isize;
+        let (w, h) = (self.width as isize, self.height as isize);
+        for j in 0..h {
+            for i in 0..w {
+                let idx = (j * w + i) as usize;
+                if self.inside[idx] {
+                    continue;
+                }
+                let mut best: Option<(isize, usize)> = None;
+                for dj in -r..=r {
+                    for di in -r..=r {
+                        let (x, y) = (i + di, j + dj);
+                        if x < 0 || y < 0 || x >= w || y >= h {
+                            continue;
+                        }
+                        let k = (y * w + x) as usize;
+                        let d2 = di * di + dj * dj;
+                        if self.inside[k] && best.is_none_or(|b| d2 < b.0) {
+                            best = Some((d2, k));
+                        }
+                    }
+                }
+                if let Some((_, k)) = best {
+                    out.t[idx] = self.t[k];
+                    out.uv_frame[idx] = self.uv_frame[k];
+                    out.inside[idx] = true;
+                }
+            }
+        }
+        out
     }
 
     /// Texel index of `(i, j)`.

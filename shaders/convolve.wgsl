@@ -1,0 +1,65 @@
+// One pass of the spatially varying separable convolution (DESIGN §5.4,
+// seed 000 eq. 4-6). CPU reference: src/micro/convolve.rs
+// (convolve_texel). Rust side: src/gpu/convolve.rs. Needs map.wgsl.
+//
+// Texel p with unit axis a (texels), strength alpha and sigma (texels):
+//   (1 - alpha) D(p) + alpha * sum_k g_k D(p - k a) / sum_k g_k,  k = -N..N,
+// N = ceil(3 sigma), g_k = exp(-k^2 / 2 sigma^2) by the recurrence
+// g_{k+1} = g_k q^(2k+1), q = exp(-1 / 2 sigma^2), in the CPU's order.
+
+// Mirrors `PassInfo` in src/gpu/convolve.rs.
+struct PassInfo {
+    // 0: the pass along s, 1: along t (index into the per-texel pair).
+    pass_index: u32,
+    // 1: use `params` at every texel instead of the per-texel buffer.
+    constant: u32,
+    _pad0: u32,
+    _pad1: u32,
+    // (axis x, axis y, alpha, sigma in texels) when constant.
+    params: vec4<f32>,
+};
+
+@group(0) @binding(0) var<uniform> map: MapInfo;
+@group(0) @binding(1) var<storage, read> src: array<f32>;
+@group(0) @binding(2) var<uniform> pass_info: PassInfo;
+// Per texel two entries (s pass, t pass): (axis x, axis y, alpha, sigma).
+@group(0) @binding(3) var<storage, read> passes: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read_write> dst: array<f32>;
+
+fn convolve_texel(i: i32, j: i32, p: vec4<f32>) -> f32 {
+    let centre = src[u32(j) * map.width + u32(i)];
+    let alpha = p.z;
+    let sigma = p.w;
+    if (alpha == 0.0 || !(sigma > 0.0)) {
+        return centre;
+    }
+    let n = i32(ceil(3.0 * sigma));
+    let q = exp(-0.5 / (sigma * sigma));
+    let x = f32(i);
+    let y = f32(j);
+    var sum = centre;
+    var norm = 1.0;
+    var g = 1.0;
+    var step = q;
+    for (var k = 1; k <= n; k++) {
+        g *= step;
+        step *= q * q;
+        let d = f32(k) * p.xy;
+        sum += g * (bilinear(x - d.x, y - d.y) + bilinear(x + d.x, y + d.y));
+        norm += 2.0 * g;
+    }
+    return (1.0 - alpha) * centre + alpha * (sum / norm);
+}
+
+@compute @workgroup_size(16, 16)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    if (id.x >= map.width || id.y >= map.height) {
+        return;
+    }
+    let idx = id.y * map.width + id.x;
+    var p = pass_info.params;
+    if (pass_info.constant == 0u) {
+        p = passes[2u * idx + pass_info.pass_index];
+    }
+    dst[idx] = convolve_texel(i32(id.x), i32(id.y), p);
+}

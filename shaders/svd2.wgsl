@@ -1,0 +1,151 @@
+// Per-texel closed-form 2x2 SVD and kernel parameters per axis (DESIGN
+// §5.3-5.4, seed 000 eq. 8-13). CPU references: src/strain/svd2.rs (Svd2),
+// src/micro/convolve.rs (KernelField::from_strain), src/strain/raster.rs
+// (StrainRaster::dilated). Rust side: src/gpu/svd2.rs.
+//
+// Reads the raster textures of raster.wgsl. A texel off the surface (zero
+// Q R^T) first takes the values of its nearest surface texel within
+// `dilate` texels (square window, Euclidean distance, ties to the first in
+// row-major window order); one with none stays the identity pass.
+//
+// SVD: T = [a b; c d], E = (a+d)/2, F = (a-d)/2, G = (c+b)/2, H = (c-b)/2,
+// q = |(E, H)|, p = |(F, G)|, phi1 = atan2(G, F), phi2 = atan2(H, E);
+// r_s = q + p, r_t = q - p, V = Rot((phi1 - phi2) / 2).
+// Axes in the map: S = (Q R^T) V scaled to texels; each column gives a unit
+// direction and texels per millimetre, which turns sigma (um) into texels.
+
+// Mirrors `FieldInfo` in src/gpu/svd2.rs. Tables are (r, value) pairs in
+// `table`: alpha(r), sigma(r < 1) and sigma(r >= 1) in micrometres.
+struct FieldInfo {
+    width: u32,
+    height: u32,
+    dilate: u32,
+    _pad0: u32,
+    alpha_start: u32,
+    alpha_len: u32,
+    compression_start: u32,
+    compression_len: u32,
+    stretch_start: u32,
+    stretch_len: u32,
+    _pad1: u32,
+    _pad2: u32,
+};
+
+@group(0) @binding(0) var<uniform> info: FieldInfo;
+@group(0) @binding(1) var t_tex: texture_2d<f32>;
+@group(0) @binding(2) var frame_tex: texture_2d<f32>;
+@group(0) @binding(3) var<storage, read> table: array<vec2<f32>>;
+// Two per texel: (axis x, axis y, alpha, sigma texels) along s, then t.
+@group(0) @binding(4) var<storage, read_write> passes: array<vec4<f32>>;
+// (r_s, r_t) per texel.
+@group(0) @binding(5) var<storage, read_write> stretch: array<vec2<f32>>;
+
+const IDENTITY = vec4<f32>(1.0, 0.0, 0.0, 0.0);
+
+// Piecewise-linear table, constant beyond its ends (kernel.rs PiecewiseLinear::at).
+fn table_at(start: u32, len: u32, r: f32) -> f32 {
+    let first = table[start];
+    let last = table[start + len - 1u];
+    if (r <= first.x) {
+        return first.y;
+    }
+    if (r >= last.x) {
+        return last.y;
+    }
+    var k = start + 1u;
+    for (; k < start + len - 1u; k++) {
+        if (table[k].x > r) {
+            break;
+        }
+    }
+    let p0 = table[k - 1u];
+    let p1 = table[k];
+    return p0.y + (p1.y - p0.y) * (r - p0.x) / (p1.x - p0.x);
+}
+
+// (r_s, r_t, U angle, V angle) of T given row-major.
+fn svd2(m: vec4<f32>) -> vec4<f32> {
+    let e = 0.5 * (m.x + m.w);
+    let f = 0.5 * (m.x - m.w);
+    let g = 0.5 * (m.z + m.y);
+    let h = 0.5 * (m.z - m.y);
+    let q = sqrt(e * e + h * h);
+    let p = sqrt(f * f + g * g);
+    // atan2(0, 0) is 0 on the CPU; it is undefined in WGSL.
+    var phi1 = 0.0;
+    if (p > 0.0) {
+        phi1 = atan2(g, f);
+    }
+    var phi2 = 0.0;
+    if (q > 0.0) {
+        phi2 = atan2(h, e);
+    }
+    return vec4<f32>(q + p, q - p, 0.5 * (phi1 + phi2), 0.5 * (phi1 - phi2));
+}
+
+// Pass parameters along an axis with texel-space direction `a` (texels per
+// millimetre as its length) and stretch ratio r.
+fn pass_params(a: vec2<f32>, r: f32) -> vec4<f32> {
+    let per_mm = length(a);
+    if (!(per_mm > 0.0) || per_mm > 3.0e38) {
+        return IDENTITY;
+    }
+    let ra = abs(r);
+    let alpha = table_at(info.alpha_start, info.alpha_len, ra);
+    var sigma_um: f32;
+    if (ra < 1.0) {
+        sigma_um = table_at(info.compression_start, info.compression_len, ra);
+    } else {
+        sigma_um = table_at(info.stretch_start, info.stretch_len, ra);
+    }
+    return vec4<f32>(a / per_mm, alpha, sigma_um * 1.0e-3 * per_mm);
+}
+
+fn on_surface(frame: vec4<f32>) -> bool {
+    return any(frame != vec4<f32>(0.0));
+}
+
+@compute @workgroup_size(16, 16)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    if (id.x >= info.width || id.y >= info.height) {
+        return;
+    }
+    let idx = id.y * info.width + id.x;
+    var coord = vec2<i32>(id.xy);
+    var frame = textureLoad(frame_tex, coord, 0);
+    if (!on_surface(frame)) {
+        let r = i32(info.dilate);
+        var best = -1;
+        var best_coord = coord;
+        for (var dj = -r; dj <= r; dj++) {
+            for (var di = -r; di <= r; di++) {
+                let c = coord + vec2<i32>(di, dj);
+                if (c.x < 0 || c.y < 0 || c.x >= i32(info.width) || c.y >= i32(info.height)) {
+                    continue;
+                }
+                let d2 = di * di + dj * dj;
+                if ((best < 0 || d2 < best) && on_surface(textureLoad(frame_tex, c, 0))) {
+                    best = d2;
+                    best_coord = c;
+                }
+            }
+        }
+        coord = best_coord;
+        frame = textureLoad(frame_tex, coord, 0);
+    }
+    let t = textureLoad(t_tex, coord, 0);
+    let svd = svd2(t);
+    stretch[idx] = svd.xy;
+    if (!on_surface(frame)) {
+        passes[2u * idx] = IDENTITY;
+        passes[2u * idx + 1u] = IDENTITY;
+        return;
+    }
+    let c = cos(svd.w);
+    let s = sin(svd.w);
+    let size = vec2<f32>(f32(info.width), f32(info.height));
+    let s_col = vec2<f32>(frame.x * c + frame.y * s, frame.z * c + frame.w * s);
+    let t_col = vec2<f32>(frame.y * c - frame.x * s, frame.w * c - frame.z * s);
+    passes[2u * idx] = pass_params(s_col * size, svd.x);
+    passes[2u * idx + 1u] = pass_params(t_col * size, svd.y);
+}

@@ -1,0 +1,259 @@
+//! GPU per-texel 2×2 SVD and kernel parameters (`shaders/svd2.wgsl`; CPU
+//! references [`crate::strain::Svd2`], [`crate::micro::KernelField::from_strain`]
+//! after [`crate::strain::StrainRaster::dilated`]).
+//!
+//! Reads the raster textures, dilates past the surface edge while reading,
+//! and writes per texel `(r_s, r_t)` and the two passes' parameters
+//! `(axis x, axis y, α, σ texels)`. The kernel model's three tables are
+//! uploaded once as `(r, value)` pairs.
+
+use bytemuck::{Pod, Zeroable};
+use nalgebra::Matrix2;
+
+use super::raster::{RasterTargets, FORMAT};
+use super::{bind_group, buffers, compute_pipeline, dispatch, encoder, Context};
+use crate::error::Result;
+use crate::micro::{KernelField, KernelModel, PassParams};
+use crate::strain::StrainRaster;
+
+/// The shader source.
+pub const SHADER: &str = include_str!("../../shaders/svd2.wgsl");
+
+/// Stage parameters; mirrors WGSL `FieldInfo`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct FieldInfo {
+    /// Texels along u.
+    pub width: u32,
+    /// Texels along v.
+    pub height: u32,
+    /// Dilation radius (texels).
+    pub dilate: u32,
+    _pad0: u32,
+    /// First α point in the table.
+    pub alpha_start: u32,
+    /// α points.
+    pub alpha_len: u32,
+    /// First σ(r < 1) point.
+    pub compression_start: u32,
+    /// σ(r < 1) points.
+    pub compression_len: u32,
+    /// First σ(r ≥ 1) point.
+    pub stretch_start: u32,
+    /// σ(r ≥ 1) points.
+    pub stretch_len: u32,
+    _pad1: [u32; 2],
+}
+
+/// The kernel model's tables, concatenated, and where each starts.
+fn model_table(model: &KernelModel) -> (Vec<[f32; 2]>, [(u32, u32); 3]) {
+    let mut table = Vec::new();
+    let mut spans = [(0, 0); 3];
+    for (span, t) in spans.iter_mut().zip([
+        &model.alpha,
+        &model.sigma_compression_um,
+        &model.sigma_stretch_um,
+    ]) {
+        *span = (table.len() as u32, t.points.len() as u32);
+        table.extend(t.points.iter().map(|&(r, v)| [r as f32, v as f32]));
+    }
+    (table, spans)
+}
+
+/// Per-texel outputs on the GPU.
+pub struct FieldBuffers {
+    /// Two `vec4` per texel: the s pass, then the t pass.
+    pub passes: wgpu::Buffer,
+    /// `(r_s, r_t)` per texel.
+    pub stretch: wgpu::Buffer,
+}
+
+impl FieldBuffers {
+    /// Buffers for `width × height` texels.
+    pub fn new(ctx: &Context, width: usize, height: usize) -> FieldBuffers {
+        let n = (width * height) as u64;
+        FieldBuffers {
+            passes: buffers::storage_zeroed(ctx, "kernel passes", 32 * n),
+            stretch: buffers::storage_zeroed(ctx, "texel stretch", 8 * n),
+        }
+    }
+}
+
+/// The compiled stage with its model table resident.
+pub struct Svd2Stage {
+    pipeline: wgpu::ComputePipeline,
+    table: wgpu::Buffer,
+    spans: [(u32, u32); 3],
+}
+
+impl Svd2Stage {
+    /// Compiles the stage for `model`.
+    pub fn new(ctx: &Context, model: &KernelModel) -> Svd2Stage {
+        let (table, spans) = model_table(model);
+        Svd2Stage {
+            pipeline: compute_pipeline(ctx, "svd2.wgsl", SHADER, "main"),
+            table: buffers::storage(ctx, "kernel tables", &table),
+            spans,
+        }
+    }
+
+    /// The uniform for a raster of `width × height` dilated by `dilate`.
+    pub fn info(&self, width: usize, height: usize, dilate: usize) -> FieldInfo {
+        let [a, c, s] = self.spans;
+        FieldInfo {
+            width: width as u32,
+            height: height as u32,
+            dilate: dilate as u32,
+            alpha_start: a.0,
+            alpha_len: a.1,
+            compression_start: c.0,
+            compression_len: c.1,
+            stretch_start: s.0,
+            stretch_len: s.1,
+            ..FieldInfo::default()
+        }
+    }
+
+    /// A bind group reading `raster` and writing `out` with `info`.
+    pub fn bind(
+        &self,
+        ctx: &Context,
+        info: &wgpu::Buffer,
+        raster: &RasterTargets,
+        out: &FieldBuffers,
+    ) -> wgpu::BindGroup {
+        let view = |t: &wgpu::Texture| t.create_view(&wgpu::TextureViewDescriptor::default());
+        let (tv, fv) = (view(&raster.t), view(&raster.frame));
+        bind_group(
+            ctx,
+            &self.pipeline.get_bind_group_layout(0),
+            &[
+                info.as_entire_binding(),
+                wgpu::BindingResource::TextureView(&tv),
+                wgpu::BindingResource::TextureView(&fv),
+                self.table.as_entire_binding(),
+                out.passes.as_entire_binding(),
+                out.stretch.as_entire_binding(),
+            ],
+        )
+    }
+
+    /// Records the dispatch over `width × height` texels.
+    pub fn encode(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        bind: &wgpu::BindGroup,
+        width: usize,
+        height: usize,
+    ) {
+        dispatch(encoder, "svd2", &self.pipeline, bind, width, height);
+    }
+}
+
+/// Uploads a CPU raster into raster textures (to run this stage on given
+/// inputs).
+pub fn upload_raster(ctx: &Context, raster: &StrainRaster) -> RasterTargets {
+    let targets = RasterTargets::new_with_usage(
+        ctx,
+        raster.width,
+        raster.height,
+        wgpu::TextureUsages::COPY_DST,
+    );
+    let row_major = |m: &Matrix2<f64>| [m[(0, 0)], m[(0, 1)], m[(1, 0)], m[(1, 1)]].map(|x| x as f32);
+    let write = |texture: &wgpu::Texture, data: Vec<[f32; 4]>| {
+        ctx.queue.write_texture(
+            texture.as_image_copy(),
+            bytemuck::cast_slice(&data),
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(raster.width as u32 * 16),
+                rows_per_image: Some(raster.height as u32),
+            },
+            wgpu::Extent3d {
+                width: raster.width as u32,
+                height: raster.height as u32,
+                depth_or_array_layers: 1,
+            },
+        );
+    };
+    debug_assert_eq!(FORMAT.block_copy_size(None), Some(16));
+    write(&targets.t, raster.t.iter().map(row_major).collect());
+    // Outside texels carry a zero frame, as the GPU raster leaves them.
+    let frames = raster
+        .uv_frame
+        .iter()
+        .zip(&raster.inside)
+        .map(|(m, &inside)| if inside { row_major(m) } else { [0.0; 4] })
+        .collect();
+    write(&targets.frame, frames);
+    targets
+}
+
+/// Per-texel results read back.
+pub struct TexelField {
+    /// Kernel parameters of both passes.
+    pub kernels: KernelField,
+    /// `(r_s, r_t)` per texel.
+    pub stretch: Vec<[f32; 2]>,
+}
+
+/// Runs the stage on `raster` (dilated by `dilate`) and reads the results.
+pub fn kernel_field(
+    ctx: &Context,
+    raster: &StrainRaster,
+    model: &KernelModel,
+    dilate: usize,
+) -> Result<TexelField> {
+    let (w, h) = (raster.width, raster.height);
+    ctx.check_map(w, h, 32)?;
+    let stage = Svd2Stage::new(ctx, model);
+    let targets = upload_raster(ctx, raster);
+    let out = FieldBuffers::new(ctx, w, h);
+    let info = buffers::uniform(ctx, "field info", &stage.info(w, h, dilate));
+    let bind = stage.bind(ctx, &info, &targets, &out);
+    let mut enc = encoder(ctx);
+    stage.encode(&mut enc, &bind, w, h);
+    ctx.queue.submit([enc.finish()]);
+    let passes: Vec<[f32; 4]> = buffers::read(ctx, &out.passes, 2 * w * h)?;
+    let stretch: Vec<[f32; 2]> = buffers::read(ctx, &out.stretch, w * h)?;
+    Ok(TexelField {
+        kernels: kernel_field_of(w, h, &passes),
+        stretch,
+    })
+}
+
+/// The [`KernelField`] of read-back pass parameters.
+pub fn kernel_field_of(width: usize, height: usize, passes: &[[f32; 4]]) -> KernelField {
+    let params = |p: &[f32; 4]| PassParams {
+        axis: [p[0], p[1]],
+        alpha: p[2],
+        sigma: p[3],
+    };
+    KernelField {
+        width,
+        height,
+        s: passes.iter().step_by(2).map(params).collect(),
+        t: passes.iter().skip(1).step_by(2).map(params).collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn field_info_matches_wgsl_layout() {
+        assert_eq!(std::mem::size_of::<FieldInfo>(), 48);
+    }
+
+    #[test]
+    fn model_tables_are_concatenated_in_order() {
+        let model = KernelModel::forehead();
+        let (table, spans) = model_table(&model);
+        assert_eq!(spans[0], (0, 4));
+        assert_eq!(spans[1], (4, 2));
+        assert_eq!(spans[2], (6, 2));
+        assert_eq!(table.len(), 8);
+        assert_eq!(table[6], [1.0, (38.2f64 - 26.5) as f32]);
+    }
+}
