@@ -1,6 +1,12 @@
 // One pass of the spatially varying separable convolution (DESIGN §5.4,
 // seed 000 eq. 4-6). CPU reference: src/micro/convolve.rs
-// (convolve_texel). Rust side: src/gpu/convolve.rs. Needs map.wgsl.
+// (convolve_texel). Rust side: src/gpu/convolve.rs. Needs map.wgsl and
+// svd2.wgsl (prepended).
+//
+// Three entry points differ only in where a texel's parameters come from:
+// `convolve_strain` computes them from the raster (svd2.wgsl, group 1), as
+// the per-frame chain does; `convolve_field` reads them from a buffer;
+// `convolve_constant` takes one set from the uniform (the fitting search).
 //
 // Texel p with unit axis a (texels), strength alpha and sigma (texels):
 //   (1 - alpha) D(p) + alpha * sum_k g_k D(p - k a) / sum_k g_k,  k = -N..N,
@@ -9,21 +15,21 @@
 
 // Mirrors `PassInfo` in src/gpu/convolve.rs.
 struct PassInfo {
-    // 0: the pass along s, 1: along t (index into the per-texel pair).
+    // 0: the pass along s, 1: along t.
     pass_index: u32,
-    // 1: use `params` at every texel instead of the per-texel buffer.
-    constant: u32,
     _pad0: u32,
     _pad1: u32,
-    // (axis x, axis y, alpha, sigma in texels) when constant.
+    _pad2: u32,
+    // (axis x, axis y, alpha, sigma in texels) for `convolve_constant`.
     params: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> map: MapInfo;
 @group(0) @binding(1) var<storage, read> src: array<f32>;
 @group(0) @binding(2) var<uniform> pass_info: PassInfo;
-// Per texel two entries (s pass, t pass): (axis x, axis y, alpha, sigma).
-@group(0) @binding(3) var<storage, read> passes: array<vec4<f32>>;
+// Per texel two entries (s pass, t pass): (axis x, axis y, alpha, sigma),
+// for `convolve_field`.
+@group(0) @binding(3) var<storage, read> field_passes: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read_write> dst: array<f32>;
 
 fn convolve_texel(i: i32, j: i32, p: vec4<f32>) -> f32 {
@@ -52,14 +58,31 @@ fn convolve_texel(i: i32, j: i32, p: vec4<f32>) -> f32 {
 }
 
 @compute @workgroup_size(16, 16)
-fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+fn convolve_strain(@builtin(global_invocation_id) id: vec3<u32>) {
+    if (id.x >= map.width || id.y >= map.height) {
+        return;
+    }
+    let p = texel_passes(id.xy);
+    var params = p.s;
+    if (pass_info.pass_index == 1u) {
+        params = p.t;
+    }
+    dst[id.y * map.width + id.x] = convolve_texel(i32(id.x), i32(id.y), params);
+}
+
+@compute @workgroup_size(16, 16)
+fn convolve_field(@builtin(global_invocation_id) id: vec3<u32>) {
     if (id.x >= map.width || id.y >= map.height) {
         return;
     }
     let idx = id.y * map.width + id.x;
-    var p = pass_info.params;
-    if (pass_info.constant == 0u) {
-        p = passes[2u * idx + pass_info.pass_index];
+    dst[idx] = convolve_texel(i32(id.x), i32(id.y), field_passes[2u * idx + pass_info.pass_index]);
+}
+
+@compute @workgroup_size(16, 16)
+fn convolve_constant(@builtin(global_invocation_id) id: vec3<u32>) {
+    if (id.x >= map.width || id.y >= map.height) {
+        return;
     }
-    dst[idx] = convolve_texel(i32(id.x), i32(id.y), p);
+    dst[id.y * map.width + id.x] = convolve_texel(i32(id.x), i32(id.y), pass_info.params);
 }

@@ -3,6 +3,11 @@
 // src/micro/convolve.rs (KernelField::from_strain), src/strain/raster.rs
 // (StrainRaster::dilated). Rust side: src/gpu/svd2.rs.
 //
+// The functions here also run inside convolve.wgsl (which prepends this
+// file): each pass computes its texel's parameters on the fly, so no
+// per-texel parameter buffer (32 bytes a texel) is needed per frame. The
+// entry point `svd2_main` writes them out, for tests and inspection.
+//
 // Reads the raster textures of raster.wgsl. A texel off the surface (zero
 // Q R^T) first takes the values of its nearest surface texel within
 // `dilate` texels (square window, Euclidean distance, ties to the first in
@@ -31,14 +36,16 @@ struct FieldInfo {
     _pad2: u32,
 };
 
-@group(0) @binding(0) var<uniform> info: FieldInfo;
-@group(0) @binding(1) var t_tex: texture_2d<f32>;
-@group(0) @binding(2) var frame_tex: texture_2d<f32>;
-@group(0) @binding(3) var<storage, read> table: array<vec2<f32>>;
+// Inputs in group 1 (shared with convolve.wgsl, whose own bindings are in
+// group 0 at 0-4); the outputs of `svd2_main` in group 0 at 8-9.
+@group(1) @binding(0) var<uniform> info: FieldInfo;
+@group(1) @binding(1) var t_tex: texture_2d<f32>;
+@group(1) @binding(2) var frame_tex: texture_2d<f32>;
+@group(1) @binding(3) var<storage, read> table: array<vec2<f32>>;
 // Two per texel: (axis x, axis y, alpha, sigma texels) along s, then t.
-@group(0) @binding(4) var<storage, read_write> passes: array<vec4<f32>>;
+@group(0) @binding(8) var<storage, read_write> passes: array<vec4<f32>>;
 // (r_s, r_t) per texel.
-@group(0) @binding(5) var<storage, read_write> stretch: array<vec2<f32>>;
+@group(0) @binding(9) var<storage, read_write> stretch: array<vec2<f32>>;
 
 const IDENTITY = vec4<f32>(1.0, 0.0, 0.0, 0.0);
 
@@ -105,13 +112,15 @@ fn on_surface(frame: vec4<f32>) -> bool {
     return any(frame != vec4<f32>(0.0));
 }
 
-@compute @workgroup_size(16, 16)
-fn main(@builtin(global_invocation_id) id: vec3<u32>) {
-    if (id.x >= info.width || id.y >= info.height) {
-        return;
-    }
-    let idx = id.y * info.width + id.x;
-    var coord = vec2<i32>(id.xy);
+// Both passes' parameters and (r_s, r_t) of one texel.
+struct TexelPasses {
+    s: vec4<f32>,
+    t: vec4<f32>,
+    stretch: vec2<f32>,
+};
+
+fn texel_passes(id: vec2<u32>) -> TexelPasses {
+    var coord = vec2<i32>(id);
     var frame = textureLoad(frame_tex, coord, 0);
     if (!on_surface(frame)) {
         let r = i32(info.dilate);
@@ -135,17 +144,25 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let t = textureLoad(t_tex, coord, 0);
     let svd = svd2(t);
-    stretch[idx] = svd.xy;
     if (!on_surface(frame)) {
-        passes[2u * idx] = IDENTITY;
-        passes[2u * idx + 1u] = IDENTITY;
-        return;
+        return TexelPasses(IDENTITY, IDENTITY, svd.xy);
     }
     let c = cos(svd.w);
     let s = sin(svd.w);
     let size = vec2<f32>(f32(info.width), f32(info.height));
     let s_col = vec2<f32>(frame.x * c + frame.y * s, frame.z * c + frame.w * s);
     let t_col = vec2<f32>(frame.y * c - frame.x * s, frame.w * c - frame.z * s);
-    passes[2u * idx] = pass_params(s_col * size, svd.x);
-    passes[2u * idx + 1u] = pass_params(t_col * size, svd.y);
+    return TexelPasses(pass_params(s_col * size, svd.x), pass_params(t_col * size, svd.y), svd.xy);
+}
+
+@compute @workgroup_size(16, 16)
+fn svd2_main(@builtin(global_invocation_id) id: vec3<u32>) {
+    if (id.x >= info.width || id.y >= info.height) {
+        return;
+    }
+    let idx = id.y * info.width + id.x;
+    let p = texel_passes(id.xy);
+    passes[2u * idx] = p.s;
+    passes[2u * idx + 1u] = p.t;
+    stretch[idx] = p.stretch;
 }

@@ -21,6 +21,7 @@
 //! inside the simulation; configuration fields carry their unit in the name.
 //! The library never prints; it logs through `log` and returns [`Error`].
 
+pub mod bench;
 pub mod error;
 pub mod export;
 pub mod fem;

@@ -58,16 +58,27 @@ enum Command {
     /// `bench fem` simulates the first frames of a scenario (default the
     /// press-and-drag example) with each linear solver in one run and prints
     /// frames/s, iterations, the time split and the ratio between solvers.
+    ///
+    /// `bench micro` runs one microstructure frame (raster, SVD, two
+    /// convolution passes, normals) on the GPU and on the CPU references at
+    /// each map size, on the scenario's mesh under a fixed deformation, and
+    /// prints both times, their ratio and the largest difference.
     Bench {
-        /// Stage to benchmark: `fem`.
+        /// Stage to benchmark: `fem` or `micro`.
         stage: String,
-        /// Scenario to simulate.
+        /// Scenario (its mesh and, for `micro`, its kernel model).
         #[arg(long, default_value = "examples/press.toml")]
         scenario: PathBuf,
-        /// Frames to simulate (after the rest frame).
+        /// Frames to simulate (`fem`) or timed GPU frames per size (`micro`).
         #[arg(long, default_value_t = 10)]
         frames: usize,
+        /// Map sides for `micro` (texels).
+        #[arg(long, value_delimiter = ',', default_value = "1024,2048,4096")]
+        sizes: Vec<usize>,
     },
+    /// List the GPU adapters (Vulkan) with the limits the stages depend on,
+    /// and the one `run` would use (`SKINPATCH_ADAPTER` picks by name).
+    GpuInfo,
 }
 
 #[derive(Args)]
@@ -157,6 +168,9 @@ fn fit(samples: &Path) -> anyhow::Result<()> {
     if let Some(path) = &report.written {
         line(format!("wrote {}", path.display()));
     }
+    if let Some(device) = &report.device {
+        line(format!("candidates evaluated on {device}"));
+    }
     print_stdout(&text)
 }
 
@@ -179,7 +193,12 @@ fn main() -> ExitCode {
             stage,
             scenario,
             frames,
-        } => bench(&stage, &scenario, frames),
+            sizes,
+        } => match stage.as_str() {
+            "micro" => bench_micro(&scenario, frames, &sizes),
+            _ => bench(&stage, &scenario, frames),
+        },
+        Command::GpuInfo => gpu_info(),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -208,6 +227,9 @@ fn run(path: &Path, output: Option<PathBuf>) -> anyhow::Result<()> {
         )
     })?;
     let mut report = format!("scenario {}: mesh\n{}", setup.name, summary.quality);
+    if let Some(device) = &summary.micro_device {
+        report += &format!("microstructure stages: {device}\n");
+    }
     for file in &summary.written {
         report += &format!("wrote {}\n", file.display());
     }
@@ -217,7 +239,7 @@ fn run(path: &Path, output: Option<PathBuf>) -> anyhow::Result<()> {
 fn bench(stage: &str, path: &Path, frames: usize) -> anyhow::Result<()> {
     use skinpatch::fem::integrate::LinearSolver;
     if stage != "fem" {
-        bail!("unknown stage '{stage}': `bench` knows `fem`");
+        bail!("unknown stage '{stage}': `bench` knows `fem` and `micro`");
     }
     let mut setup = Setup::load(path).with_context(|| format!("scenario {}", path.display()))?;
     let mut report = format!(
@@ -257,6 +279,74 @@ fn bench(stage: &str, path: &Path, frames: usize) -> anyhow::Result<()> {
     }
     report += &format!("direct / cg wall-time ratio: {:.2}\n", walls[1] / walls[0]);
     print_stdout(&report)
+}
+
+fn bench_micro(path: &Path, frames: usize, sizes: &[usize]) -> anyhow::Result<()> {
+    if sizes.is_empty() || sizes.contains(&0) {
+        bail!("--sizes needs positive map sides, e.g. 1024,2048,4096");
+    }
+    let setup = Setup::load(path).with_context(|| format!("scenario {}", path.display()))?;
+    let model = setup
+        .micro
+        .as_ref()
+        .map_or_else(skinpatch::micro::KernelModel::forehead, |m| m.model.clone());
+    println!(
+        "bench micro: one frame (raster, SVD, two passes, normals) on {} ({} top triangles)",
+        path.display(),
+        setup.mesh.top.triangles.len()
+    );
+    println!(
+        "{:>6} {:>12} {:>12} {:>16} {:>10} {:>12}",
+        "size", "CPU ms", "GPU ms", "GPU+readback ms", "CPU/GPU", "max |Δ|"
+    );
+    let fmt = |x: Option<f64>, p: usize| x.map_or("-".to_string(), |v| format!("{v:.p$}"));
+    let bench = skinpatch::bench::bench_micro(&setup.mesh, &model, sizes, frames, |r| {
+        println!(
+            "{:>6} {:>12.1} {:>12} {:>16} {:>10} {:>12}",
+            r.size,
+            r.cpu_ms,
+            fmt(r.gpu_ms, 2),
+            fmt(r.gpu_readback_ms, 1),
+            fmt(r.gpu_ms.map(|g| r.cpu_ms / g), 1),
+            r.max_difference.map_or("-".to_string(), |d| format!("{d:.1e}")),
+        );
+    })?;
+    match &bench.adapter {
+        Some(a) => println!("GPU: {a}; GPU ms is the mean of {} frames", frames.max(1)),
+        None => println!("no GPU adapter: CPU figures only"),
+    }
+    Ok(())
+}
+
+fn gpu_info() -> anyhow::Result<()> {
+    let adapters = skinpatch::gpu::adapters();
+    if adapters.is_empty() {
+        bail!("no Vulkan adapter found (install a Vulkan driver, e.g. Mesa's lavapipe: mesa-vulkan-drivers)");
+    }
+    let mut text = String::new();
+    for (k, a) in adapters.iter().enumerate() {
+        let (i, l) = (&a.info, &a.limits);
+        text += &format!(
+            "adapter {k}: {}\n  backend {:?}, type {:?}, vendor {:#06x}, device {:#06x}\n  driver {} {}\n",
+            i.name, i.backend, i.device_type, i.vendor, i.device, i.driver, i.driver_info
+        );
+        text += &format!(
+            "  max_texture_dimension_2d {}\n  max_storage_buffer_binding_size {}\n  max_buffer_size {}\n  \
+             max_compute_workgroup_storage_size {}\n  max_compute_invocations_per_workgroup {}\n  \
+             max_compute_workgroups_per_dimension {}\n",
+            l.max_texture_dimension_2d,
+            l.max_storage_buffer_binding_size,
+            l.max_buffer_size,
+            l.max_compute_workgroup_storage_size,
+            l.max_compute_invocations_per_workgroup,
+            l.max_compute_workgroups_per_dimension,
+        );
+    }
+    match skinpatch::gpu::Context::new() {
+        Ok(ctx) => text += &format!("in use: {}\n", ctx.describe()),
+        Err(e) => text += &format!("in use: none ({e})\n"),
+    }
+    print_stdout(&text)
 }
 
 /// A progress bar on a terminal, plain lines otherwise.

@@ -6,6 +6,10 @@
 //! maps, deformed microstructure and a `metrics.csv` row. A failing frame
 //! stops the run with an error naming it; everything written before stays.
 //! [`fit`] runs a `skinpatch fit` samples file.
+//!
+//! The microstructure stages run on the GPU ([`crate::gpu::micro`]) when an
+//! adapter exists and on their CPU references otherwise (see
+//! [`crate::gpu::acquire`]); both write the same files.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -27,6 +31,68 @@ pub struct RunSummary {
     pub quality: QualityReport,
     /// Metrics of every frame.
     pub frames: Vec<FrameMetrics>,
+    /// Where the microstructure stages ran (`None` without microstructure).
+    pub micro_device: Option<String>,
+}
+
+/// Where the per-frame microstructure stages run.
+enum MicroEngine {
+    /// The GPU chain with the neutral map resident.
+    Gpu(Box<crate::gpu::micro::GpuMicro>),
+    /// The CPU references.
+    Cpu,
+}
+
+impl MicroEngine {
+    /// The GPU chain when an adapter is usable, else the CPU (an error
+    /// instead when `SKINPATCH_REQUIRE_GPU=1`).
+    fn new(micro: &MicroSetup) -> Result<MicroEngine> {
+        let Some(ctx) = crate::gpu::acquire()? else {
+            return Ok(MicroEngine::Cpu);
+        };
+        let name = ctx.describe();
+        match crate::gpu::micro::GpuMicro::new(
+            ctx,
+            &micro.neutral,
+            &micro.model,
+            crate::strain::raster::DILATE_TEXELS,
+        ) {
+            Ok(chain) => {
+                log::info!("microstructure stages on the GPU: {name}");
+                Ok(MicroEngine::Gpu(Box::new(chain)))
+            }
+            Err(e) if crate::gpu::gpu_required() => Err(e),
+            Err(e) => {
+                log::warn!("{e}; running the CPU reference stages instead");
+                Ok(MicroEngine::Cpu)
+            }
+        }
+    }
+
+    fn describe(&self) -> String {
+        match self {
+            MicroEngine::Gpu(chain) => format!("GPU: {}", chain.context().describe()),
+            MicroEngine::Cpu => "CPU reference stages (no GPU adapter)".into(),
+        }
+    }
+
+    /// The deformed map of a frame and, when asked, its normals.
+    fn deform(
+        &mut self,
+        micro: &MicroSetup,
+        field: &SurfaceField,
+    ) -> Result<(crate::micro::DisplacementMap, Option<Vec<[f32; 3]>>)> {
+        match self {
+            MicroEngine::Gpu(chain) => {
+                let frame = chain.deform(field, micro.normal_maps)?;
+                Ok((frame.map, frame.normals))
+            }
+            MicroEngine::Cpu => Ok((
+                crate::micro::convolve::deform(&micro.neutral, &micro.model, field),
+                None,
+            )),
+        }
+    }
 }
 
 /// Runs the scenario; `on_frame` is called after each frame (for progress).
@@ -53,9 +119,12 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Res
         let folder = dir.join("strain");
         std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
     }
+    let mut engine = None;
     if let Some(micro) = &setup.micro {
         written.extend(write_neutral(dir, setup, micro)?);
+        engine = Some(MicroEngine::new(micro)?);
     }
+    let micro_device = engine.as_ref().map(MicroEngine::describe);
     let mesh = &setup.mesh;
     let result = simulate(setup, |m, sim| {
         let mut m = *m;
@@ -74,12 +143,13 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Res
             let raster = StrainRaster::new(&field, images.px, images.px);
             export::strain_images::StrainImages::new(&raster, images.range).write(dir, m.frame)?;
         }
-        if let Some(micro) = setup
-            .micro
-            .as_ref()
-            .filter(|mi| m.frame % mi.frame_stride == 0)
-        {
-            deform_microstructure(dir, m.frame, micro, &field)?;
+        if let (Some(micro), Some(engine)) = (&setup.micro, engine.as_mut()) {
+            if m.frame % micro.frame_stride == 0 {
+                let (deformed, normals) = engine.deform(micro, &field)?;
+                let folder = dir.join("micro");
+                let tag = format!("{:04}", m.frame);
+                write_micro_frame(&folder, &tag, micro, &deformed, normals)?;
+            }
         }
         frames.push(m);
         on_frame(&m, setup.simulation.frames + 1);
@@ -93,6 +163,7 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Res
         written,
         quality: QualityReport::of(&setup.mesh),
         frames,
+        micro_device,
     })
 }
 
@@ -113,7 +184,7 @@ fn write_neutral(dir: &std::path::Path, setup: &Setup, micro: &MicroSetup) -> Re
             patch_texel_um
         );
     }
-    let mut written = write_micro_frame(&folder, "neutral", micro, map)?;
+    let mut written = write_micro_frame(&folder, "neutral", micro, map, None)?;
     if micro.roughness_table {
         let ratios: Vec<f64> = (0..=14).map(|k| 0.7 + 0.05 * k as f64).collect();
         let table = crate::micro::roughness::tabulate(map, &micro.model, &ratios);
@@ -128,27 +199,14 @@ fn write_neutral(dir: &std::path::Path, setup: &Setup, micro: &MicroSetup) -> Re
     Ok(written)
 }
 
-/// The frame's deformed microstructure: the strain raster at the map's size,
-/// per-texel kernels from the model, the two-pass convolution; written as
-/// `micro/height_NNNN.{png,exr}` and `micro/normal_NNNN.png`.
-fn deform_microstructure(
-    dir: &std::path::Path,
-    frame: usize,
-    micro: &MicroSetup,
-    field: &SurfaceField,
-) -> Result<Vec<PathBuf>> {
-    let map = &micro.neutral;
-    let raster = StrainRaster::new(field, map.width, map.height);
-    let kernels = crate::micro::KernelField::from_strain(&raster, &micro.model, map);
-    let deformed = crate::micro::convolve(map, &kernels);
-    write_micro_frame(&dir.join("micro"), &format!("{frame:04}"), micro, &deformed)
-}
-
+/// Writes a map as `height_TAG.{png,exr}` and, when asked, its normals as
+/// `normal_TAG.{png,exr}` (`normals` if already computed, else from the map).
 fn write_micro_frame(
     folder: &std::path::Path,
     tag: &str,
     micro: &MicroSetup,
     map: &crate::micro::DisplacementMap,
+    normals: Option<Vec<[f32; 3]>>,
 ) -> Result<Vec<PathBuf>> {
     use crate::micro::io;
     let mut written = Vec::new();
@@ -164,7 +222,7 @@ fn write_micro_frame(
     }
     if micro.normal_maps {
         let path = folder.join(format!("normal_{tag}.png"));
-        let normals = crate::micro::normals::normal_map(map);
+        let normals = normals.unwrap_or_else(|| crate::micro::normals::normal_map(map));
         io::write_normal_png16(&path, &normals, map.width, map.height)?;
         written.push(path);
         if micro.exr {
@@ -309,6 +367,8 @@ pub struct FitReport {
     pub lines: crate::micro::fit::ModelLines,
     /// The kernel file written, if the samples file names one.
     pub written: Option<PathBuf>,
+    /// Where the candidates were evaluated (`None` without map samples).
+    pub device: Option<String>,
 }
 
 /// Runs a `skinpatch fit` samples file (see [`crate::scenario::FitSamples`]).
@@ -338,12 +398,27 @@ pub fn fit(path: &std::path::Path) -> Result<FitReport> {
         edge: crate::micro::Edge::Clamp,
     };
     let mut rows = Vec::new();
+    let mut device = None;
     if !samples.sample.is_empty() {
         let neutral_path = samples
             .neutral
             .as_ref()
             .ok_or_else(|| Error::parameter("neutral", "is required to fit [[sample]] maps"))?;
         let neutral = read_map(&base.join(neutral_path), &defaults)?;
+        let ctx = crate::gpu::acquire()?;
+        let gpu_fit = match ctx.as_ref().map(|c| crate::gpu::fit::GpuFit::new(c, &neutral)) {
+            Some(Ok(f)) => Some(f),
+            Some(Err(e)) if crate::gpu::gpu_required() => return Err(e),
+            Some(Err(e)) => {
+                log::warn!("{e}; fitting on the CPU instead");
+                None
+            }
+            None => None,
+        };
+        device = Some(match (&ctx, &gpu_fit) {
+            (Some(c), Some(_)) => format!("GPU: {}", c.describe()),
+            _ => "CPU reference (no GPU adapter)".to_string(),
+        });
         for (k, s) in samples.sample.iter().enumerate() {
             let axis = match s.axis.as_str() {
                 "u" => Axis::U,
@@ -378,7 +453,10 @@ pub fn fit(path: &std::path::Path) -> Result<FitReport> {
                     ))
                 }
             };
-            let result = fit_params(&neutral, &target, axis, s.r, hist);
+            let result = match &gpu_fit {
+                Some(f) => f.fit_params(&target, axis, s.r, hist)?,
+                None => fit_params(&neutral, &target, axis, s.r, hist),
+            };
             log::info!(
                 "fitted {source}: α {:.2}, σ {:.1} µm",
                 result.alpha,
@@ -432,6 +510,7 @@ pub fn fit(path: &std::path::Path) -> Result<FitReport> {
         model,
         lines,
         written,
+        device,
     })
 }
 

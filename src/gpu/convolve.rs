@@ -2,36 +2,42 @@
 //! CPU reference [`crate::micro::convolve`]).
 //!
 //! One dispatch is one 1D pass: the s pass reads the neutral map into an
-//! intermediate, the t pass reads that into the output (eq. 4–5). Per-texel
-//! parameters come from the [`super::svd2`] stage's buffer; a constant mode
-//! (one parameter set in the uniform) serves the fitting search.
+//! intermediate, the t pass reads that into the output (eq. 4–5). Where a
+//! texel's parameters come from is the entry point ([`Params`]): computed
+//! from the strain raster by the [`super::svd2`] functions (the frame
+//! chain), read from a per-texel buffer, or one constant set (the fitting
+//! search).
 
 use bytemuck::{Pod, Zeroable};
 
 use super::map::{with_map_access, GpuMap};
-use super::{bind_group, buffers, compute_pipeline, dispatch, encoder, Context};
+use super::svd2::{self, Svd2Stage};
+use super::{buffers, compute_pipeline, dispatch, encoder, Context};
 use crate::error::Result;
 use crate::micro::{DisplacementMap, KernelField, PassParams};
 
-/// The shader source (without the map access functions).
+/// The shader source (without the map access and svd2 functions).
 pub const SHADER: &str = include_str!("../../shaders/convolve.wgsl");
 
-/// Which parameters a pass uses; mirrors WGSL `PassInfo`.
+/// The whole module: map access, svd2 functions, convolution.
+pub fn source() -> String {
+    with_map_access(&format!("{}\n{SHADER}", svd2::SHADER))
+}
+
+/// The pass and constant parameters; mirrors WGSL `PassInfo`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct PassInfo {
     /// 0: along s; 1: along t.
     pub pass_index: u32,
-    /// 1: `params` at every texel.
-    pub constant: u32,
-    _pad: [u32; 2],
-    /// `(axis x, axis y, α, σ texels)` in constant mode.
+    _pad: [u32; 3],
+    /// `(axis x, axis y, α, σ texels)` for [`Params::Constant`].
     pub params: [f32; 4],
 }
 
 impl PassInfo {
-    /// The s (0) or t (1) pass with per-texel parameters.
-    pub fn per_texel(pass_index: u32) -> PassInfo {
+    /// The s (0) or t (1) pass.
+    pub fn pass(pass_index: u32) -> PassInfo {
         PassInfo {
             pass_index,
             ..PassInfo::default()
@@ -41,11 +47,21 @@ impl PassInfo {
     /// The same parameters everywhere.
     pub fn constant(p: &PassParams) -> PassInfo {
         PassInfo {
-            constant: 1,
             params: pass_vec(p),
             ..PassInfo::default()
         }
     }
+}
+
+/// Where a pass takes its per-texel parameters from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Params {
+    /// The svd2 functions on the raster (bind group 1).
+    Strain,
+    /// A buffer of two `vec4` per texel.
+    Field,
+    /// The uniform's `params`.
+    Constant,
 }
 
 /// A pass's parameters as the shader stores them.
@@ -53,53 +69,88 @@ pub fn pass_vec(p: &PassParams) -> [f32; 4] {
     [p.axis[0], p.axis[1], p.alpha, p.sigma]
 }
 
-/// The compiled stage.
+/// The compiled stage (one pipeline per parameter source).
 pub struct ConvolveStage {
-    pipeline: wgpu::ComputePipeline,
-    no_passes: wgpu::Buffer,
+    strain: wgpu::ComputePipeline,
+    field: wgpu::ComputePipeline,
+    constant: wgpu::ComputePipeline,
 }
 
 impl ConvolveStage {
     /// Compiles the stage.
     pub fn new(ctx: &Context) -> ConvolveStage {
+        let source = source();
+        let make = |entry| compute_pipeline(ctx, "convolve.wgsl", &source, entry);
         ConvolveStage {
-            pipeline: compute_pipeline(ctx, "convolve.wgsl", &with_map_access(SHADER), "main"),
-            no_passes: buffers::storage(ctx, "no per-texel passes", &[[0.0f32; 4]; 2]),
+            strain: make("convolve_strain"),
+            field: make("convolve_field"),
+            constant: make("convolve_constant"),
         }
     }
 
-    /// A bind group convolving `src` into `dst` (same size) with the pass
-    /// selected by `info` and, unless constant, parameters from `passes`.
+    fn pipeline(&self, params: Params) -> &wgpu::ComputePipeline {
+        match params {
+            Params::Strain => &self.strain,
+            Params::Field => &self.field,
+            Params::Constant => &self.constant,
+        }
+    }
+
+    /// Group 0: convolving `src` into `dst` (same size) with the pass and
+    /// constants of `info`, and for [`Params::Field`] the buffer `passes`.
     pub fn bind(
         &self,
         ctx: &Context,
+        params: Params,
         src: &GpuMap,
         info: wgpu::BindingResource<'_>,
         passes: Option<&wgpu::Buffer>,
         dst: &GpuMap,
     ) -> wgpu::BindGroup {
-        bind_group(
-            ctx,
-            &self.pipeline.get_bind_group_layout(0),
-            &[
-                src.info.as_entire_binding(),
-                src.heights.as_entire_binding(),
-                info,
-                passes.unwrap_or(&self.no_passes).as_entire_binding(),
-                dst.heights.as_entire_binding(),
-            ],
-        )
+        let layout = self.pipeline(params).get_bind_group_layout(0);
+        let mut entries = vec![
+            (0, src.info.as_entire_binding()),
+            (1, src.heights.as_entire_binding()),
+            (2, info),
+            (4, dst.heights.as_entire_binding()),
+        ];
+        if params == Params::Field {
+            let passes = passes.expect("a per-texel pass needs its parameter buffer");
+            entries.push((3, passes.as_entire_binding()));
+        }
+        let entries: Vec<wgpu::BindGroupEntry<'_>> = entries
+            .into_iter()
+            .map(|(binding, resource)| wgpu::BindGroupEntry { binding, resource })
+            .collect();
+        ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("convolve"),
+            layout: &layout,
+            entries: &entries,
+        })
     }
 
-    /// Records one pass over the map's texels.
+    /// Group 1 of [`Params::Strain`]: the raster and kernel tables.
+    pub fn strain_inputs(
+        &self,
+        ctx: &Context,
+        svd2: &Svd2Stage,
+        info: &wgpu::Buffer,
+        raster: &super::raster::RasterTargets,
+    ) -> wgpu::BindGroup {
+        svd2.inputs(ctx, &self.strain.get_bind_group_layout(1), info, raster)
+    }
+
+    /// Records one pass over `width × height` texels with `binds` (group
+    /// 0, and group 1 for [`Params::Strain`]).
     pub fn encode(
         &self,
         encoder: &mut wgpu::CommandEncoder,
-        bind: &wgpu::BindGroup,
+        params: Params,
+        binds: &[&wgpu::BindGroup],
         width: usize,
         height: usize,
     ) {
-        dispatch(encoder, "convolve", &self.pipeline, bind, width, height);
+        dispatch(encoder, "convolve", self.pipeline(params), binds, width, height);
     }
 }
 
@@ -118,12 +169,14 @@ pub fn convolve(ctx: &Context, map: &DisplacementMap, field: &KernelField) -> Re
         .flat_map(|(s, t)| [pass_vec(s), pass_vec(t)])
         .collect();
     let passes = buffers::storage(ctx, "kernel passes", &interleaved);
-    let infos = [0, 1].map(|k| buffers::uniform(ctx, "pass info", &PassInfo::per_texel(k)));
-    let first = stage.bind(ctx, &src, infos[0].as_entire_binding(), Some(&passes), &mid);
-    let second = stage.bind(ctx, &mid, infos[1].as_entire_binding(), Some(&passes), &dst);
+    let infos = [0, 1].map(|k| buffers::uniform(ctx, "pass info", &PassInfo::pass(k)));
+    let bind = |s, info: &wgpu::Buffer, d| {
+        stage.bind(ctx, Params::Field, s, info.as_entire_binding(), Some(&passes), d)
+    };
+    let (first, second) = (bind(&src, &infos[0], &mid), bind(&mid, &infos[1], &dst));
     let mut enc = encoder(ctx);
-    stage.encode(&mut enc, &first, map.width, map.height);
-    stage.encode(&mut enc, &second, map.width, map.height);
+    stage.encode(&mut enc, Params::Field, &[&first], map.width, map.height);
+    stage.encode(&mut enc, Params::Field, &[&second], map.width, map.height);
     ctx.queue.submit([enc.finish()]);
     dst.download(ctx)
 }

@@ -11,7 +11,7 @@
 
 use std::num::NonZeroU64;
 
-use super::convolve::{ConvolveStage, PassInfo};
+use super::convolve::{ConvolveStage, Params, PassInfo};
 use super::histogram::{normalise, HistogramInfo, HistogramStage};
 use super::map::{GpuMap, MapInfo};
 use super::{buffers, encoder, Context};
@@ -89,10 +89,16 @@ impl<'a> GpuFit<'a> {
             };
             let mut enc = encoder(ctx);
             for c in 0..batch.len() as u64 {
-                let conv = self
-                    .convolve
-                    .bind(ctx, &self.neutral, slot(2 * c), None, &self.scratch);
-                self.convolve.encode(&mut enc, &conv, w, h);
+                let conv = self.convolve.bind(
+                    ctx,
+                    Params::Constant,
+                    &self.neutral,
+                    slot(2 * c),
+                    None,
+                    &self.scratch,
+                );
+                self.convolve
+                    .encode(&mut enc, Params::Constant, &[&conv], w, h);
                 let hist_bind = self.histogram.bind(
                     ctx,
                     stretched.as_entire_binding(),

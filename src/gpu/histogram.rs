@@ -84,7 +84,7 @@ impl HistogramStage {
         width: usize,
         height: usize,
     ) {
-        dispatch(encoder, "histogram", &self.pipeline, bind, width, height);
+        dispatch(encoder, "histogram", &self.pipeline, &[bind], width, height);
     }
 }
 

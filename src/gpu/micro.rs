@@ -1,5 +1,6 @@
-//! The per-frame microstructure chain on the GPU: raster → SVD and kernel
-//! parameters → pass along s → pass along t → normals (CPU reference
+//! The per-frame microstructure chain on the GPU: raster → pass along s →
+//! pass along t → normals, each pass computing its texel's SVD and kernel
+//! parameters from the raster (the svd2 functions) (CPU reference
 //! [`crate::micro::convolve::deform`] and
 //! [`crate::micro::normals::normal_map`]).
 //!
@@ -8,19 +9,20 @@
 //! surface's per-vertex matrices (40 bytes a vertex) and records the five
 //! stages into one command buffer.
 
-use super::convolve::{ConvolveStage, PassInfo};
+use super::convolve::{ConvolveStage, Params, PassInfo};
 use super::map::GpuMap;
-use super::normals::{normal_buffer, NormalsStage};
+use super::normals::{normal_texture, read_normals, NormalsStage};
 use super::raster::{RasterStage, RasterTargets, SurfaceBuffers};
-use super::svd2::{FieldBuffers, Svd2Stage};
+use super::svd2::Svd2Stage;
 use super::{buffers, encoder, Context};
 use crate::error::Result;
 use crate::micro::{DisplacementMap, KernelModel};
 use crate::strain::SurfaceField;
 
-/// Bytes per texel of the largest buffer a frame binds (the two passes'
-/// parameters, 2 × vec4<f32>).
-pub const LARGEST_BYTES_PER_TEXEL: u64 = 32;
+/// Bytes per texel of the largest storage buffer a frame binds (a map of
+/// f32 heights; the raster and normals are textures, and the kernel
+/// parameters are computed where they are used).
+pub const LARGEST_BYTES_PER_TEXEL: u64 = 4;
 
 /// A frame's outputs read back.
 pub struct DeformedFrame {
@@ -36,12 +38,11 @@ pub struct GpuMicro {
     width: usize,
     height: usize,
     out: GpuMap,
-    normals: wgpu::Buffer,
+    normals: wgpu::Texture,
     raster: RasterStage,
     targets: RasterTargets,
     surface: Option<SurfaceBuffers>,
-    svd2: Svd2Stage,
-    field_bind: wgpu::BindGroup,
+    strain_inputs: wgpu::BindGroup,
     convolve: ConvolveStage,
     pass_binds: [wgpu::BindGroup; 2],
     normals_stage: NormalsStage,
@@ -62,17 +63,19 @@ impl GpuMicro {
         let source = GpuMap::upload(&ctx, neutral);
         let mid = GpuMap::scratch(&ctx, neutral);
         let out = GpuMap::scratch(&ctx, neutral);
-        let normals = normal_buffer(&ctx, w, h);
+        let normals = normal_texture(&ctx, w, h);
         let targets = RasterTargets::new(&ctx, w, h);
         let svd2 = Svd2Stage::new(&ctx, model);
-        let field = FieldBuffers::new(&ctx, w, h);
         let info = buffers::uniform(&ctx, "field info", &svd2.info(w, h, dilate));
-        let field_bind = svd2.bind(&ctx, &info, &targets, &field);
         let convolve = ConvolveStage::new(&ctx);
-        let pass_info = [0, 1].map(|k| buffers::uniform(&ctx, "pass info", &PassInfo::per_texel(k)));
+        let strain_inputs = convolve.strain_inputs(&ctx, &svd2, &info, &targets);
+        let pass_info = [0, 1].map(|k| buffers::uniform(&ctx, "pass info", &PassInfo::pass(k)));
+        let bind = |src, info: &wgpu::Buffer, dst| {
+            convolve.bind(&ctx, Params::Strain, src, info.as_entire_binding(), None, dst)
+        };
         let pass_binds = [
-            convolve.bind(&ctx, &source, pass_info[0].as_entire_binding(), Some(&field.passes), &mid),
-            convolve.bind(&ctx, &mid, pass_info[1].as_entire_binding(), Some(&field.passes), &out),
+            bind(&source, &pass_info[0], &mid),
+            bind(&mid, &pass_info[1], &out),
         ];
         let normals_stage = NormalsStage::new(&ctx);
         let normals_bind = normals_stage.bind(&ctx, &out, &normals);
@@ -86,8 +89,7 @@ impl GpuMicro {
             normals,
             targets,
             surface: None,
-            svd2,
-            field_bind,
+            strain_inputs,
             convolve,
             pass_binds,
             normals_stage,
@@ -98,6 +100,11 @@ impl GpuMicro {
     /// The device in use.
     pub fn context(&self) -> &Context {
         &self.ctx
+    }
+
+    /// Gives the device back (the chain's buffers are freed).
+    pub fn into_context(self) -> Context {
+        self.ctx
     }
 
     /// Uploads `field` and submits the whole chain (normals too when
@@ -111,9 +118,9 @@ impl GpuMicro {
         let (w, h) = (self.width, self.height);
         let mut enc = encoder(&self.ctx);
         self.raster.encode(&mut enc, surface, &self.targets);
-        self.svd2.encode(&mut enc, &self.field_bind, w, h);
         for bind in &self.pass_binds {
-            self.convolve.encode(&mut enc, bind, w, h);
+            let binds = [bind, &self.strain_inputs];
+            self.convolve.encode(&mut enc, Params::Strain, &binds, w, h);
         }
         if normals {
             self.normals_stage.encode(&mut enc, &self.normals_bind, w, h);
@@ -132,7 +139,7 @@ impl GpuMicro {
         self.submit(field, normals);
         let map = self.out.download(&self.ctx)?;
         let normals = if normals {
-            Some(buffers::read(&self.ctx, &self.normals, self.width * self.height)?)
+            Some(read_normals(&self.ctx, &self.normals, self.width, self.height)?)
         } else {
             None
         };

@@ -8,7 +8,8 @@
 //!   parameters per axis, dilation past the surface edge —
 //!   [`crate::strain::Svd2`], [`crate::micro::KernelField`];
 //! * [`convolve`] (`shaders/convolve.wgsl`): one spatially varying 1D pass —
-//!   [`crate::micro::convolve`];
+//!   [`crate::micro::convolve`]; in the per-frame chain each pass evaluates
+//!   the svd2 functions at its texel instead of reading a parameter buffer;
 //! * [`normals`] (`shaders/normals.wgsl`): normal map —
 //!   [`crate::micro::normals::normal_map`];
 //! * [`histogram`] (`shaders/histogram.wgsl`): 64 × 64 normal histogram with
@@ -309,12 +310,12 @@ pub(crate) fn bind_group(
 }
 
 /// Records one compute pass of `pipeline` over `width × height` texels
-/// (16 × 16 workgroups).
+/// (16 × 16 workgroups) with `binds` as groups 0, 1, ….
 pub(crate) fn dispatch(
     encoder: &mut wgpu::CommandEncoder,
     label: &str,
     pipeline: &wgpu::ComputePipeline,
-    bind: &wgpu::BindGroup,
+    binds: &[&wgpu::BindGroup],
     width: usize,
     height: usize,
 ) {
@@ -323,7 +324,9 @@ pub(crate) fn dispatch(
         timestamp_writes: None,
     });
     pass.set_pipeline(pipeline);
-    pass.set_bind_group(0, bind, &[]);
+    for (k, bind) in binds.iter().enumerate() {
+        pass.set_bind_group(k as u32, *bind, &[]);
+    }
     let (gx, gy) = Context::groups(width, height);
     pass.dispatch_workgroups(gx, gy, 1);
 }
@@ -341,7 +344,7 @@ pub fn shader_sources() -> Vec<(&'static str, String)> {
     vec![
         ("raster.wgsl", raster::SHADER.to_string()),
         ("svd2.wgsl", svd2::SHADER.to_string()),
-        ("convolve.wgsl", map::with_map_access(convolve::SHADER)),
+        ("convolve.wgsl", convolve::source()),
         ("normals.wgsl", map::with_map_access(normals::SHADER)),
         ("histogram.wgsl", map::with_map_access(histogram::SHADER)),
     ]

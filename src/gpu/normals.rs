@@ -1,5 +1,7 @@
 //! GPU normal map (`shaders/normals.wgsl`; CPU reference
-//! [`crate::micro::normals::normal_map`]).
+//! [`crate::micro::normals::normal_map`]). Normals go to an `Rgba32Float`
+//! storage texture: 16 bytes a texel would exceed the storage-buffer
+//! binding limit of some adapters at 4096² (128 MiB on lavapipe).
 
 use super::map::{with_map_access, GpuMap};
 use super::{bind_group, buffers, compute_pipeline, dispatch, encoder, Context};
@@ -22,15 +24,16 @@ impl NormalsStage {
         }
     }
 
-    /// A bind group writing `map`'s normals (3 floats per texel) to `out`.
-    pub fn bind(&self, ctx: &Context, map: &GpuMap, out: &wgpu::Buffer) -> wgpu::BindGroup {
+    /// A bind group writing `map`'s normals to `out` (see [`normal_texture`]).
+    pub fn bind(&self, ctx: &Context, map: &GpuMap, out: &wgpu::Texture) -> wgpu::BindGroup {
+        let view = out.create_view(&wgpu::TextureViewDescriptor::default());
         bind_group(
             ctx,
             &self.pipeline.get_bind_group_layout(0),
             &[
                 map.info.as_entire_binding(),
                 map.heights.as_entire_binding(),
-                out.as_entire_binding(),
+                wgpu::BindingResource::TextureView(&view),
             ],
         )
     }
@@ -43,24 +46,48 @@ impl NormalsStage {
         width: usize,
         height: usize,
     ) {
-        dispatch(encoder, "normals", &self.pipeline, bind, width, height);
+        dispatch(encoder, "normals", &self.pipeline, &[bind], width, height);
     }
 }
 
-/// A buffer for the normals of `width × height` texels.
-pub fn normal_buffer(ctx: &Context, width: usize, height: usize) -> wgpu::Buffer {
-    buffers::storage_zeroed(ctx, "normals", 12 * (width * height) as u64)
+/// A texture for the normals of `width × height` texels.
+pub fn normal_texture(ctx: &Context, width: usize, height: usize) -> wgpu::Texture {
+    ctx.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("normals"),
+        size: wgpu::Extent3d {
+            width: width as u32,
+            height: height as u32,
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Rgba32Float,
+        usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
+        view_formats: &[],
+    })
+}
+
+/// Reads a normal texture back as `[x, y, z]` per texel.
+pub fn read_normals(
+    ctx: &Context,
+    texture: &wgpu::Texture,
+    width: usize,
+    height: usize,
+) -> Result<Vec<[f32; 3]>> {
+    let texels = buffers::read_texture_rgba32(ctx, texture, width, height)?;
+    Ok(texels.into_iter().map(|n| [n[0], n[1], n[2]]).collect())
 }
 
 /// The normal map of `map` computed on the GPU.
 pub fn normal_map(ctx: &Context, map: &DisplacementMap) -> Result<Vec<[f32; 3]>> {
-    ctx.check_map(map.width, map.height, 12)?;
+    ctx.check_map(map.width, map.height, 4)?;
     let stage = NormalsStage::new(ctx);
     let src = GpuMap::upload(ctx, map);
-    let out = normal_buffer(ctx, map.width, map.height);
+    let out = normal_texture(ctx, map.width, map.height);
     let bind = stage.bind(ctx, &src, &out);
     let mut enc = encoder(ctx);
     stage.encode(&mut enc, &bind, map.width, map.height);
     ctx.queue.submit([enc.finish()]);
-    buffers::read(ctx, &out, map.width * map.height)
+    read_normals(ctx, &out, map.width, map.height)
 }

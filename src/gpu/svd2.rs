@@ -3,9 +3,12 @@
 //! after [`crate::strain::StrainRaster::dilated`]).
 //!
 //! Reads the raster textures, dilates past the surface edge while reading,
-//! and writes per texel `(r_s, r_t)` and the two passes' parameters
+//! and gives per texel `(r_s, r_t)` and the two passes' parameters
 //! `(axis x, axis y, α, σ texels)`. The kernel model's three tables are
-//! uploaded once as `(r, value)` pairs.
+//! uploaded once as `(r, value)` pairs. The shader's inputs are bind group
+//! 1, shared with the convolution, which evaluates the same functions per
+//! texel in the frame chain; this stage's own entry point writes the
+//! results to buffers (group 0) for comparison and inspection.
 
 use bytemuck::{Pod, Zeroable};
 use nalgebra::Matrix2;
@@ -91,7 +94,7 @@ impl Svd2Stage {
     pub fn new(ctx: &Context, model: &KernelModel) -> Svd2Stage {
         let (table, spans) = model_table(model);
         Svd2Stage {
-            pipeline: compute_pipeline(ctx, "svd2.wgsl", SHADER, "main"),
+            pipeline: compute_pipeline(ctx, "svd2.wgsl", SHADER, "svd2_main"),
             table: buffers::storage(ctx, "kernel tables", &table),
             spans,
         }
@@ -114,39 +117,61 @@ impl Svd2Stage {
         }
     }
 
-    /// A bind group reading `raster` and writing `out` with `info`.
-    pub fn bind(
+    /// The input group (1) for `layout` — this stage's, or that of a
+    /// pipeline that includes the svd2 functions: `info` and `raster`.
+    pub fn inputs(
         &self,
         ctx: &Context,
+        layout: &wgpu::BindGroupLayout,
         info: &wgpu::Buffer,
         raster: &RasterTargets,
-        out: &FieldBuffers,
     ) -> wgpu::BindGroup {
         let view = |t: &wgpu::Texture| t.create_view(&wgpu::TextureViewDescriptor::default());
         let (tv, fv) = (view(&raster.t), view(&raster.frame));
         bind_group(
             ctx,
-            &self.pipeline.get_bind_group_layout(0),
+            layout,
             &[
                 info.as_entire_binding(),
                 wgpu::BindingResource::TextureView(&tv),
                 wgpu::BindingResource::TextureView(&fv),
                 self.table.as_entire_binding(),
-                out.passes.as_entire_binding(),
-                out.stretch.as_entire_binding(),
             ],
         )
     }
 
-    /// Records the dispatch over `width × height` texels.
+    /// Runs the stage's own entry point over `raster` into `out`.
     pub fn encode(
         &self,
+        ctx: &Context,
         encoder: &mut wgpu::CommandEncoder,
-        bind: &wgpu::BindGroup,
-        width: usize,
-        height: usize,
+        info: &wgpu::Buffer,
+        raster: &RasterTargets,
+        out: &FieldBuffers,
     ) {
-        dispatch(encoder, "svd2", &self.pipeline, bind, width, height);
+        let inputs = self.inputs(ctx, &self.pipeline.get_bind_group_layout(1), info, raster);
+        let outputs = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("svd2 outputs"),
+            layout: &self.pipeline.get_bind_group_layout(0),
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 8,
+                    resource: out.passes.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 9,
+                    resource: out.stretch.as_entire_binding(),
+                },
+            ],
+        });
+        dispatch(
+            encoder,
+            "svd2",
+            &self.pipeline,
+            &[&outputs, &inputs],
+            raster.width,
+            raster.height,
+        );
     }
 }
 
@@ -210,9 +235,8 @@ pub fn kernel_field(
     let targets = upload_raster(ctx, raster);
     let out = FieldBuffers::new(ctx, w, h);
     let info = buffers::uniform(ctx, "field info", &stage.info(w, h, dilate));
-    let bind = stage.bind(ctx, &info, &targets, &out);
     let mut enc = encoder(ctx);
-    stage.encode(&mut enc, &bind, w, h);
+    stage.encode(ctx, &mut enc, &info, &targets, &out);
     ctx.queue.submit([enc.finish()]);
     let passes: Vec<[f32; 4]> = buffers::read(ctx, &out.passes, 2 * w * h)?;
     let stretch: Vec<[f32; 2]> = buffers::read(ctx, &out.stretch, w * h)?;
