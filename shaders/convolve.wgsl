@@ -11,7 +11,9 @@
 // Texel p with unit axis a (texels), strength alpha and sigma (texels):
 //   (1 - alpha) D(p) + alpha * sum_k g_k D(p - k a) / sum_k g_k,  k = -N..N,
 // N = ceil(3 sigma), g_k = exp(-k^2 / 2 sigma^2) by the recurrence
-// g_{k+1} = g_k q^(2k+1), q = exp(-1 / 2 sigma^2), in the CPU's order.
+// g_{k+1} = g_k q^(2k+1), q = exp(-1 / 2 sigma^2), in the CPU's order; the
+// outermost pair is scaled by 3 sigma - (N - 1), so the kernel is continuous
+// in sigma.
 
 // Mirrors `PassInfo` in src/gpu/convolve.rs.
 struct PassInfo {
@@ -40,6 +42,7 @@ fn convolve_texel(i: i32, j: i32, p: vec4<f32>) -> f32 {
         return centre;
     }
     let n = i32(ceil(3.0 * sigma));
+    let taper = 3.0 * sigma - f32(n - 1);
     let q = exp(-0.5 / (sigma * sigma));
     let x = f32(i);
     let y = f32(j);
@@ -50,9 +53,13 @@ fn convolve_texel(i: i32, j: i32, p: vec4<f32>) -> f32 {
     for (var k = 1; k <= n; k++) {
         g *= step;
         step *= q * q;
+        var w = g;
+        if (k == n) {
+            w = g * taper;
+        }
         let d = f32(k) * p.xy;
-        sum += g * (bilinear(x - d.x, y - d.y) + bilinear(x + d.x, y + d.y));
-        norm += 2.0 * g;
+        sum += w * (bilinear(x - d.x, y - d.y) + bilinear(x + d.x, y + d.y));
+        norm += 2.0 * w;
     }
     return (1.0 - alpha) * centre + alpha * (sum / norm);
 }

@@ -4,8 +4,10 @@
 // Each surface triangle is drawn with its UVs as positions: texel (i, j) of a
 // width x height target covers u in [i, i+1)/width, v in [j, j+1)/height, with
 // row 0 at v = 0, and the rasteriser samples at texel centres, as the CPU
-// raster does. The per-vertex 2x2 matrices T and Q R^T (row-major in a vec4)
-// are interpolated linearly (w = 1, so perspective correction is exact).
+// raster does. The per-vertex 2x2 matrices T - I and Q R^T (row-major in a
+// vec4) are interpolated linearly (w = 1, so perspective correction is
+// exact). T - I rather than T keeps full f32 precision in the small
+// deviations that fix the principal axes.
 // Targets are cleared to zero: a zero Q R^T marks a texel off the surface.
 
 // Mirrors `RasterVertex` in src/gpu/raster.rs.

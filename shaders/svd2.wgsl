@@ -13,7 +13,9 @@
 // `dilate` texels (square window, Euclidean distance, ties to the first in
 // row-major window order); one with none stays the identity pass.
 //
-// SVD: T = [a b; c d], E = (a+d)/2, F = (a-d)/2, G = (c+b)/2, H = (c-b)/2,
+// SVD of T from the raster's T - I = [a' b'; c' d'] (so that F and G, which
+// fix the axes, keep full f32 precision when T is near a rotation):
+// T = [a b; c d], E = (a+d)/2, F = (a-d)/2, G = (c+b)/2, H = (c-b)/2,
 // q = |(E, H)|, p = |(F, G)|, phi1 = atan2(G, F), phi2 = atan2(H, E);
 // r_s = q + p, r_t = q - p, V = Rot((phi1 - phi2) / 2).
 // Axes in the map: S = (Q R^T) V scaled to texels; each column gives a unit
@@ -70,9 +72,9 @@ fn table_at(start: u32, len: u32, r: f32) -> f32 {
     return p0.y + (p1.y - p0.y) * (r - p0.x) / (p1.x - p0.x);
 }
 
-// (r_s, r_t, U angle, V angle) of T given row-major.
+// (r_s, r_t, U angle, V angle) of T, given T - I row-major.
 fn svd2(m: vec4<f32>) -> vec4<f32> {
-    let e = 0.5 * (m.x + m.w);
+    let e = 1.0 + 0.5 * (m.x + m.w);
     let f = 0.5 * (m.x - m.w);
     let g = 0.5 * (m.z + m.y);
     let h = 0.5 * (m.z - m.y);
@@ -142,11 +144,11 @@ fn texel_passes(id: vec2<u32>) -> TexelPasses {
         coord = best_coord;
         frame = textureLoad(frame_tex, coord, 0);
     }
-    let t = textureLoad(t_tex, coord, 0);
-    let svd = svd2(t);
     if (!on_surface(frame)) {
-        return TexelPasses(IDENTITY, IDENTITY, svd.xy);
+        // Off the surface T is taken as zero, as on the CPU.
+        return TexelPasses(IDENTITY, IDENTITY, vec2<f32>(0.0));
     }
+    let svd = svd2(textureLoad(t_tex, coord, 0));
     let c = cos(svd.w);
     let s = sin(svd.w);
     let size = vec2<f32>(f32(info.width), f32(info.height));

@@ -14,9 +14,9 @@ use std::time::Instant;
 
 use crate::error::Result;
 use crate::gpu::micro::GpuMicro;
+use crate::mesh::{TetMesh, Vec3};
 use crate::micro::procedural::{generate, SkinParams};
 use crate::micro::{DisplacementMap, Edge, KernelModel};
-use crate::mesh::{TetMesh, Vec3};
 use crate::strain::raster::DILATE_TEXELS;
 use crate::strain::SurfaceField;
 
@@ -70,9 +70,13 @@ pub fn bench_map(size: usize, extent_mm: f64) -> Result<DisplacementMap> {
         groove_spacing_um: 150.0,
         ..SkinParams::default()
     })?;
-    let mut map = DisplacementMap::from_fn(size, size, extent_mm * 1000.0 / size as f64, Edge::Wrap, |i, j| {
-        tile.data[(j % 256) * 256 + i % 256]
-    });
+    let mut map = DisplacementMap::from_fn(
+        size,
+        size,
+        extent_mm * 1000.0 / size as f64,
+        Edge::Wrap,
+        |i, j| tile.data[(j % 256) * 256 + i % 256],
+    );
     map.height_unit_um = tile.height_unit_um;
     Ok(map)
 }

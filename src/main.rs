@@ -308,7 +308,8 @@ fn bench_micro(path: &Path, frames: usize, sizes: &[usize]) -> anyhow::Result<()
             fmt(r.gpu_ms, 2),
             fmt(r.gpu_readback_ms, 1),
             fmt(r.gpu_ms.map(|g| r.cpu_ms / g), 1),
-            r.max_difference.map_or("-".to_string(), |d| format!("{d:.1e}")),
+            r.max_difference
+                .map_or("-".to_string(), |d| format!("{d:.1e}")),
         );
     })?;
     match &bench.adapter {

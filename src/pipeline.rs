@@ -406,7 +406,10 @@ pub fn fit(path: &std::path::Path) -> Result<FitReport> {
             .ok_or_else(|| Error::parameter("neutral", "is required to fit [[sample]] maps"))?;
         let neutral = read_map(&base.join(neutral_path), &defaults)?;
         let ctx = crate::gpu::acquire()?;
-        let gpu_fit = match ctx.as_ref().map(|c| crate::gpu::fit::GpuFit::new(c, &neutral)) {
+        let gpu_fit = match ctx
+            .as_ref()
+            .map(|c| crate::gpu::fit::GpuFit::new(c, &neutral))
+        {
             Some(Ok(f)) => Some(f),
             Some(Err(e)) if crate::gpu::gpu_required() => return Err(e),
             Some(Err(e)) => {

@@ -562,3 +562,132 @@ fn fit_prints_the_table_and_writes_a_usable_kernel_file() {
     let err = text(&o.stderr);
     assert!(err.contains("bad.toml:3"), "{err}");
 }
+
+/// Runs `skinpatch run` on the small press with a microstructure, with
+/// extra environment variables.
+fn run_micro_with_env(dir: &Path, env: &[(&str, &str)]) -> (std::path::PathBuf, Output) {
+    let scenario = std::fs::read_to_string(root().join("tests/fixtures/press_small.toml")).unwrap();
+    let scenario = scenario.replace("../../meshes", root().join("meshes").to_str().unwrap())
+        + "\n[microstructure]\nframe_stride = 6\n[microstructure.procedural]\nsize_px = 300\n";
+    let path = dir.join("scenario.toml");
+    std::fs::write(&path, scenario).unwrap();
+    let out = dir.join("out");
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_skinpatch"));
+    cmd.args([
+        "run",
+        path.to_str().unwrap(),
+        "--output",
+        out.to_str().unwrap(),
+    ])
+    .current_dir(root())
+    .env_remove("SKINPATCH_ADAPTER")
+    .env_remove("SKINPATCH_REQUIRE_GPU");
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    (out, cmd.output().expect("the skinpatch binary runs"))
+}
+
+#[test]
+fn gpu_and_cpu_runs_write_the_same_maps_and_say_where_they_ran() {
+    use skinpatch::micro::io::{read_png16, MapDefaults, TexelSize};
+    let required = std::env::var("SKINPATCH_REQUIRE_GPU").is_ok_and(|v| v == "1");
+    let gpu_dir = tempfile::tempdir().unwrap();
+    let (gpu_out, o) = run_micro_with_env(gpu_dir.path(), &[]);
+    assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    let gpu_used = text(&o.stdout).contains("microstructure stages: GPU: ");
+    assert!(gpu_used || !required, "stdout: {}", text(&o.stdout));
+    // A name no adapter has: the run falls back to the CPU and says so.
+    let cpu_dir = tempfile::tempdir().unwrap();
+    let (cpu_out, o) =
+        run_micro_with_env(cpu_dir.path(), &[("SKINPATCH_ADAPTER", "no-such-adapter")]);
+    assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    assert!(
+        text(&o.stdout).contains("microstructure stages: CPU reference"),
+        "stdout: {}",
+        text(&o.stdout)
+    );
+    assert!(
+        text(&o.stderr).contains("no-such-adapter"),
+        "the fallback is logged"
+    );
+    let defaults = MapDefaults {
+        texel: TexelSize::Um(1.0),
+        height_unit_um: 1.0,
+        edge: skinpatch::micro::Edge::Wrap,
+    };
+    for name in ["height_0006.png", "normal_0006.png"] {
+        let a = std::fs::read(gpu_out.join("micro").join(name)).unwrap();
+        let b = std::fs::read(cpu_out.join("micro").join(name)).unwrap();
+        if a == b {
+            continue;
+        }
+        // 16-bit quantisation may round a texel either way.
+        if name.starts_with("height") {
+            let (ga, cb) = (
+                read_png16(&gpu_out.join("micro").join(name), &defaults).unwrap(),
+                read_png16(&cpu_out.join("micro").join(name), &defaults).unwrap(),
+            );
+            let (lo, hi) = cb.range();
+            let worst = ga
+                .data
+                .iter()
+                .zip(&cb.data)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0f32, f32::max);
+            assert!(worst / (hi - lo) < 1e-4, "{name}: {}", worst / (hi - lo));
+        } else {
+            let (ia, ib) = (
+                image::open(gpu_out.join("micro").join(name))
+                    .unwrap()
+                    .into_rgb16(),
+                image::open(cpu_out.join("micro").join(name))
+                    .unwrap()
+                    .into_rgb16(),
+            );
+            let worst = ia
+                .as_raw()
+                .iter()
+                .zip(ib.as_raw())
+                .map(|(x, y)| x.abs_diff(*y))
+                .max()
+                .unwrap();
+            assert!(worst <= 8, "{name}: {worst} of 65535");
+        }
+    }
+    // Required but not available: a clear error, not a silent fallback.
+    let dir = tempfile::tempdir().unwrap();
+    let (_, o) = run_micro_with_env(
+        dir.path(),
+        &[
+            ("SKINPATCH_ADAPTER", "no-such-adapter"),
+            ("SKINPATCH_REQUIRE_GPU", "1"),
+        ],
+    );
+    assert!(!o.status.success());
+    let err = text(&o.stderr);
+    assert!(
+        err.contains("SKINPATCH_REQUIRE_GPU=1") && err.contains("no-such-adapter"),
+        "{err}"
+    );
+}
+
+#[test]
+fn gpu_info_lists_adapters_or_says_there_are_none() {
+    let o = skinpatch(&["gpu-info"]);
+    let out = text(&o.stdout);
+    if o.status.success() {
+        assert!(
+            out.contains("adapter 0: ") && out.contains("max_texture_dimension_2d"),
+            "{out}"
+        );
+        assert!(out.contains("in use: "), "{out}");
+    } else {
+        assert!(
+            text(&o.stderr).contains("no Vulkan adapter"),
+            "{}",
+            text(&o.stderr)
+        );
+        assert!(std::env::var("SKINPATCH_REQUIRE_GPU").map_or(true, |v| v != "1"));
+    }
+}

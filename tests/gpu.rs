@@ -129,7 +129,10 @@ fn maps_beyond_the_device_limits_are_refused_up_front() {
     assert!(e.contains("max_texture_dimension_2d"), "{e}");
     let binding = ctx.limits.max_storage_buffer_binding_size as u64;
     let per_texel = binding / (side * side) as u64 + 1;
-    let e = ctx.check_map(side, side, per_texel).unwrap_err().to_string();
+    let e = ctx
+        .check_map(side, side, per_texel)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("max_storage_buffer_binding_size"), "{e}");
     assert!(ctx.check_map(1000, 777, 32).is_ok());
 }
@@ -192,19 +195,26 @@ fn random_raster(width: usize, height: usize, rng: &mut Rng) -> StrainRaster {
             }
             3 => {
                 let (c, s) = (r().cos(), r().sin());
-                Matrix2::new(c, -s, s, c) * (1.0 + 1e-4 * r()) + Matrix2::new(1e-6 * r(), 0.0, 0.0, 0.0)
+                Matrix2::new(c, -s, s, c) * (1.0 + 1e-4 * r())
+                    + Matrix2::new(1e-6 * r(), 0.0, 0.0, 0.0)
             }
             _ => {
                 if k % 35 == 4 {
                     Matrix2::zeros()
                 } else {
-                    Matrix2::new(0.7 + 0.6 * r().abs(), 0.1 * r(), 0.1 * r(), 0.7 + 0.6 * r().abs())
+                    Matrix2::new(
+                        0.7 + 0.6 * r().abs(),
+                        0.1 * r(),
+                        0.1 * r(),
+                        0.7 + 0.6 * r().abs(),
+                    )
                 }
             }
         };
         raster.t[k] = t;
         // UV per millimetre of a 10 × 8 mm patch, slightly sheared.
-        raster.uv_frame[k] = Matrix2::new(0.1 + 0.01 * r(), 0.01 * r(), 0.01 * r(), 0.125 + 0.01 * r());
+        raster.uv_frame[k] =
+            Matrix2::new(0.1 + 0.01 * r(), 0.01 * r(), 0.01 * r(), 0.125 + 0.01 * r());
         raster.inside[k] = true;
     }
     raster
@@ -232,13 +242,21 @@ fn per_texel_svd_and_kernel_parameters_match_the_cpu_reference() {
                 svd.rs,
                 svd.rt
             );
-            for (g, c) in [(&gpu.kernels.s[k], &cpu.s[k]), (&gpu.kernels.t[k], &cpu.t[k])] {
+            for (g, c) in [
+                (&gpu.kernels.s[k], &cpu.s[k]),
+                (&gpu.kernels.t[k], &cpu.t[k]),
+            ] {
                 if *c == PassParams::IDENTITY {
                     identity += 1;
                     assert_eq!(g.alpha, 0.0, "texel {k}");
                     continue;
                 }
-                assert!((g.alpha - c.alpha).abs() <= 1e-5, "texel {k}: α {} vs {}", g.alpha, c.alpha);
+                assert!(
+                    (g.alpha - c.alpha).abs() <= 1e-5,
+                    "texel {k}: α {} vs {}",
+                    g.alpha,
+                    c.alpha
+                );
                 // Axes are defined up to sign, and not at all where the
                 // stretches coincide; near there an f32 axis turns by about
                 // ε/(r_s − |r_t|), and σ in texels turns with it through the
@@ -251,7 +269,12 @@ fn per_texel_svd_and_kernel_parameters_match_the_cpu_reference() {
                         c.sigma
                     );
                     let dot = g.axis[0] * c.axis[0] + g.axis[1] * c.axis[1];
-                    assert!(1.0 - dot.abs() < 1e-5, "texel {k}: axis {:?} vs {:?}", g.axis, c.axis);
+                    assert!(
+                        1.0 - dot.abs() < 1e-5,
+                        "texel {k}: axis {:?} vs {:?}",
+                        g.axis,
+                        c.axis
+                    );
                     checked_axes += 1;
                 }
             }
@@ -383,14 +406,27 @@ fn the_batched_fit_finds_the_cpu_optimum() {
         let truth = KernelParams { alpha, sigma_um };
         let target = candidate_histogram(&neutral, axis, r, truth, hist);
         // The batch gives the CPU's histograms.
-        let probes = [truth, KernelParams { alpha: -0.5, sigma_um: 3.0 }];
-        for (p, g) in probes.iter().zip(fitter.histograms(axis, r, &probes, hist).unwrap()) {
+        let probes = [
+            truth,
+            KernelParams {
+                alpha: -0.5,
+                sigma_um: 3.0,
+            },
+        ];
+        for (p, g) in probes
+            .iter()
+            .zip(fitter.histograms(axis, r, &probes, hist).unwrap())
+        {
             let c = candidate_histogram(&neutral, axis, r, *p, hist);
             assert!(c.distance(&g) < 2e-3, "{p:?}: TV {:e}", c.distance(&g));
         }
         let cpu = fit_params(&neutral, &target, axis, r, hist);
         let gpu = fitter.fit_params(&target, axis, r, hist).unwrap();
-        assert_eq!((gpu.alpha, gpu.sigma_um), (cpu.alpha, cpu.sigma_um), "{axis:?} r {r}");
+        assert_eq!(
+            (gpu.alpha, gpu.sigma_um),
+            (cpu.alpha, cpu.sigma_um),
+            "{axis:?} r {r}"
+        );
         assert_eq!(gpu.evaluations, cpu.evaluations);
         assert!((gpu.alpha - alpha).abs() < 0.051 && (gpu.sigma_um - sigma_um).abs() <= 2.0);
     }

@@ -150,12 +150,23 @@ impl ConvolveStage {
         width: usize,
         height: usize,
     ) {
-        dispatch(encoder, "convolve", self.pipeline(params), binds, width, height);
+        dispatch(
+            encoder,
+            "convolve",
+            self.pipeline(params),
+            binds,
+            width,
+            height,
+        );
     }
 }
 
 /// Both passes of `field` over `map` on the GPU, read back.
-pub fn convolve(ctx: &Context, map: &DisplacementMap, field: &KernelField) -> Result<DisplacementMap> {
+pub fn convolve(
+    ctx: &Context,
+    map: &DisplacementMap,
+    field: &KernelField,
+) -> Result<DisplacementMap> {
     assert_eq!((field.width, field.height), (map.width, map.height));
     ctx.check_map(map.width, map.height, 32)?;
     let stage = ConvolveStage::new(ctx);
@@ -171,7 +182,14 @@ pub fn convolve(ctx: &Context, map: &DisplacementMap, field: &KernelField) -> Re
     let passes = buffers::storage(ctx, "kernel passes", &interleaved);
     let infos = [0, 1].map(|k| buffers::uniform(ctx, "pass info", &PassInfo::pass(k)));
     let bind = |s, info: &wgpu::Buffer, d| {
-        stage.bind(ctx, Params::Field, s, info.as_entire_binding(), Some(&passes), d)
+        stage.bind(
+            ctx,
+            Params::Field,
+            s,
+            info.as_entire_binding(),
+            Some(&passes),
+            d,
+        )
     };
     let (first, second) = (bind(&src, &infos[0], &mid), bind(&mid, &infos[1], &dst));
     let mut enc = encoder(ctx);

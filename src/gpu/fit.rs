@@ -62,7 +62,11 @@ impl<'a> GpuFit<'a> {
         let (w, h) = (meta.width, meta.height);
         let bins = hist.bins.max(1);
         let cells = bins * bins;
-        let stretched = buffers::uniform(ctx, "stretched map info", &MapInfo::of(meta, axis.stretch(r)));
+        let stretched = buffers::uniform(
+            ctx,
+            "stretched map info",
+            &MapInfo::of(meta, axis.stretch(r)),
+        );
         let mut out = Vec::with_capacity(candidates.len());
         for batch in candidates.chunks(BATCH) {
             let mut uniforms = vec![0u8; 2 * STRIDE as usize * batch.len()];
@@ -78,8 +82,14 @@ impl<'a> GpuFit<'a> {
                 let at = at + STRIDE as usize;
                 uniforms[at..at + 32].copy_from_slice(bytemuck::bytes_of(&info));
             }
-            let uniforms = buffers::init(ctx, "fit candidates", &uniforms, wgpu::BufferUsages::UNIFORM);
-            let counts = buffers::storage_zeroed(ctx, "fit counts", 4 * (cells * batch.len()) as u64);
+            let uniforms = buffers::init(
+                ctx,
+                "fit candidates",
+                &uniforms,
+                wgpu::BufferUsages::UNIFORM,
+            );
+            let counts =
+                buffers::storage_zeroed(ctx, "fit counts", 4 * (cells * batch.len()) as u64);
             let slot = |k: u64| {
                 wgpu::BindingResource::Buffer(wgpu::BufferBinding {
                     buffer: &uniforms,
@@ -110,10 +120,7 @@ impl<'a> GpuFit<'a> {
             }
             ctx.queue.submit([enc.finish()]);
             let all: Vec<u32> = buffers::read(ctx, &counts, cells * batch.len())?;
-            out.extend(
-                all.chunks(cells)
-                    .map(|c| normalise(c, bins, hist.range)),
-            );
+            out.extend(all.chunks(cells).map(|c| normalise(c, bins, hist.range)));
         }
         Ok(out)
     }

@@ -71,7 +71,14 @@ impl GpuMicro {
         let strain_inputs = convolve.strain_inputs(&ctx, &svd2, &info, &targets);
         let pass_info = [0, 1].map(|k| buffers::uniform(&ctx, "pass info", &PassInfo::pass(k)));
         let bind = |src, info: &wgpu::Buffer, dst| {
-            convolve.bind(&ctx, Params::Strain, src, info.as_entire_binding(), None, dst)
+            convolve.bind(
+                &ctx,
+                Params::Strain,
+                src,
+                info.as_entire_binding(),
+                None,
+                dst,
+            )
         };
         let pass_binds = [
             bind(&source, &pass_info[0], &mid),
@@ -114,7 +121,10 @@ impl GpuMicro {
             Some(s) if s.fits(field) => s.update(&self.ctx, field),
             _ => self.surface = Some(SurfaceBuffers::new(&self.ctx, field)),
         }
-        let surface = self.surface.as_ref().expect("surface buffers were just made");
+        let surface = self
+            .surface
+            .as_ref()
+            .expect("surface buffers were just made");
         let (w, h) = (self.width, self.height);
         let mut enc = encoder(&self.ctx);
         self.raster.encode(&mut enc, surface, &self.targets);
@@ -123,7 +133,8 @@ impl GpuMicro {
             self.convolve.encode(&mut enc, Params::Strain, &binds, w, h);
         }
         if normals {
-            self.normals_stage.encode(&mut enc, &self.normals_bind, w, h);
+            self.normals_stage
+                .encode(&mut enc, &self.normals_bind, w, h);
         }
         self.ctx.queue.submit([enc.finish()]);
     }
@@ -139,7 +150,12 @@ impl GpuMicro {
         self.submit(field, normals);
         let map = self.out.download(&self.ctx)?;
         let normals = if normals {
-            Some(read_normals(&self.ctx, &self.normals, self.width, self.height)?)
+            Some(read_normals(
+                &self.ctx,
+                &self.normals,
+                self.width,
+                self.height,
+            )?)
         } else {
             None
         };

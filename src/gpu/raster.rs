@@ -2,8 +2,8 @@
 //! CPU reference [`crate::strain::StrainRaster::new`]).
 //!
 //! A render pass draws the surface triangles with their UVs as positions
-//! into two `Rgba32Float` targets holding the interpolated `T` and `Q Rᵀ`
-//! (row-major). The triangle indices stay resident; per frame only the
+//! into two `Rgba32Float` targets holding the interpolated `T − I` and
+//! `Q Rᵀ` (row-major). The triangle indices stay resident; per frame only the
 //! per-vertex matrices are uploaded. A texel whose `Q Rᵀ` is zero lies off
 //! the surface (inside the surface `Q Rᵀ` has full rank).
 
@@ -26,7 +26,7 @@ pub const FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 pub struct RasterVertex {
     /// Texture coordinates.
     pub uv: [f32; 2],
-    /// `T`, row-major.
+    /// `T − I`, row-major (full f32 precision in the small deviations).
     pub t: [f32; 4],
     /// `Q Rᵀ`, row-major.
     pub frame: [f32; 4],
@@ -45,7 +45,7 @@ pub fn vertices(field: &SurfaceField) -> Vec<RasterVertex> {
         .zip(uvs)
         .map(|(v, uv)| RasterVertex {
             uv: [uv.x as f32, uv.y as f32],
-            t: row_major(&v.t),
+            t: row_major(&(v.t - Matrix2::identity())),
             frame: row_major(&v.uv_frame),
         })
         .collect()
@@ -103,7 +103,7 @@ pub struct RasterTargets {
     pub width: usize,
     /// Texels along v.
     pub height: usize,
-    /// Interpolated `T`.
+    /// Interpolated `T − I`.
     pub t: wgpu::Texture,
     /// Interpolated `Q Rᵀ`.
     pub frame: wgpu::Texture,
@@ -259,12 +259,22 @@ pub fn rasterize(
     let t = buffers::read_texture_rgba32(ctx, &targets.t, width, height)?;
     let frame = buffers::read_texture_rgba32(ctx, &targets.frame, width, height)?;
     let matrix = |m: &[f32; 4]| Matrix2::new(m[0], m[1], m[2], m[3]).map(f64::from);
+    let inside: Vec<bool> = frame.iter().map(|f| f.iter().any(|&x| x != 0.0)).collect();
     Ok(StrainRaster {
         width,
         height,
-        t: t.iter().map(matrix).collect(),
+        t: t.iter()
+            .zip(&inside)
+            .map(|(m, &i)| {
+                if i {
+                    matrix(m) + Matrix2::identity()
+                } else {
+                    Matrix2::zeros()
+                }
+            })
+            .collect(),
         uv_frame: frame.iter().map(matrix).collect(),
-        inside: frame.iter().map(|f| f.iter().any(|&x| x != 0.0)).collect(),
+        inside,
     })
 }
 

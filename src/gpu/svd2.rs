@@ -184,7 +184,8 @@ pub fn upload_raster(ctx: &Context, raster: &StrainRaster) -> RasterTargets {
         raster.height,
         wgpu::TextureUsages::COPY_DST,
     );
-    let row_major = |m: &Matrix2<f64>| [m[(0, 0)], m[(0, 1)], m[(1, 0)], m[(1, 1)]].map(|x| x as f32);
+    let row_major =
+        |m: &Matrix2<f64>| [m[(0, 0)], m[(0, 1)], m[(1, 0)], m[(1, 1)]].map(|x| x as f32);
     let write = |texture: &wgpu::Texture, data: Vec<[f32; 4]>| {
         ctx.queue.write_texture(
             texture.as_image_copy(),
@@ -202,7 +203,16 @@ pub fn upload_raster(ctx: &Context, raster: &StrainRaster) -> RasterTargets {
         );
     };
     debug_assert_eq!(FORMAT.block_copy_size(None), Some(16));
-    write(&targets.t, raster.t.iter().map(row_major).collect());
+    // The raster holds T − I (see raster.wgsl).
+    let identity = Matrix2::identity();
+    write(
+        &targets.t,
+        raster
+            .t
+            .iter()
+            .map(|t| row_major(&(t - identity)))
+            .collect(),
+    );
     // Outside texels carry a zero frame, as the GPU raster leaves them.
     let frames = raster
         .uv_frame

@@ -6,8 +6,11 @@
 //! pass at texel `p` with unit axis `a` (in texel units), strength α and
 //! σ (texels) computes
 //! `(1 − α)·D(p) + α·Σ_k g_k·D(p − k·a) / Σ_k g_k`, `k = −N … N`,
-//! `N = ⌈3σ⌉`, `g_k = exp(−k²/2σ²)`, reading D bilinearly with the map's edge
-//! handling. The Gaussian weights come from the recurrence
+//! `N = ⌈3σ⌉`, `g_k = exp(−k²/2σ²)` with the outermost pair `k = ±N` scaled
+//! by `3σ − (N − 1) ∈ (0, 1]`, reading D bilinearly with the map's edge
+//! handling. The taper makes the kernel continuous in σ: a new pair of taps
+//! enters with weight zero as 3σ passes an integer, so σ computed in f32
+//! (GPU) and f64 (CPU) cannot differ by a whole tap pair. The Gaussian weights come from the recurrence
 //! `g_{k+1} = g_k·q^{2k+1}`, `q = exp(−1/2σ²)`. Arithmetic is f32 in the
 //! order the GPU shader uses, so the two compare texel by texel; texels are
 //! independent, so the parallel loop gives the same bits on any thread count.
@@ -152,6 +155,7 @@ pub fn convolve_texel(src: &DisplacementMap, i: usize, j: usize, p: &PassParams)
         return centre;
     }
     let n = (3.0 * p.sigma).ceil() as i32;
+    let taper = 3.0 * p.sigma - (n - 1) as f32;
     let q = (-0.5 / (p.sigma * p.sigma)).exp();
     let (x, y) = (i as f32, j as f32);
     // Whether every sample's four texels lie inside the grid (then no edge
@@ -165,6 +169,7 @@ pub fn convolve_texel(src: &DisplacementMap, i: usize, j: usize, p: &PassParams)
     fn taps(
         centre: f32,
         n: i32,
+        taper: f32,
         q: f32,
         at: (f32, f32),
         axis: [f32; 2],
@@ -178,18 +183,21 @@ pub fn convolve_texel(src: &DisplacementMap, i: usize, j: usize, p: &PassParams)
         for k in 1..=n {
             g *= step;
             step *= q * q;
+            let w = if k == n { g * taper } else { g };
             let (dx, dy) = (k as f32 * axis[0], k as f32 * axis[1]);
-            sum += g * (read(x - dx, y - dy) + read(x + dx, y + dy));
-            norm += 2.0 * g;
+            sum += w * (read(x - dx, y - dy) + read(x + dx, y + dy));
+            norm += 2.0 * w;
         }
         sum / norm
     }
     let blurred = if interior {
-        taps(centre, n, q, (x, y), p.axis, |u, v| {
+        taps(centre, n, taper, q, (x, y), p.axis, |u, v| {
             src.bilinear_interior(u, v)
         })
     } else {
-        taps(centre, n, q, (x, y), p.axis, |u, v| src.bilinear(u, v))
+        taps(centre, n, taper, q, (x, y), p.axis, |u, v| {
+            src.bilinear(u, v)
+        })
     };
     (1.0 - p.alpha) * centre + p.alpha * blurred
 }

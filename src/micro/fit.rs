@@ -120,9 +120,7 @@ fn grid_params((a, s): (i64, i64)) -> KernelParams {
 /// returns their distances in order (the GPU evaluates a batch in one
 /// submission). Ties keep the first candidate in (α, σ) order, so equal
 /// objectives give the same optimum on every evaluator.
-pub fn search(
-    mut evaluate: impl FnMut(&[KernelParams]) -> Result<Vec<f64>>,
-) -> Result<FitResult> {
+pub fn search(mut evaluate: impl FnMut(&[KernelParams]) -> Result<Vec<f64>>) -> Result<FitResult> {
     let mut cache: std::collections::HashMap<(i64, i64), f64> = std::collections::HashMap::new();
     // α = 0 makes every σ equal: one key for all.
     let key = |a: i64, s: i64| if a == 200 { (200, 0) } else { (a, s) };

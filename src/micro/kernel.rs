@@ -170,8 +170,9 @@ pub fn kernel_weights(alpha: f64, sigma_texels: f64) -> Vec<f64> {
     w
 }
 
-/// The normalised discrete Gaussian of σ texels, radius `⌈3σ⌉` (one tap
-/// of weight 1 for σ ≤ 0).
+/// The normalised discrete Gaussian of σ texels, radius `N = ⌈3σ⌉`, the
+/// outermost pair scaled by `3σ − (N − 1)` so the taps are continuous in σ
+/// (one tap of weight 1 for σ ≤ 0).
 pub fn gaussian(sigma_texels: f64) -> Vec<f64> {
     if sigma_texels.is_nan() || sigma_texels <= 0.0 {
         return vec![1.0];
@@ -180,7 +181,12 @@ pub fn gaussian(sigma_texels: f64) -> Vec<f64> {
     let mut g: Vec<f64> = (0..=2 * n)
         .map(|k| {
             let i = k as f64 - n as f64;
-            (-i * i / (2.0 * sigma_texels * sigma_texels)).exp()
+            let taper = if i.abs() == n as f64 {
+                3.0 * sigma_texels - (n as f64 - 1.0)
+            } else {
+                1.0
+            };
+            taper * (-i * i / (2.0 * sigma_texels * sigma_texels)).exp()
         })
         .collect();
     let sum: f64 = g.iter().sum();
