@@ -127,7 +127,7 @@ fn maps_beyond_the_device_limits_are_refused_up_front() {
     let side = ctx.limits.max_texture_dimension_2d as usize;
     let e = ctx.check_map(side + 1, 8, 4).unwrap_err().to_string();
     assert!(e.contains("max_texture_dimension_2d"), "{e}");
-    let binding = ctx.limits.max_storage_buffer_binding_size as u64;
+    let binding = ctx.limits.max_storage_buffer_binding_size;
     let per_texel = binding / (side * side) as u64 + 1;
     let e = ctx
         .check_map(side, side, per_texel)

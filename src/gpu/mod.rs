@@ -218,7 +218,7 @@ impl Context {
             )));
         }
         let bytes = width as u64 * height as u64 * bytes_per_texel;
-        let binding = self.limits.max_storage_buffer_binding_size as u64;
+        let binding = self.limits.max_storage_buffer_binding_size;
         let buffer = self.limits.max_buffer_size;
         if bytes > binding.min(buffer) {
             return Err(Error::Gpu(format!(
