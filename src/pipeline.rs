@@ -72,7 +72,7 @@ impl MicroEngine {
     fn describe(&self) -> String {
         match self {
             MicroEngine::Gpu(chain) => format!("GPU: {}", chain.context().describe()),
-            MicroEngine::Cpu => "CPU reference stages (no GPU adapter)".into(),
+            MicroEngine::Cpu => "CPU reference stages".into(),
         }
     }
 

@@ -87,17 +87,6 @@ fn skin_map(width: usize, height: usize, edge: Edge) -> DisplacementMap {
     map
 }
 
-fn max_relative(a: &DisplacementMap, b: &DisplacementMap) -> f64 {
-    let (lo, hi) = a.range();
-    let worst = a
-        .data
-        .iter()
-        .zip(&b.data)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0f32, f32::max);
-    worst as f64 / (hi - lo) as f64
-}
-
 #[test]
 fn every_shader_validates_with_naga() {
     for (name, source) in gpu::shader_sources() {
@@ -324,10 +313,10 @@ fn convolution_matches_the_cpu_reference_on_odd_sizes_and_both_edges() {
         let field = random_field(w, h, &mut rng);
         let cpu = convolve(&map, &field);
         let gpu = gpu::convolve::convolve(&ctx, &map, &field).unwrap();
-        let d = max_relative(&cpu, &gpu);
+        let d = cpu.max_difference(&gpu);
         eprintln!("convolution {w}×{h} {edge:?}: GPU − CPU ≤ {d:.2e} of the height range");
         assert!(d < 1e-4, "{w}×{h} {edge:?}: {d:e} of the height range");
-        assert!(max_relative(&map, &cpu) > 1e-2, "the passes change the map");
+        assert!(map.max_difference(&cpu) > 1e-2, "the passes change the map");
     }
 }
 
@@ -369,10 +358,10 @@ fn one_whole_frame_matches_the_cpu_path() {
     for round in 0..2 {
         // The second round reuses the resident buffers.
         let frame = chain.deform(&field, true).unwrap();
-        let d = max_relative(&cpu, &frame.map);
+        let d = cpu.max_difference(&frame.map);
         eprintln!("whole frame 1000×777, round {round}: GPU − CPU ≤ {d:.2e} of the height range");
         assert!(d < 1e-4, "round {round}: {d:e} of the height range");
-        assert!(max_relative(&neutral, &cpu) > 0.05, "the frame is deformed");
+        assert!(neutral.max_difference(&cpu) > 0.05, "the frame is deformed");
         let normals = frame.normals.unwrap();
         let reference = normal_map(&cpu);
         let worst = normals
@@ -385,7 +374,7 @@ fn one_whole_frame_matches_the_cpu_path() {
     // A neutral surface leaves the map as it is.
     let rest = SurfaceField::new(&mesh.top, &mesh.positions, &mesh.positions);
     let frame = chain.deform(&rest, false).unwrap();
-    assert!(max_relative(&neutral, &frame.map) < 1e-4);
+    assert!(neutral.max_difference(&frame.map) < 1e-4);
     assert!(frame.normals.is_none());
 }
 

@@ -55,6 +55,30 @@ pub fn init(ctx: &Context, label: &str, bytes: &[u8], usage: wgpu::BufferUsages)
         })
 }
 
+/// A 2D texture of `width × height` texels.
+pub fn texture(
+    ctx: &Context,
+    label: &str,
+    (width, height): (usize, usize),
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+) -> wgpu::Texture {
+    ctx.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d {
+            width: width as u32,
+            height: height as u32,
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage,
+        view_formats: &[],
+    })
+}
+
 /// A mappable buffer to copy `bytes` into for read-back.
 pub fn staging(ctx: &Context, bytes: u64) -> wgpu::Buffer {
     ctx.device.create_buffer(&wgpu::BufferDescriptor {

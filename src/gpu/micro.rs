@@ -6,7 +6,7 @@
 //!
 //! The neutral map, kernel tables, triangle indices, intermediate maps and
 //! bind groups are created once and stay resident; a frame uploads only the
-//! surface's per-vertex matrices (40 bytes a vertex) and records the five
+//! surface's per-vertex matrices (40 bytes a vertex) and records the four
 //! stages into one command buffer.
 
 use super::convolve::{ConvolveStage, Params, PassInfo};

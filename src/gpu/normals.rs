@@ -52,20 +52,13 @@ impl NormalsStage {
 
 /// A texture for the normals of `width × height` texels.
 pub fn normal_texture(ctx: &Context, width: usize, height: usize) -> wgpu::Texture {
-    ctx.device.create_texture(&wgpu::TextureDescriptor {
-        label: Some("normals"),
-        size: wgpu::Extent3d {
-            width: width as u32,
-            height: height as u32,
-            depth_or_array_layers: 1,
-        },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format: wgpu::TextureFormat::Rgba32Float,
-        usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
-        view_formats: &[],
-    })
+    buffers::texture(
+        ctx,
+        "normals",
+        (width, height),
+        wgpu::TextureFormat::Rgba32Float,
+        wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
+    )
 }
 
 /// Reads a normal texture back as `[x, y, z]` per texel.

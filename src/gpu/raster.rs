@@ -122,25 +122,11 @@ impl RasterTargets {
         height: usize,
         extra: wgpu::TextureUsages,
     ) -> RasterTargets {
-        let make = |label| {
-            ctx.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some(label),
-                size: wgpu::Extent3d {
-                    width: width as u32,
-                    height: height as u32,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: FORMAT,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
-                    | wgpu::TextureUsages::TEXTURE_BINDING
-                    | wgpu::TextureUsages::COPY_SRC
-                    | extra,
-                view_formats: &[],
-            })
-        };
+        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
+            | wgpu::TextureUsages::TEXTURE_BINDING
+            | wgpu::TextureUsages::COPY_SRC
+            | extra;
+        let make = |label| buffers::texture(ctx, label, (width, height), FORMAT, usage);
         RasterTargets {
             width,
             height,

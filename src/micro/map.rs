@@ -147,6 +147,19 @@ impl DisplacementMap {
         top + (bottom - top) * fy
     }
 
+    /// Largest |self − other| over the texels, relative to this map's
+    /// height range (how GPU and CPU results are compared).
+    pub fn max_difference(&self, other: &DisplacementMap) -> f64 {
+        let (lo, hi) = self.range();
+        let worst = self
+            .data
+            .iter()
+            .zip(&other.data)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0f32, f32::max);
+        worst as f64 / (hi - lo).max(f32::MIN_POSITIVE) as f64
+    }
+
     /// Smallest and largest height (units).
     pub fn range(&self) -> (f32, f32) {
         self.data
