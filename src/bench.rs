@@ -93,10 +93,9 @@ pub fn bench_micro(
 ) -> Result<MicroBench> {
     let field = SurfaceField::new(&mesh.top, &mesh.positions, &bench_deformation(mesh));
     let (lo, hi) = mesh.bounds();
-    let ctx = crate::gpu::acquire()?;
+    let mut ctx = crate::gpu::acquire()?;
     let adapter = ctx.as_ref().map(|c| c.describe());
     let mut rows = Vec::new();
-    let mut ctx = ctx;
     for &size in sizes {
         let neutral = bench_map(size, hi.x - lo.x)?;
         let start = Instant::now();

@@ -51,22 +51,19 @@ impl MicroEngine {
             return Ok(MicroEngine::Cpu);
         };
         let name = ctx.describe();
-        match crate::gpu::micro::GpuMicro::new(
+        let built = crate::gpu::micro::GpuMicro::new(
             ctx,
             &micro.neutral,
             &micro.model,
             crate::strain::raster::DILATE_TEXELS,
-        ) {
-            Ok(chain) => {
+        );
+        Ok(match crate::gpu::or_cpu(built)? {
+            Some(chain) => {
                 log::info!("microstructure stages on the GPU: {name}");
-                Ok(MicroEngine::Gpu(Box::new(chain)))
+                MicroEngine::Gpu(Box::new(chain))
             }
-            Err(e) if crate::gpu::gpu_required() => Err(e),
-            Err(e) => {
-                log::warn!("{e}; running the CPU reference stages instead");
-                Ok(MicroEngine::Cpu)
-            }
-        }
+            None => MicroEngine::Cpu,
+        })
     }
 
     fn describe(&self) -> String {
@@ -406,16 +403,8 @@ pub fn fit(path: &std::path::Path) -> Result<FitReport> {
             .ok_or_else(|| Error::parameter("neutral", "is required to fit [[sample]] maps"))?;
         let neutral = read_map(&base.join(neutral_path), &defaults)?;
         let ctx = crate::gpu::acquire()?;
-        let gpu_fit = match ctx
-            .as_ref()
-            .map(|c| crate::gpu::fit::GpuFit::new(c, &neutral))
-        {
-            Some(Ok(f)) => Some(f),
-            Some(Err(e)) if crate::gpu::gpu_required() => return Err(e),
-            Some(Err(e)) => {
-                log::warn!("{e}; fitting on the CPU instead");
-                None
-            }
+        let gpu_fit = match &ctx {
+            Some(c) => crate::gpu::or_cpu(crate::gpu::fit::GpuFit::new(c, &neutral))?,
             None => None,
         };
         device = Some(match (&ctx, &gpu_fit) {

@@ -255,26 +255,39 @@ fn bad_scenarios_fail_cleanly() {
     assert!(text(&o.stderr).contains("no/such/scenario.toml"));
 }
 
-/// A run whose solver gives up stops with an error naming the frame and the
-/// residual, and keeps every frame written before.
 /// Writes tests/fixtures/press_small.toml with `extra` appended (mesh path
-/// made absolute) into `dir` and runs it with output `dir/out`.
-fn run_press_small_with(dir: &Path, extra: &str) -> (std::path::PathBuf, Output) {
+/// made absolute) into `dir` and runs it with output `dir/out`, after
+/// `configure` has adjusted the command (environment).
+fn run_press_small_configured(
+    dir: &Path,
+    extra: &str,
+    configure: impl FnOnce(&mut Command),
+) -> (std::path::PathBuf, Output) {
     let scenario = std::fs::read_to_string(root().join("tests/fixtures/press_small.toml")).unwrap();
     let scenario =
         scenario.replace("../../meshes", root().join("meshes").to_str().unwrap()) + extra;
     let path = dir.join("scenario.toml");
     std::fs::write(&path, scenario).unwrap();
     let out = dir.join("out");
-    let o = skinpatch(&[
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_skinpatch"));
+    cmd.args([
         "run",
         path.to_str().unwrap(),
         "--output",
         out.to_str().unwrap(),
-    ]);
-    (out, o)
+    ])
+    .current_dir(root());
+    configure(&mut cmd);
+    (out, cmd.output().expect("the skinpatch binary runs"))
 }
 
+/// [`run_press_small_configured`] with the environment as it is.
+fn run_press_small_with(dir: &Path, extra: &str) -> (std::path::PathBuf, Output) {
+    run_press_small_configured(dir, extra, |_| {})
+}
+
+/// A run whose solver gives up stops with an error naming the frame and the
+/// residual, and keeps every frame written before.
 #[test]
 fn solver_failure_stops_cleanly_and_keeps_outputs() {
     let dir = tempfile::tempdir().unwrap();
@@ -563,29 +576,16 @@ fn fit_prints_the_table_and_writes_a_usable_kernel_file() {
     assert!(err.contains("bad.toml:3"), "{err}");
 }
 
-/// Runs `skinpatch run` on the small press with a microstructure, with
-/// extra environment variables.
+/// Runs the small press with a microstructure, the GPU variables cleared
+/// and then `env` set.
 fn run_micro_with_env(dir: &Path, env: &[(&str, &str)]) -> (std::path::PathBuf, Output) {
-    let scenario = std::fs::read_to_string(root().join("tests/fixtures/press_small.toml")).unwrap();
-    let scenario = scenario.replace("../../meshes", root().join("meshes").to_str().unwrap())
-        + "\n[microstructure]\nframe_stride = 6\n[microstructure.procedural]\nsize_px = 300\n";
-    let path = dir.join("scenario.toml");
-    std::fs::write(&path, scenario).unwrap();
-    let out = dir.join("out");
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_skinpatch"));
-    cmd.args([
-        "run",
-        path.to_str().unwrap(),
-        "--output",
-        out.to_str().unwrap(),
-    ])
-    .current_dir(root())
-    .env_remove("SKINPATCH_ADAPTER")
-    .env_remove("SKINPATCH_REQUIRE_GPU");
-    for (k, v) in env {
-        cmd.env(k, v);
-    }
-    (out, cmd.output().expect("the skinpatch binary runs"))
+    let extra =
+        "\n[microstructure]\nframe_stride = 6\n[microstructure.procedural]\nsize_px = 300\n";
+    run_press_small_configured(dir, extra, |cmd| {
+        cmd.env_remove("SKINPATCH_ADAPTER")
+            .env_remove("SKINPATCH_REQUIRE_GPU")
+            .envs(env.iter().copied());
+    })
 }
 
 #[test]

@@ -263,6 +263,20 @@ pub fn acquire() -> Result<Option<Context>> {
     }
 }
 
+/// The fallback rule for a GPU stage that could not be built (a limit, a
+/// device error): `None` after a logged warning, so the caller runs the CPU
+/// reference — or the error itself when `SKINPATCH_REQUIRE_GPU=1`.
+pub fn or_cpu<T>(built: Result<T>) -> Result<Option<T>> {
+    match built {
+        Ok(stage) => Ok(Some(stage)),
+        Err(e) if gpu_required() => Err(e),
+        Err(e) => {
+            log::warn!("{e}; running the CPU reference stages instead");
+            Ok(None)
+        }
+    }
+}
+
 /// A compute pipeline from `source` with an automatic layout.
 pub(crate) fn compute_pipeline(
     ctx: &Context,

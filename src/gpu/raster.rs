@@ -107,6 +107,8 @@ pub struct RasterTargets {
     pub t: wgpu::Texture,
     /// Interpolated `Q Rᵀ`.
     pub frame: wgpu::Texture,
+    /// Views of `t` and `frame`, made once for every pass that uses them.
+    pub views: [wgpu::TextureView; 2],
 }
 
 impl RasterTargets {
@@ -127,11 +129,14 @@ impl RasterTargets {
             | wgpu::TextureUsages::COPY_SRC
             | extra;
         let make = |label| buffers::texture(ctx, label, (width, height), FORMAT, usage);
+        let (t, frame) = (make("raster T"), make("raster Q R^T"));
+        let views = [&t, &frame].map(|x| x.create_view(&wgpu::TextureViewDescriptor::default()));
         RasterTargets {
             width,
             height,
-            t: make("raster T"),
-            frame: make("raster Q R^T"),
+            t,
+            frame,
+            views,
         }
     }
 }
@@ -198,8 +203,7 @@ impl RasterStage {
         surface: &SurfaceBuffers,
         targets: &RasterTargets,
     ) {
-        let views = [&targets.t, &targets.frame]
-            .map(|t| t.create_view(&wgpu::TextureViewDescriptor::default()));
+        let views = &targets.views;
         let attachment = |view| {
             Some(wgpu::RenderPassColorAttachment {
                 view,

@@ -126,15 +126,14 @@ impl Svd2Stage {
         info: &wgpu::Buffer,
         raster: &RasterTargets,
     ) -> wgpu::BindGroup {
-        let view = |t: &wgpu::Texture| t.create_view(&wgpu::TextureViewDescriptor::default());
-        let (tv, fv) = (view(&raster.t), view(&raster.frame));
+        let [tv, fv] = &raster.views;
         bind_group(
             ctx,
             layout,
             &[
                 info.as_entire_binding(),
-                wgpu::BindingResource::TextureView(&tv),
-                wgpu::BindingResource::TextureView(&fv),
+                wgpu::BindingResource::TextureView(tv),
+                wgpu::BindingResource::TextureView(fv),
                 self.table.as_entire_binding(),
             ],
         )

@@ -36,17 +36,22 @@ pub struct StrainRaster {
 }
 
 impl StrainRaster {
-    /// Rasterises `field` at `width × height` (both ≥ 1).
-    pub fn new(field: &SurfaceField, width: usize, height: usize) -> StrainRaster {
-        let (width, height) = (width.max(1), height.max(1));
+    /// A `width × height` raster with every texel outside (zero values).
+    pub fn outside(width: usize, height: usize) -> StrainRaster {
         let n = width * height;
-        let mut raster = StrainRaster {
+        StrainRaster {
             width,
             height,
             t: vec![Matrix2::zeros(); n],
             uv_frame: vec![Matrix2::zeros(); n],
             inside: vec![false; n],
-        };
+        }
+    }
+
+    /// Rasterises `field` at `width × height` (both ≥ 1).
+    pub fn new(field: &SurfaceField, width: usize, height: usize) -> StrainRaster {
+        let (width, height) = (width.max(1), height.max(1));
+        let mut raster = StrainRaster::outside(width, height);
         let (tri, uvs) = field.layout();
         let size = Vector2::new(width as f64, height as f64);
         for (k, t) in tri.iter().enumerate() {
@@ -85,14 +90,16 @@ impl StrainRaster {
     /// this raster (Euclidean distance in texels; ties go to the first in
     /// row-major order of the window). Those texels count as inside. The
     /// GPU kernel-field stage applies the same rule when it reads the raster.
-    pub fn dilated(&self, radius: usize) -> StrainRaster {
-        let mut out = self.clone();
+    pub fn dilated(mut self, radius: usize) -> StrainRaster {
+        // Writes go only to outside texels and reads only to texels inside
+        // before dilation, so one copy of the mask lets it work in place.
+        let was_inside = self.inside.clone();
         let r = radius as isize;
         let (w, h) = (self.width as isize, self.height as isize);
         for j in 0..h {
             for i in 0..w {
                 let idx = (j * w + i) as usize;
-                if self.inside[idx] {
+                if was_inside[idx] {
                     continue;
                 }
                 let mut best: Option<(isize, usize)> = None;
@@ -104,19 +111,19 @@ impl StrainRaster {
                         }
                         let k = (y * w + x) as usize;
                         let d2 = di * di + dj * dj;
-                        if self.inside[k] && best.is_none_or(|b| d2 < b.0) {
+                        if was_inside[k] && best.is_none_or(|b| d2 < b.0) {
                             best = Some((d2, k));
                         }
                     }
                 }
                 if let Some((_, k)) = best {
-                    out.t[idx] = self.t[k];
-                    out.uv_frame[idx] = self.uv_frame[k];
-                    out.inside[idx] = true;
+                    self.t[idx] = self.t[k];
+                    self.uv_frame[idx] = self.uv_frame[k];
+                    self.inside[idx] = true;
                 }
             }
         }
-        out
+        self
     }
 
     /// Texel index of `(i, j)`.
