@@ -69,6 +69,10 @@ pub enum Error {
     #[error("{0}")]
     FeatureDisabled(String),
 
+    /// An external program the request needs is not installed.
+    #[error("{0}")]
+    MissingTool(String),
+
     /// No usable GPU adapter, a limit a stage needs, or a failed GPU
     /// operation (what failed and on which adapter).
     #[error("GPU: {0}")]

@@ -29,6 +29,7 @@ pub mod gpu;
 pub mod mesh;
 pub mod micro;
 pub mod pipeline;
+pub mod render;
 pub mod scenario;
 pub mod strain;
 

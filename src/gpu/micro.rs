@@ -109,6 +109,11 @@ impl GpuMicro {
         &self.ctx
     }
 
+    /// The texture D′'s normals are written to (the renderer samples it).
+    pub fn normals_texture(&self) -> &wgpu::Texture {
+        &self.normals
+    }
+
     /// Gives the device back (the chain's buffers are freed).
     pub fn into_context(self) -> Context {
         self.ctx

@@ -361,5 +361,13 @@ pub fn shader_sources() -> Vec<(&'static str, String)> {
         ("convolve.wgsl", convolve::source()),
         ("normals.wgsl", map::with_map_access(normals::SHADER)),
         ("histogram.wgsl", map::with_map_access(histogram::SHADER)),
+        ("shadow.wgsl", crate::render::shadow::SHADER.to_string()),
+        ("irradiance.wgsl", crate::render::irradiance::source()),
+        (
+            "diffusion.wgsl",
+            crate::render::diffusion::SHADER.to_string(),
+        ),
+        ("skin.wgsl", crate::render::skin::source()),
+        ("resolve.wgsl", crate::render::resolve::SHADER.to_string()),
     ]
 }

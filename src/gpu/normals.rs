@@ -57,7 +57,9 @@ pub fn normal_texture(ctx: &Context, width: usize, height: usize) -> wgpu::Textu
         "normals",
         (width, height),
         wgpu::TextureFormat::Rgba32Float,
-        wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
+        wgpu::TextureUsages::STORAGE_BINDING
+            | wgpu::TextureUsages::COPY_SRC
+            | wgpu::TextureUsages::TEXTURE_BINDING,
     )
 }
 

@@ -217,7 +217,7 @@ pub fn write_exr(path: &Path, map: &DisplacementMap) -> Result<()> {
 }
 
 /// Writes one EXR layer of f32 channels, atomically.
-fn write_exr_channels(
+pub(crate) fn write_exr_channels(
     path: &Path,
     size: (usize, usize),
     attributes: exr::prelude::LayerAttributes,

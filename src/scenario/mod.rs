@@ -23,6 +23,7 @@ use crate::mesh::{io, TetMesh};
 
 mod mesh;
 mod micro;
+mod render;
 mod simulation;
 
 pub use mesh::{MeshSection, RefineSection, ZoneKind};
@@ -30,6 +31,7 @@ pub use micro::{
     FitPoint, FitSample, FitSamples, KernelSection, MicroSetup, MicrostructureSection,
     ProceduralSection,
 };
+pub use render::{CameraSection, EnvironmentSection, LightSection, RenderSection};
 pub use simulation::{
     BoundarySection, CaliperSection, MaterialSection, PrescribedSection, ProbeSection,
     SimulationSetup, SolverSection, TimeSection,
@@ -66,6 +68,8 @@ pub struct Scenario {
     pub output: OutputSection,
     /// The microstructure driven by the surface strain (none: not computed).
     pub microstructure: Option<MicrostructureSection>,
+    /// The rendered frames (none: nothing rendered).
+    pub render: Option<RenderSection>,
 }
 
 /// `[output]`: where results go.
@@ -126,6 +130,8 @@ pub struct Setup {
     pub strain_images: Option<StrainImageSettings>,
     /// The microstructure stage, if the scenario has one.
     pub micro: Option<MicroSetup>,
+    /// The renderer, if the scenario has one.
+    pub render: Option<crate::render::RenderSetup>,
     /// The simulation.
     pub simulation: SimulationSetup,
 }
@@ -335,8 +341,14 @@ impl Setup {
             }
             None => None,
         };
+        let render = scenario
+            .render
+            .as_ref()
+            .map(|r| r.setup(base, micro.is_some()))
+            .transpose()?;
         Ok(Setup {
             name,
+            render,
             mesh,
             mesh_source,
             output_dir,

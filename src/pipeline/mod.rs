@@ -14,6 +14,8 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
+mod render;
+
 use crate::error::{Error, Result};
 use crate::export::{self, FrameMetrics, MetricsWriter};
 use crate::fem::contact::{solve_with_contact, ContactState};
@@ -123,6 +125,19 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Res
     }
     let micro_device = engine.as_ref().map(MicroEngine::describe);
     let mesh = &setup.mesh;
+    let mut renderer = match &setup.render {
+        Some(r) => {
+            let (lo, hi) = mesh.bounds();
+            Some(render::RenderEngine::new(
+                dir,
+                r,
+                setup.micro.as_ref(),
+                engine.as_ref(),
+                hi.x - lo.x,
+            )?)
+        }
+        None => None,
+    };
     let result = simulate(setup, |m, sim| {
         let mut m = *m;
         let field = SurfaceField::new(&mesh.top, &mesh.positions, &sim.x);
@@ -140,12 +155,29 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Res
             let raster = StrainRaster::new(&field, images.px, images.px);
             export::strain_images::StrainImages::new(&raster, images.range).write(dir, m.frame)?;
         }
+        let mut fresh_normals = false;
         if let (Some(micro), Some(engine)) = (&setup.micro, engine.as_mut()) {
             if m.frame % micro.frame_stride == 0 {
                 let (deformed, normals) = engine.deform(micro, &field)?;
+                fresh_normals = micro.normal_maps;
                 let folder = dir.join("micro");
                 let tag = format!("{:04}", m.frame);
                 write_micro_frame(&folder, &tag, micro, &deformed, normals)?;
+            }
+        }
+        if let (Some(r), Some(renderer)) = (&setup.render, renderer.as_mut()) {
+            if m.frame % r.frame_stride == 0 {
+                let probe = setup.simulation.probe.as_ref().map(|p| p.pose(m.time_s));
+                renderer.frame(
+                    r,
+                    mesh,
+                    &sim.x,
+                    &field,
+                    probe.as_ref(),
+                    engine.as_mut(),
+                    m.frame,
+                    fresh_normals,
+                )?;
             }
         }
         frames.push(m);
@@ -156,6 +188,9 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Res
         written.push(export::write_collection(dir, &collection)?);
     }
     result?;
+    if let (Some(r), Some(renderer)) = (&setup.render, &renderer) {
+        written.extend(renderer.finish(r, 1.0 / setup.simulation.frame_dt)?);
+    }
     Ok(RunSummary {
         written,
         quality: QualityReport::of(&setup.mesh),

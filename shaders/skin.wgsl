@@ -1,0 +1,231 @@
+// The final camera pass (seed 001 §2.8): the skin surface with diffused
+// light from the six blurred irradiance textures, pre/post-scatter albedo,
+// energy conservation and two-lobe Kelemen/Szirmay-Kalos specular from the
+// microstructure normals; plus the cut sides of the patch and the probe.
+// Rust side: src/render/skin.rs. Prepended: lighting.wgsl.
+
+@group(1) @binding(0) var blur0: texture_2d<f32>;
+@group(1) @binding(1) var blur1: texture_2d<f32>;
+@group(1) @binding(2) var blur2: texture_2d<f32>;
+@group(1) @binding(3) var blur3: texture_2d<f32>;
+@group(1) @binding(4) var blur4: texture_2d<f32>;
+@group(1) @binding(5) var blur5: texture_2d<f32>;
+@group(1) @binding(6) var transmitted: texture_2d<f32>;
+// Tangent-space normals of the displacement map (static or deformed).
+@group(1) @binding(7) var micro_normals: texture_2d<f32>;
+
+// Mirrors `SurfaceVertex` in src/render/scene.rs.
+struct SurfaceVertex {
+    @location(0) position: vec4<f32>,
+    @location(1) normal: vec4<f32>,
+    @location(2) tangent: vec4<f32>,
+    @location(3) uv: vec4<f32>,
+    @location(4) strain: vec4<f32>,
+};
+
+// Mirrors `MeshVertex` in src/render/scene.rs.
+struct MeshVertex {
+    @location(0) position: vec4<f32>,
+    @location(1) normal: vec4<f32>,
+};
+
+struct SurfaceVaryings {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) world: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) tangent: vec3<f32>,
+    @location(3) uv: vec2<f32>,
+    @location(4) strain: vec4<f32>,
+};
+
+struct MeshVaryings {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) world: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+};
+
+@vertex
+fn vs_surface(v: SurfaceVertex) -> SurfaceVaryings {
+    var out: SurfaceVaryings;
+    out.clip = globals.view_proj * vec4<f32>(v.position.xyz, 1.0);
+    out.world = v.position.xyz;
+    out.normal = v.normal.xyz;
+    out.tangent = v.tangent.xyz;
+    out.uv = v.uv.xy;
+    out.strain = v.strain;
+    return out;
+}
+
+@vertex
+fn vs_mesh(v: MeshVertex) -> MeshVaryings {
+    var out: MeshVaryings;
+    out.clip = globals.view_proj * vec4<f32>(v.position.xyz, 1.0);
+    out.world = v.position.xyz;
+    out.normal = v.normal.xyz;
+    return out;
+}
+
+fn view_dir(p: vec3<f32>) -> vec3<f32> {
+    if (globals.eye.w == 1.0) {
+        return normalize(globals.eye.xyz - p);
+    }
+    return -globals.forward.xyz;
+}
+
+// Bilinear, wrapped lookup of the microstructure normal at uv.
+fn micro_normal(uv: vec2<f32>) -> vec3<f32> {
+    let size = vec2<i32>(textureDimensions(micro_normals));
+    let x = uv * vec2<f32>(size) - 0.5;
+    let base = vec2<i32>(floor(x));
+    let f = x - floor(x);
+    var sum = vec3<f32>(0.0);
+    for (var j = 0; j < 2; j++) {
+        for (var i = 0; i < 2; i++) {
+            let t = ((base + vec2<i32>(i, j)) % size + size) % size;
+            let w = select(1.0 - f.x, f.x, i == 1) * select(1.0 - f.y, f.y, j == 1);
+            sum += w * textureLoad(micro_normals, t, 0).xyz;
+        }
+    }
+    return normalize(sum);
+}
+
+// m(r) / m(1) of the strain-driven roughness model, linear in r.
+fn roughness_scale(r: f32) -> f32 {
+    let x = clamp((r - 0.7) / 0.05, 0.0, 15.0);
+    let i = min(u32(floor(x)), 14u);
+    let f = x - f32(i);
+    let a = globals.roughness_curve[i / 4u][i % 4u];
+    let b = globals.roughness_curve[(i + 1u) / 4u][(i + 1u) % 4u];
+    return mix(a, b, f);
+}
+
+// Two anisotropic lobes; s, t, n an orthonormal frame along the strain axes.
+fn ks_specular_aniso(
+    frame: mat3x3<f32>,
+    l: vec3<f32>,
+    v: vec3<f32>,
+    lobes: vec4<f32>,
+    scale: vec2<f32>,
+) -> f32 {
+    let n = frame[2];
+    let nl = dot(n, l);
+    if (nl <= 0.0 || dot(n, v) <= 0.0) {
+        return 0.0;
+    }
+    let hv = l + v;
+    let h = normalize(hv);
+    let hl = vec3<f32>(dot(h, frame[0]), dot(h, frame[1]), dot(h, n));
+    let d = lobes.z * beckmann_aniso(hl, lobes.x * scale.x, lobes.x * scale.y)
+        + (1.0 - lobes.z) * beckmann_aniso(hl, lobes.y * scale.x, lobes.y * scale.y);
+    return d * schlick(dot(v, h), 0.028) / dot(hv, hv) * nl;
+}
+
+fn diffused(uv: vec2<f32>) -> vec3<f32> {
+    let p = globals.profile;
+    var sum = p[0].rgb * textureSampleLevel(blur0, linear_clamp, uv, 0.0).rgb;
+    sum += p[1].rgb * textureSampleLevel(blur1, linear_clamp, uv, 0.0).rgb;
+    sum += p[2].rgb * textureSampleLevel(blur2, linear_clamp, uv, 0.0).rgb;
+    sum += p[3].rgb * textureSampleLevel(blur3, linear_clamp, uv, 0.0).rgb;
+    sum += p[4].rgb * textureSampleLevel(blur4, linear_clamp, uv, 0.0).rgb;
+    sum += p[5].rgb * textureSampleLevel(blur5, linear_clamp, uv, 0.0).rgb;
+    return sum + textureSampleLevel(transmitted, linear_clamp, uv, 0.0).rgb;
+}
+
+@fragment
+fn fs_skin(in: SurfaceVaryings) -> @location(0) vec4<f32> {
+    let n = normalize(in.normal);
+    let t = normalize(in.tangent - n * dot(n, in.tangent));
+    let b = cross(n, t);
+    let p = in.world;
+    let v = view_dir(p);
+    let mode = globals.flags.y;
+    let anisotropic = globals.flags.z == 1u;
+    let lobes = select(globals.micro_lobes, globals.meso_lobes, mode == 0u);
+    let rho_s = lobes.w;
+
+    // Diffuse: light diffused in texture space, the remaining albedo, and
+    // the share of it that leaves through the rough interface.
+    var diffuse = diffused(in.uv);
+    let albedo = textureSampleLevel(albedo_map, linear_clamp, in.uv, 0.0).rgb;
+    diffuse *= pow(albedo, vec3<f32>(1.0 - globals.params.x));
+    diffuse *= energy_factor(max(dot(n, v), 0.0), lobes);
+
+    // Specular normal: the microstructure's in static and dynamic modes.
+    var ns = n;
+    if (mode != 0u && !anisotropic) {
+        let m = micro_normal(in.uv);
+        ns = normalize(m.x * t + m.y * b + m.z * n);
+    }
+    // Strain frame for anisotropic roughness.
+    let s_uv = in.strain.zw;
+    var s_axis = t * s_uv.x + b * s_uv.y;
+    s_axis = select(t, normalize(s_axis), dot(s_axis, s_axis) > 1e-8);
+    let frame = mat3x3<f32>(s_axis, cross(n, s_axis), n);
+    let scale = vec2<f32>(roughness_scale(in.strain.x), roughness_scale(in.strain.y));
+
+    var specular = vec3<f32>(0.0);
+    for (var k = 0u; k < globals.flags.x; k++) {
+        let inc = incident(k, p);
+        if (dot(n, inc.dir) <= 0.0) {
+            continue;
+        }
+        let shadow = shadow_pcf(k, p, inc.distance);
+        var brdf: f32;
+        if (mode != 0u && anisotropic) {
+            brdf = ks_specular_aniso(frame, inc.dir, v, lobes, scale);
+        } else {
+            brdf = ks_specular(ns, inc.dir, v, lobes);
+        }
+        specular += shadow * rho_s * brdf * inc.irradiance;
+    }
+    // Environment: irradiance about the mirror direction, a coarse stand-in
+    // for the glossy environment reflection.
+    let r = reflect(-v, ns);
+    specular += rho_s * schlick(max(dot(ns, v), 0.0), 0.028) * sh_irradiance(r) / PI;
+    return vec4<f32>(diffuse + specular, 1.0);
+}
+
+// Lambertian surface lit by every light (with shadows) and the environment.
+fn lambert(p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
+    var e = sh_irradiance(n);
+    for (var k = 0u; k < globals.flags.x; k++) {
+        let inc = incident(k, p);
+        let nl = dot(n, inc.dir);
+        if (nl > 0.0) {
+            e += shadow_pcf(k, p, inc.distance) * nl * inc.irradiance;
+        }
+    }
+    return e / PI;
+}
+
+// The cut sides and bottom of the patch: subcutaneous tissue colour.
+@fragment
+fn fs_tissue(in: MeshVaryings) -> @location(0) vec4<f32> {
+    var n = normalize(in.normal);
+    if (dot(n, view_dir(in.world)) < 0.0) {
+        n = -n;
+    }
+    return vec4<f32>(vec3<f32>(0.62, 0.30, 0.24) * lambert(in.world, n), 1.0);
+}
+
+// The probe: brushed steel.
+@fragment
+fn fs_probe(in: MeshVaryings) -> @location(0) vec4<f32> {
+    let n = normalize(in.normal);
+    let v = view_dir(in.world);
+    var color = vec3<f32>(0.08) * lambert(in.world, n);
+    for (var k = 0u; k < globals.flags.x; k++) {
+        let inc = incident(k, in.world);
+        let nl = dot(n, inc.dir);
+        if (nl <= 0.0 || dot(n, v) <= 0.0) {
+            continue;
+        }
+        let hv = inc.dir + v;
+        let h = normalize(hv);
+        let brdf = beckmann(dot(n, h), 0.2) * schlick(dot(v, h), 0.6) / dot(hv, hv);
+        color += brdf * nl * inc.irradiance;
+    }
+    let r = reflect(-v, n);
+    color += schlick(max(dot(n, v), 0.0), 0.6) * sh_irradiance(r) / PI;
+    return vec4<f32>(color, 1.0);
+}

@@ -1,0 +1,138 @@
+//! Rendered frame files: numbered sequences as 8-bit or 16-bit sRGB PNG or
+//! linear float EXR, each written atomically (a temporary file renamed into
+//! place, so an interrupted run leaves only complete frames), and an
+//! optional MP4 per sequence through an installed `ffmpeg`.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use crate::error::{Error, Result};
+use crate::mesh::io::write_atomically;
+use crate::render::albedo::linear_to_srgb;
+use crate::render::{FrameFormat, Image};
+
+/// File name of frame `frame` in `format`.
+pub fn frame_name(frame: usize, format: FrameFormat) -> String {
+    format!("frame_{frame:04}.{}", format.extension())
+}
+
+/// Writes `image` to `path` in `format`.
+pub fn write_image(path: &Path, image: &Image, format: FrameFormat) -> Result<()> {
+    match format {
+        FrameFormat::Png8 | FrameFormat::Png16 => {
+            write_png(path, image, format == FrameFormat::Png16)
+        }
+        FrameFormat::Exr => write_exr(path, image),
+    }
+}
+
+fn write_png(path: &Path, image: &Image, sixteen: bool) -> Result<()> {
+    let failed = |e: png::EncodingError| Error::io(path, std::io::Error::other(e));
+    let mut bytes = Vec::with_capacity(image.pixels.len() * if sixteen { 6 } else { 3 });
+    for p in &image.pixels {
+        for &c in &p[..3] {
+            let s = linear_to_srgb(c);
+            if sixteen {
+                bytes.extend_from_slice(&((s * 65535.0).round() as u16).to_be_bytes());
+            } else {
+                bytes.push((s * 255.0).round() as u8);
+            }
+        }
+    }
+    let mut out = Vec::new();
+    {
+        let mut encoder = png::Encoder::new(&mut out, image.width as u32, image.height as u32);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(if sixteen {
+            png::BitDepth::Sixteen
+        } else {
+            png::BitDepth::Eight
+        });
+        encoder.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+        let mut writer = encoder.write_header().map_err(failed)?;
+        writer.write_image_data(&bytes).map_err(failed)?;
+        writer.finish().map_err(failed)?;
+    }
+    write_atomically(path, &out)
+}
+
+fn write_exr(path: &Path, image: &Image) -> Result<()> {
+    use exr::prelude::{AnyChannel, FlatSamples, LayerAttributes};
+    let channel = |name: &str, c: usize| {
+        AnyChannel::new(
+            name,
+            FlatSamples::F32(image.pixels.iter().map(|p| p[c]).collect()),
+        )
+    };
+    crate::micro::io::write_exr_channels(
+        path,
+        (image.width, image.height),
+        LayerAttributes::named("rendered frame"),
+        vec![channel("R", 0), channel("G", 1), channel("B", 2)],
+    )
+}
+
+/// Whether an `ffmpeg` executable runs.
+pub fn ffmpeg_available() -> bool {
+    Command::new("ffmpeg")
+        .arg("-version")
+        .output()
+        .is_ok_and(|o| o.status.success())
+}
+
+/// Encodes the PNG frames of `folder` (`frame_NNNN.png`, `frame_numbers`
+/// in order) into `out` (H.264, yuv420p) at `fps` with ffmpeg. Frames are
+/// passed through a concat list so gaps from a frame stride are fine.
+pub fn encode_mp4(folder: &Path, frame_numbers: &[usize], fps: f64, out: &Path) -> Result<PathBuf> {
+    if !ffmpeg_available() {
+        return Err(Error::MissingTool(format!(
+            "render.mp4 needs ffmpeg on the PATH (e.g. `apt-get install ffmpeg`); \
+             the frames in {} are complete without it",
+            folder.display()
+        )));
+    }
+    let list = folder.join("frames.txt");
+    let mut text = String::new();
+    for &f in frame_numbers {
+        text.push_str(&format!(
+            "file '{}'\nduration {}\n",
+            frame_name(f, FrameFormat::Png8),
+            1.0 / fps
+        ));
+    }
+    write_atomically(&list, text.as_bytes())?;
+    let output = Command::new("ffmpeg")
+        .args([
+            "-y",
+            "-loglevel",
+            "error",
+            "-f",
+            "concat",
+            "-safe",
+            "0",
+            "-i",
+        ])
+        .arg(&list)
+        .args([
+            "-vf",
+            "pad=ceil(iw/2)*2:ceil(ih/2)*2",
+            "-c:v",
+            "libx264",
+            "-pix_fmt",
+            "yuv420p",
+        ])
+        .arg(out)
+        .output()
+        .map_err(|e| Error::io(out, e))?;
+    let _ = std::fs::remove_file(&list);
+    if !output.status.success() {
+        return Err(Error::io(
+            out,
+            std::io::Error::other(format!(
+                "ffmpeg failed: {}",
+                String::from_utf8_lossy(&output.stderr).trim()
+            )),
+        ));
+    }
+    Ok(out.to_path_buf())
+}

@@ -1,0 +1,192 @@
+//! The rendered frames of a run: builds the renderer on the device the
+//! microstructure chain uses (or its own), and per rendered frame builds the
+//! geometry, makes sure D′'s normals are current, renders every comparison
+//! mode and writes `render/<mode>/frame_NNNN.<ext>` atomically.
+
+use std::path::{Path, PathBuf};
+
+use super::MicroEngine;
+use crate::error::{Error, Result};
+use crate::export::frames;
+use crate::fem::contact::ProbePose;
+use crate::gpu::Context;
+use crate::mesh::{TetMesh, Vec3};
+use crate::render::albedo::Albedo;
+use crate::render::{AlbedoSource, Mode, NormalMap, RenderSetup, Renderer, Roughness};
+use crate::scenario::MicroSetup;
+use crate::strain::SurfaceField;
+
+/// The renderer and, without a GPU microstructure chain, its own device.
+pub(super) struct RenderEngine {
+    renderer: Renderer,
+    own: Option<Context>,
+    folders: Vec<(Mode, PathBuf)>,
+    rendered: Vec<usize>,
+}
+
+/// The message for a render request without a GPU.
+fn no_gpu() -> Error {
+    Error::Gpu(
+        "[render] needs a GPU adapter (Vulkan; for a software one install mesa-vulkan-drivers) — \
+         or remove the [render] section"
+            .into(),
+    )
+}
+
+/// m(r)/m(1) of the map under the kernel model at the curve's ratios.
+fn roughness_curve(setup: &RenderSetup, micro: Option<&MicroSetup>) -> [f32; 16] {
+    let ratios = crate::render::lighting::curve_ratios();
+    match micro {
+        Some(m) if setup.roughness == Roughness::Anisotropic => {
+            let table = crate::micro::roughness::tabulate(&m.neutral, &m.model, &ratios);
+            let at_one = table
+                .points
+                .iter()
+                .find(|(r, _)| (r - 1.0).abs() < 1e-9)
+                .map(|p| p.1)
+                .unwrap_or(1.0);
+            std::array::from_fn(|i| (table.points[i].1 / at_one) as f32)
+        }
+        _ => [1.0; 16],
+    }
+}
+
+impl RenderEngine {
+    /// Builds the renderer; creates `render/<mode>/` folders under `dir`.
+    pub(super) fn new(
+        dir: &Path,
+        setup: &RenderSetup,
+        micro: Option<&MicroSetup>,
+        engine: Option<&MicroEngine>,
+        patch_width_mm: f64,
+    ) -> Result<RenderEngine> {
+        if setup.mp4 && !frames::ffmpeg_available() {
+            return Err(Error::MissingTool(
+                "render.mp4 = true needs ffmpeg on the PATH (e.g. `apt-get install ffmpeg`); \
+                 install it or set render.mp4 = false"
+                    .into(),
+            ));
+        }
+        let mut folders = Vec::new();
+        for &mode in &setup.modes {
+            let folder = dir.join("render").join(mode.name());
+            std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
+            probe_writable(&folder)?;
+            folders.push((mode, folder));
+        }
+        let albedo = match &setup.albedo {
+            AlbedoSource::Procedural => {
+                Albedo::procedural(setup.texture_px.min(2048), patch_width_mm)
+            }
+            AlbedoSource::File(path) => Albedo::load(path)?,
+        };
+        let neutral_normals = micro.map(|m| crate::micro::normals::normal_map(&m.neutral));
+        let neutral = match (micro, &neutral_normals) {
+            (Some(m), Some(n)) => Some(NormalMap {
+                normals: n,
+                width: m.neutral.width,
+                height: m.neutral.height,
+            }),
+            _ => None,
+        };
+        let curve = roughness_curve(setup, micro);
+        let (renderer, own) = match engine {
+            Some(MicroEngine::Gpu(chain)) => (
+                Renderer::new(
+                    chain.context(),
+                    setup,
+                    &albedo,
+                    neutral,
+                    Some(chain.normals_texture()),
+                    curve,
+                )?,
+                None,
+            ),
+            Some(MicroEngine::Cpu) => return Err(no_gpu()),
+            None => {
+                let ctx = crate::gpu::acquire()?.ok_or_else(no_gpu)?;
+                let renderer = Renderer::new(&ctx, setup, &albedo, neutral, None, curve)?;
+                (renderer, Some(ctx))
+            }
+        };
+        log::info!(
+            "rendering {} × {} px (×{} supersampling), modes {:?}",
+            setup.width,
+            setup.height,
+            setup.supersample,
+            setup.modes
+        );
+        Ok(RenderEngine {
+            renderer,
+            own,
+            folders,
+            rendered: Vec::new(),
+        })
+    }
+
+    /// Renders frame `frame` in every mode. `fresh_normals` says whether the
+    /// chain already computed this frame's D′ normals.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn frame(
+        &mut self,
+        setup: &RenderSetup,
+        mesh: &TetMesh,
+        x: &[Vec3],
+        field: &SurfaceField,
+        probe: Option<&ProbePose>,
+        engine: Option<&mut MicroEngine>,
+        frame: usize,
+        fresh_normals: bool,
+    ) -> Result<()> {
+        let needs_dynamic = setup.modes.contains(&Mode::Dynamic);
+        let ctx: &Context = match (engine, &self.own) {
+            (Some(MicroEngine::Gpu(chain)), _) => {
+                if needs_dynamic && !fresh_normals {
+                    chain.submit(field, true);
+                }
+                chain.context()
+            }
+            (_, Some(ctx)) => ctx,
+            _ => return Err(no_gpu()),
+        };
+        let geometry = crate::render::scene::build(mesh, x, field, probe, setup.tessellate);
+        self.renderer.set_geometry(ctx, &geometry);
+        for (mode, folder) in &self.folders {
+            let image = self
+                .renderer
+                .render(ctx, *mode)
+                .map_err(|e| at_frame(e, frame, *mode))?;
+            let path = folder.join(frames::frame_name(frame, setup.format));
+            frames::write_image(&path, &image, setup.format)?;
+        }
+        self.rendered.push(frame);
+        Ok(())
+    }
+
+    /// Encodes the MP4s (when asked) and returns the files written.
+    pub(super) fn finish(&self, setup: &RenderSetup, frame_rate_hz: f64) -> Result<Vec<PathBuf>> {
+        let mut written: Vec<PathBuf> = self.folders.iter().map(|(_, f)| f.clone()).collect();
+        if setup.mp4 && !self.rendered.is_empty() {
+            let fps = frame_rate_hz / setup.frame_stride as f64;
+            for (mode, folder) in &self.folders {
+                let out = folder.with_file_name(format!("{}.mp4", mode.name()));
+                written.push(frames::encode_mp4(folder, &self.rendered, fps, &out)?);
+            }
+        }
+        Ok(written)
+    }
+}
+
+fn at_frame(e: Error, frame: usize, mode: Mode) -> Error {
+    match e {
+        Error::Gpu(m) => Error::Gpu(format!("rendering frame {frame} ({}): {m}", mode.name())),
+        other => other,
+    }
+}
+
+/// Fails early, naming the folder, when frames cannot be written there.
+fn probe_writable(folder: &Path) -> Result<()> {
+    let probe = folder.join(".write-test");
+    std::fs::write(&probe, b"").map_err(|e| Error::io(folder, e))?;
+    std::fs::remove_file(&probe).map_err(|e| Error::io(folder, e))
+}

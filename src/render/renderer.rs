@@ -1,0 +1,500 @@
+//! The renderer: owns every render resource and records a frame as
+//! shadow maps → texture-space irradiance → six-Gaussian diffusion → skin
+//! pass → supersampling resolve, in one command buffer.
+
+use glam::Vec3;
+
+use super::albedo::{linear_to_srgb, Albedo};
+use super::diffusion::DiffusionStage;
+use super::irradiance::IrradianceStage;
+use super::lighting::{light_view_proj, Bounds, Globals};
+use super::resolve::ResolveStage;
+use super::scene::FrameGeometry;
+use super::shadow::{ShadowInfo, ShadowStage};
+use super::skin::{FrameBuffers, SkinStage, HDR_FORMAT};
+use super::specular::EnergyTable;
+use super::stage::{linear_sampler, texture_entry, uniform_entry, DEPTH_FORMAT};
+use super::{Image, Mode, RenderSetup};
+use crate::error::Result;
+use crate::gpu::{bind_group, buffers, encoder, Context};
+
+/// Tangent-space normals of a displacement map, for the static mode.
+pub struct NormalMap<'a> {
+    /// Normals, row-major.
+    pub normals: &'a [[f32; 3]],
+    /// Width in texels.
+    pub width: usize,
+    /// Height in texels.
+    pub height: usize,
+}
+
+/// A vertex buffer that grows as needed.
+struct Vertices {
+    buffer: wgpu::Buffer,
+    capacity: usize,
+    count: u32,
+}
+
+impl Vertices {
+    fn new(ctx: &Context, label: &str) -> Vertices {
+        Vertices {
+            buffer: vertex_buffer(ctx, label, 1024),
+            capacity: 1024,
+            count: 0,
+        }
+    }
+
+    fn upload<T: bytemuck::Pod>(&mut self, ctx: &Context, label: &str, data: &[T]) {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        if bytes.len() > self.capacity {
+            self.capacity = bytes.len().next_power_of_two();
+            self.buffer = vertex_buffer(ctx, label, self.capacity);
+        }
+        if !bytes.is_empty() {
+            ctx.queue.write_buffer(&self.buffer, 0, bytes);
+        }
+        self.count = data.len() as u32;
+    }
+}
+
+fn vertex_buffer(ctx: &Context, label: &str, bytes: usize) -> wgpu::Buffer {
+    ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: bytes as u64,
+        usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+fn view(texture: &wgpu::Texture) -> wgpu::TextureView {
+    texture.create_view(&wgpu::TextureViewDescriptor::default())
+}
+
+/// Uploads a 2D texture of `format` from raw texel bytes.
+fn upload_texture(
+    ctx: &Context,
+    label: &str,
+    (width, height): (usize, usize),
+    format: wgpu::TextureFormat,
+    bytes_per_texel: usize,
+    data: &[u8],
+) -> wgpu::Texture {
+    let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+    let texture = buffers::texture(ctx, label, (width, height), format, usage);
+    ctx.queue.write_texture(
+        wgpu::TexelCopyTextureInfo {
+            texture: &texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
+        data,
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some((width * bytes_per_texel) as u32),
+            rows_per_image: Some(height as u32),
+        },
+        wgpu::Extent3d {
+            width: width as u32,
+            height: height as u32,
+            depth_or_array_layers: 1,
+        },
+    );
+    texture
+}
+
+/// The resident renderer.
+pub struct Renderer {
+    setup: RenderSetup,
+    table: EnergyTable,
+    curve: [f32; 16],
+    globals: wgpu::Buffer,
+    shadow: ShadowStage,
+    shadow_infos: Vec<wgpu::Buffer>,
+    shadow_binds: Vec<wgpu::BindGroup>,
+    shadow_layers: Vec<wgpu::TextureView>,
+    shadow_depth: wgpu::TextureView,
+    lighting: wgpu::BindGroup,
+    irradiance: IrradianceStage,
+    irradiance_views: [wgpu::TextureView; 3],
+    diffusion: DiffusionStage,
+    skin: SkinStage,
+    // Group 1 of the skin pass with the neutral and the dynamic normals.
+    diffused: [wgpu::BindGroup; 2],
+    hdr: wgpu::TextureView,
+    depth: wgpu::TextureView,
+    resolve: ResolveStage,
+    surface: Vertices,
+    top: Vertices,
+    sides: Vertices,
+    probe: Vertices,
+    bounds: Bounds,
+}
+
+impl Renderer {
+    /// Builds every resource. `neutral` is the static microstructure's
+    /// normal map (none: a flat one), `dynamic` the texture the
+    /// microstructure chain writes D′'s normals to (none: `neutral` again),
+    /// `curve` the roughness ratio m(r)/m(1) at
+    /// [`super::lighting::curve_ratios`].
+    pub fn new(
+        ctx: &Context,
+        setup: &RenderSetup,
+        albedo: &Albedo,
+        neutral: Option<NormalMap<'_>>,
+        dynamic: Option<&wgpu::Texture>,
+        curve: [f32; 16],
+    ) -> Result<Renderer> {
+        let (w, h, f) = (setup.width, setup.height, setup.supersample);
+        let tex = setup.texture_px;
+        ctx.check_map(w * f, h * f, 8)?;
+        ctx.check_map(tex, tex, 16)?;
+        ctx.check_map(setup.shadow_map_px, setup.shadow_map_px, 16)?;
+        let table = EnergyTable::skin();
+        let globals = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("globals"),
+            size: std::mem::size_of::<Globals>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+
+        // Shadow maps: one array layer per light (at least one).
+        let layers = setup.lights.len().max(1);
+        let s = setup.shadow_map_px;
+        let shadow_maps = ctx.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("shadow maps"),
+            size: wgpu::Extent3d {
+                width: s as u32,
+                height: s as u32,
+                depth_or_array_layers: layers as u32,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: super::shadow::FORMAT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        });
+        let shadow_layers = (0..layers as u32)
+            .map(|k| {
+                shadow_maps.create_view(&wgpu::TextureViewDescriptor {
+                    dimension: Some(wgpu::TextureViewDimension::D2),
+                    base_array_layer: k,
+                    array_layer_count: Some(1),
+                    ..Default::default()
+                })
+            })
+            .collect();
+        let shadow_array = shadow_maps.create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
+        let shadow_depth = view(&buffers::texture(
+            ctx,
+            "shadow depth",
+            (s, s),
+            DEPTH_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+        ));
+        let shadow = ShadowStage::new(ctx);
+        let shadow_infos: Vec<wgpu::Buffer> = (0..layers)
+            .map(|_| buffers::uniform(ctx, "shadow info", &ShadowInfo::default()))
+            .collect();
+        let shadow_binds = shadow_infos
+            .iter()
+            .map(|b| bind_group(ctx, &shadow.layout, &[b.as_entire_binding()]))
+            .collect();
+
+        // Group 0: scene uniforms and lighting lookups.
+        let lighting_layout =
+            ctx.device
+                .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                    label: Some("lighting"),
+                    entries: &[
+                        uniform_entry(0),
+                        texture_entry(1, false, false),
+                        texture_entry(2, true, false),
+                        super::stage::sampler_entry(3),
+                        texture_entry(4, false, true),
+                    ],
+                });
+        let energy = upload_texture(
+            ctx,
+            "energy table",
+            (table.mu_samples, table.m_samples),
+            wgpu::TextureFormat::R32Float,
+            4,
+            bytemuck::cast_slice(&table.values),
+        );
+        let albedo_bytes: Vec<u8> = albedo
+            .texels
+            .iter()
+            .flat_map(|t| {
+                let c = |x: f32| (linear_to_srgb(x) * 255.0).round() as u8;
+                [c(t[0]), c(t[1]), c(t[2]), 255]
+            })
+            .collect();
+        let albedo_tex = upload_texture(
+            ctx,
+            "albedo",
+            (albedo.width, albedo.height),
+            wgpu::TextureFormat::Rgba8UnormSrgb,
+            4,
+            &albedo_bytes,
+        );
+        let sampler = linear_sampler(ctx);
+        let lighting = bind_group(
+            ctx,
+            &lighting_layout,
+            &[
+                globals.as_entire_binding(),
+                wgpu::BindingResource::TextureView(&view(&energy)),
+                wgpu::BindingResource::TextureView(&view(&albedo_tex)),
+                wgpu::BindingResource::Sampler(&sampler),
+                wgpu::BindingResource::TextureView(&shadow_array),
+            ],
+        );
+
+        // Texture-space targets and the diffusion chain.
+        let target_usage =
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+        let irradiance_views = ["irradiance", "stretch", "transmitted"].map(|label| {
+            view(&buffers::texture(
+                ctx,
+                label,
+                (tex, tex),
+                super::irradiance::FORMAT,
+                target_usage,
+            ))
+        });
+        let blur_usage =
+            wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING;
+        let blur_texture = |label| {
+            view(&buffers::texture(
+                ctx,
+                label,
+                (tex, tex),
+                super::diffusion::FORMAT,
+                blur_usage,
+            ))
+        };
+        let scratch = blur_texture("blur scratch");
+        let blurred: Vec<wgpu::TextureView> =
+            (0..6).map(|_| blur_texture("blurred irradiance")).collect();
+        let diffusion = DiffusionStage::new(
+            ctx,
+            tex,
+            &irradiance_views[0],
+            &irradiance_views[1],
+            &scratch,
+            &blurred,
+        );
+
+        // Group 1 of the skin pass.
+        let mut diffused_entries: Vec<wgpu::BindGroupLayoutEntry> =
+            (0..7).map(|k| texture_entry(k, true, false)).collect();
+        diffused_entries.push(texture_entry(7, false, false));
+        let diffused_layout =
+            ctx.device
+                .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                    label: Some("diffused light"),
+                    entries: &diffused_entries,
+                });
+        let flat = [[0.0f32, 0.0, 1.0]];
+        let neutral = neutral.unwrap_or(NormalMap {
+            normals: &flat,
+            width: 1,
+            height: 1,
+        });
+        let neutral_rgba: Vec<[f32; 4]> = neutral
+            .normals
+            .iter()
+            .map(|n| [n[0], n[1], n[2], 0.0])
+            .collect();
+        let neutral_tex = upload_texture(
+            ctx,
+            "neutral normals",
+            (neutral.width, neutral.height),
+            wgpu::TextureFormat::Rgba32Float,
+            16,
+            bytemuck::cast_slice(&neutral_rgba),
+        );
+        let neutral_view = view(&neutral_tex);
+        let dynamic_view = dynamic.map(view);
+        let diffused = [
+            &neutral_view,
+            dynamic_view.as_ref().unwrap_or(&neutral_view),
+        ]
+        .map(|normals| {
+            let mut resources: Vec<wgpu::BindingResource<'_>> = blurred
+                .iter()
+                .map(wgpu::BindingResource::TextureView)
+                .collect();
+            resources.push(wgpu::BindingResource::TextureView(&irradiance_views[2]));
+            resources.push(wgpu::BindingResource::TextureView(normals));
+            bind_group(ctx, &diffused_layout, &resources)
+        });
+
+        let camera_usage =
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+        let hdr = view(&buffers::texture(
+            ctx,
+            "hdr",
+            (w * f, h * f),
+            HDR_FORMAT,
+            camera_usage,
+        ));
+        let depth = view(&buffers::texture(
+            ctx,
+            "depth",
+            (w * f, h * f),
+            DEPTH_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+        ));
+        let resolve = ResolveStage::new(ctx, &hdr, w, h, f);
+        let renderer = Renderer {
+            setup: setup.clone(),
+            table,
+            curve,
+            globals,
+            shadow,
+            shadow_infos,
+            shadow_binds,
+            shadow_layers,
+            shadow_depth,
+            lighting,
+            irradiance: IrradianceStage::new(ctx, &lighting_layout),
+            irradiance_views,
+            diffusion,
+            skin: SkinStage::new(ctx, [&lighting_layout, &diffused_layout]),
+            diffused,
+            hdr,
+            depth,
+            resolve,
+            surface: Vertices::new(ctx, "surface vertices"),
+            top: Vertices::new(ctx, "top caster vertices"),
+            sides: Vertices::new(ctx, "side vertices"),
+            probe: Vertices::new(ctx, "probe vertices"),
+            bounds: (Vec3::ZERO, 1.0),
+        };
+        ctx.finish()?;
+        Ok(renderer)
+    }
+
+    /// Uploads a frame's geometry (shared by every mode of the frame).
+    pub fn set_geometry(&mut self, ctx: &Context, geometry: &FrameGeometry) {
+        self.surface
+            .upload(ctx, "surface vertices", &geometry.surface);
+        self.top.upload(ctx, "top caster vertices", &geometry.top);
+        self.sides.upload(ctx, "side vertices", &geometry.sides);
+        let probe: &[super::scene::MeshVertex] = if self.setup.draw_probe {
+            &geometry.probe
+        } else {
+            &[]
+        };
+        self.probe.upload(ctx, "probe vertices", probe);
+        self.bounds = bounds(geometry);
+    }
+
+    /// Records and submits the frame in `mode` without waiting.
+    pub fn submit(&mut self, ctx: &Context, mode: Mode) {
+        let (w, h) = (self.setup.width, self.setup.height);
+        let aspect = w as f32 / h as f32;
+        let globals = Globals::new(
+            &self.setup,
+            &self.table,
+            mode,
+            aspect,
+            self.bounds,
+            self.curve,
+        );
+        ctx.queue
+            .write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
+        for (light, info) in self.setup.lights.iter().zip(&self.shadow_infos) {
+            let where_ = match light.kind {
+                super::light::LightKind::Directional(d) => d.extend(0.0),
+                super::light::LightKind::Point(p) => p.extend(1.0),
+            };
+            let value = ShadowInfo {
+                view_proj: light_view_proj(light, self.bounds).to_cols_array_2d(),
+                where_: where_.to_array(),
+            };
+            ctx.queue.write_buffer(info, 0, bytemuck::bytes_of(&value));
+        }
+        let mut enc = encoder(ctx);
+        let casters = [
+            (&self.top.buffer, self.top.count),
+            (&self.sides.buffer, self.sides.count),
+            (&self.probe.buffer, self.probe.count),
+        ];
+        for (k, layer) in self
+            .shadow_layers
+            .iter()
+            .enumerate()
+            .take(self.setup.lights.len())
+        {
+            self.shadow.encode(
+                &mut enc,
+                &self.shadow_binds[k],
+                layer,
+                &self.shadow_depth,
+                &casters,
+            );
+        }
+        let v = &self.irradiance_views;
+        self.irradiance.encode(
+            &mut enc,
+            &self.lighting,
+            [&v[0], &v[1], &v[2]],
+            (&self.surface.buffer, self.surface.count),
+        );
+        self.diffusion.encode(&mut enc);
+        let normals = &self.diffused[(mode == Mode::Dynamic) as usize];
+        self.skin.encode(
+            &mut enc,
+            [&self.lighting, normals],
+            &self.hdr,
+            &self.depth,
+            &FrameBuffers {
+                surface: (&self.surface.buffer, self.surface.count),
+                sides: (&self.sides.buffer, self.sides.count),
+                probe: (&self.probe.buffer, self.probe.count),
+            },
+        );
+        self.resolve.encode(&mut enc);
+        ctx.queue.submit([enc.finish()]);
+    }
+
+    /// Renders the current geometry in `mode` and reads the image back.
+    pub fn render(&mut self, ctx: &Context, mode: Mode) -> Result<Image> {
+        self.submit(ctx, mode);
+        let (w, h) = (self.setup.width, self.setup.height);
+        let pixels: Vec<[f32; 4]> = buffers::read(ctx, &self.resolve.pixels, w * h)?;
+        ctx.finish()?;
+        Ok(Image {
+            width: w,
+            height: h,
+            pixels,
+        })
+    }
+}
+
+/// Bounding sphere of a frame's geometry.
+fn bounds(geometry: &FrameGeometry) -> Bounds {
+    let points = geometry
+        .surface
+        .iter()
+        .map(|v| v.position)
+        .chain(geometry.sides.iter().map(|v| v.position))
+        .chain(geometry.probe.iter().map(|v| v.position))
+        .map(|p| Vec3::new(p[0], p[1], p[2]));
+    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+    for p in points {
+        lo = lo.min(p);
+        hi = hi.max(p);
+    }
+    if lo.x > hi.x {
+        return (Vec3::ZERO, 1.0);
+    }
+    ((lo + hi) * 0.5, ((hi - lo) * 0.5).length().max(1e-3))
+}

@@ -1,0 +1,489 @@
+//! `[render]`: image size, camera, lights, environment, skin shading and
+//! the frame files, validated into a [`RenderSetup`].
+
+use std::path::Path;
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+use super::{non_negative, positive};
+use crate::error::{Error, Result};
+use crate::render::camera::{Camera, Projection};
+use crate::render::light::{Environment, Light, LightKind, GRACE_CATHEDRAL, MAX_LIGHTS};
+use crate::render::specular::{region_lobes, Lobes, REGIONS};
+use crate::render::{AlbedoSource, FrameFormat, Mode, RenderSetup, Roughness};
+
+/// `[render]`.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct RenderSection {
+    /// Image width in pixels. Default 640.
+    pub width_px: usize,
+    /// Image height in pixels. Default 360.
+    pub height_px: usize,
+    /// Supersampling factor per axis (1 … 4): shading runs at
+    /// `factor × size` and is box-filtered down. Default 2.
+    pub supersample: usize,
+    /// Comparison modes rendered per frame (seed 000 Fig. 1): any of `none`
+    /// (mesoscale surface, mesoscale BRDF), `static` (neutral
+    /// microstructure), `dynamic` (deformed microstructure D′). Default
+    /// `["dynamic"]`.
+    pub modes: Vec<String>,
+    /// Frame files: `png8` (sRGB), `png16` (sRGB, 16 bits) or `exr` (linear
+    /// 32-bit floats). Default `png8`.
+    pub format: String,
+    /// Render every n-th frame (frame 0 always). Default 1.
+    pub frame_stride: usize,
+    /// Also encode `render/<mode>.mp4` with ffmpeg (must be installed). Default false.
+    pub mp4: bool,
+    /// Side of the texture-space irradiance textures (texels). Default 1024.
+    pub texture_px: usize,
+    /// Side of each light's shadow map (texels). Default 2048.
+    pub shadow_map_px: usize,
+    /// Subdivisions of each surface-triangle edge (1 … 8). Default 1.
+    pub tessellate: usize,
+    /// Pre-scatter share of the albedo (seed 001 §2.2.4), [0, 1]. Default 0.5.
+    pub mix_ratio: f64,
+    /// Draw the probe. Default true.
+    pub draw_probe: bool,
+    /// Light through thin, back-lit parts (translucent shadow map). Default true.
+    pub translucency: bool,
+    /// `procedural` or an sRGB image file (relative to the scenario file)
+    /// mapped over the patch's UV square. Default `procedural`.
+    pub albedo: String,
+    /// Facial region of the measured specular lobes (seed 002 Tables 1–2):
+    /// forehead, temple, cheek, nose, chin. Default `forehead`.
+    pub region: String,
+    /// Subject of the measured lobes, 1 or 2. Default 1.
+    pub subject: usize,
+    /// Explicit two-lobe microscale fit `[m1, m2, w]` in place of the region's.
+    pub lobes: Option<[f64; 3]>,
+    /// Specular intensity ρ_s multiplying the normalised BRDF, [0, 10]. Default 1.
+    pub specular_intensity: f64,
+    /// Specular detail in `static`/`dynamic` modes: `microgeometry` (normals
+    /// of the displacement map) or `anisotropic` (mesoscale normals with
+    /// Beckmann roughness along the strain axes following the map's m(r),
+    /// seed 003). Default `microgeometry`.
+    pub roughness: String,
+    /// The camera.
+    pub camera: CameraSection,
+    /// Up to four lights. Default: one directional light from above-left-front.
+    pub lights: Option<Vec<LightSection>>,
+    /// Environment light.
+    pub environment: EnvironmentSection,
+}
+
+impl Default for RenderSection {
+    fn default() -> Self {
+        RenderSection {
+            width_px: 640,
+            height_px: 360,
+            supersample: 2,
+            modes: vec!["dynamic".into()],
+            format: "png8".into(),
+            frame_stride: 1,
+            mp4: false,
+            texture_px: 1024,
+            shadow_map_px: 2048,
+            tessellate: 1,
+            mix_ratio: 0.5,
+            draw_probe: true,
+            translucency: true,
+            albedo: "procedural".into(),
+            region: "forehead".into(),
+            subject: 1,
+            lobes: None,
+            specular_intensity: 1.0,
+            roughness: "microgeometry".into(),
+            camera: CameraSection::default(),
+            lights: None,
+            environment: EnvironmentSection::default(),
+        }
+    }
+}
+
+/// `[render.camera]`.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct CameraSection {
+    /// `perspective` or `orthographic`. Default `perspective`.
+    pub projection: String,
+    /// Eye position (mm). Default `[0, -14, 12]`.
+    pub eye_mm: [f64; 3],
+    /// Point looked at (mm). Default `[0, 0, -0.5]`.
+    pub target_mm: [f64; 3],
+    /// Up direction. Default `[0, 0, 1]`.
+    pub up: [f64; 3],
+    /// Vertical field of view (degrees, perspective), in (0, 170). Default 35.
+    pub fov_deg: f64,
+    /// Height of the view (mm, orthographic). Default 12.
+    pub height_mm: f64,
+}
+
+impl Default for CameraSection {
+    fn default() -> Self {
+        CameraSection {
+            projection: "perspective".into(),
+            eye_mm: [0.0, -14.0, 12.0],
+            target_mm: [0.0, 0.0, -0.5],
+            up: [0.0, 0.0, 1.0],
+            fov_deg: 35.0,
+            height_mm: 12.0,
+        }
+    }
+}
+
+/// `[[render.lights]]`.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct LightSection {
+    /// `directional` or `point`.
+    pub kind: String,
+    /// Direction the light travels (directional).
+    pub direction: Option<[f64; 3]>,
+    /// Position (mm, point).
+    pub position_mm: Option<[f64; 3]>,
+    /// Linear RGB colour, each ≥ 0. Default `[1, 1, 1]`.
+    #[serde(default = "white")]
+    pub color: [f64; 3],
+    /// Irradiance at normal incidence (at 100 mm for a point light), ≥ 0.
+    pub intensity: f64,
+}
+
+fn white() -> [f64; 3] {
+    [1.0; 3]
+}
+
+/// `[render.environment]`.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct EnvironmentSection {
+    /// `grace_cathedral` (Ramamoorthi & Hanrahan 2001) or `none`; ignored
+    /// when `coefficients` are given. Default `grace_cathedral`.
+    pub preset: String,
+    /// Nine RGB SH radiance coefficients L00, L1−1, L10, L11, L2−2, L2−1,
+    /// L20, L21, L22 (z up).
+    pub coefficients: Option<Vec<[f64; 3]>>,
+    /// Scale of the radiance, ≥ 0. Default 0.4.
+    pub intensity: f64,
+}
+
+impl Default for EnvironmentSection {
+    fn default() -> Self {
+        EnvironmentSection {
+            preset: "grace_cathedral".into(),
+            coefficients: None,
+            intensity: 0.4,
+        }
+    }
+}
+
+fn finite_vec(key: &str, v: [f64; 3]) -> Result<Vec3> {
+    if v.iter().all(|x| x.is_finite()) {
+        Ok(Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32))
+    } else {
+        Err(Error::parameter(key, format!("must be finite, got {v:?}")))
+    }
+}
+
+fn unit_vec(key: &str, v: [f64; 3]) -> Result<Vec3> {
+    let u = finite_vec(key, v)?;
+    if u.length() < 1e-6 {
+        return Err(Error::parameter(
+            key,
+            format!("must not be zero, got {v:?}"),
+        ));
+    }
+    Ok(u.normalize())
+}
+
+fn in_range(key: &str, v: usize, lo: usize, hi: usize) -> Result<usize> {
+    if (lo..=hi).contains(&v) {
+        Ok(v)
+    } else {
+        Err(Error::parameter(
+            key,
+            format!("must be in {lo} … {hi}, got {v}"),
+        ))
+    }
+}
+
+fn one_of<'a>(key: &str, v: &str, allowed: &[&'a str]) -> Result<&'a str> {
+    allowed.iter().find(|a| **a == v).copied().ok_or_else(|| {
+        let list: Vec<String> = allowed.iter().map(|a| format!("\"{a}\"")).collect();
+        Error::parameter(
+            key,
+            format!("must be one of {}, got \"{v}\"", list.join(", ")),
+        )
+    })
+}
+
+impl CameraSection {
+    fn camera(&self) -> Result<Camera> {
+        let eye = finite_vec("render.camera.eye_mm", self.eye_mm)?;
+        let target = finite_vec("render.camera.target_mm", self.target_mm)?;
+        let up = unit_vec("render.camera.up", self.up)?;
+        let view = target - eye;
+        if view.length() < 1e-6 {
+            return Err(Error::parameter(
+                "render.camera.target_mm",
+                "must differ from render.camera.eye_mm",
+            ));
+        }
+        if view.normalize().cross(up).length() < 1e-3 {
+            return Err(Error::parameter(
+                "render.camera.up",
+                format!("must not be parallel to the view direction {view}"),
+            ));
+        }
+        let projection = match one_of(
+            "render.camera.projection",
+            &self.projection,
+            &["perspective", "orthographic"],
+        )? {
+            "perspective" => {
+                let fov = self.fov_deg;
+                if !(fov.is_finite() && fov > 0.0 && fov < 170.0) {
+                    return Err(Error::parameter(
+                        "render.camera.fov_deg",
+                        format!("must be in (0, 170), got {fov}"),
+                    ));
+                }
+                Projection::Perspective {
+                    fov_deg: fov as f32,
+                }
+            }
+            _ => Projection::Orthographic {
+                height_mm: positive("render.camera.height_mm", self.height_mm)? as f32,
+            },
+        };
+        Ok(Camera {
+            eye,
+            target,
+            up,
+            projection,
+        })
+    }
+}
+
+impl LightSection {
+    fn light(&self, k: usize) -> Result<Light> {
+        let key = |field: &str| format!("render.lights[{k}].{field}");
+        let kind = match one_of(&key("kind"), &self.kind, &["directional", "point"])? {
+            "directional" => {
+                let d = self.direction.ok_or_else(|| {
+                    Error::parameter(key("direction"), "is required for a directional light")
+                })?;
+                LightKind::Directional(unit_vec(&key("direction"), d)?)
+            }
+            _ => {
+                let p = self.position_mm.ok_or_else(|| {
+                    Error::parameter(key("position_mm"), "is required for a point light")
+                })?;
+                LightKind::Point(finite_vec(&key("position_mm"), p)?)
+            }
+        };
+        for c in self.color {
+            non_negative(&key("color"), c)?;
+        }
+        Ok(Light {
+            kind,
+            color: finite_vec(&key("color"), self.color)?,
+            intensity: non_negative(&key("intensity"), self.intensity)? as f32,
+        })
+    }
+}
+
+impl EnvironmentSection {
+    fn environment(&self) -> Result<Option<Environment>> {
+        let intensity = non_negative("render.environment.intensity", self.intensity)? as f32;
+        let coefficients = match &self.coefficients {
+            Some(list) => {
+                if list.len() != 9 {
+                    return Err(Error::parameter(
+                        "render.environment.coefficients",
+                        format!("must hold 9 RGB triples (L00 … L22), got {}", list.len()),
+                    ));
+                }
+                let mut c = [[0.0f32; 3]; 9];
+                for (k, v) in list.iter().enumerate() {
+                    let key = format!("render.environment.coefficients[{k}]");
+                    c[k] = finite_vec(&key, *v)?.to_array();
+                }
+                c
+            }
+            None => match one_of(
+                "render.environment.preset",
+                &self.preset,
+                &["grace_cathedral", "none"],
+            )? {
+                "none" => return Ok(None),
+                _ => GRACE_CATHEDRAL,
+            },
+        };
+        Ok(Some(Environment {
+            coefficients,
+            intensity,
+        }))
+    }
+}
+
+impl RenderSection {
+    /// Validates the section; `base` resolves an albedo file and
+    /// `has_micro` says whether the scenario has a microstructure.
+    pub fn setup(&self, base: &Path, has_micro: bool) -> Result<RenderSetup> {
+        let width = in_range("render.width_px", self.width_px, 8, 8192)?;
+        let height = in_range("render.height_px", self.height_px, 8, 8192)?;
+        let supersample = in_range("render.supersample", self.supersample, 1, 4)?;
+        if width * supersample > 16384 || height * supersample > 16384 {
+            return Err(Error::parameter(
+                "render.supersample",
+                format!("{width} × {height} px × {supersample} exceeds 16384 px per side"),
+            ));
+        }
+        if self.modes.is_empty() {
+            return Err(Error::parameter(
+                "render.modes",
+                "must name at least one mode",
+            ));
+        }
+        let mut modes = Vec::new();
+        for (k, m) in self.modes.iter().enumerate() {
+            let key = format!("render.modes[{k}]");
+            let mode = match one_of(&key, m, &["none", "static", "dynamic"])? {
+                "none" => Mode::None,
+                "static" => Mode::Static,
+                _ => Mode::Dynamic,
+            };
+            if mode != Mode::None && !has_micro {
+                return Err(Error::parameter(
+                    key,
+                    format!("\"{m}\" needs a [microstructure] section"),
+                ));
+            }
+            if modes.contains(&mode) {
+                return Err(Error::parameter(key, format!("\"{m}\" is listed twice")));
+            }
+            modes.push(mode);
+        }
+        let format = match one_of("render.format", &self.format, &["png8", "png16", "exr"])? {
+            "png8" => FrameFormat::Png8,
+            "png16" => FrameFormat::Png16,
+            _ => FrameFormat::Exr,
+        };
+        if self.frame_stride == 0 {
+            return Err(Error::parameter(
+                "render.frame_stride",
+                "must be ≥ 1, got 0",
+            ));
+        }
+        let mix_ratio = self.mix_ratio;
+        if !(0.0..=1.0).contains(&mix_ratio) {
+            return Err(Error::parameter(
+                "render.mix_ratio",
+                format!("must be in [0, 1], got {mix_ratio}"),
+            ));
+        }
+        let rho_s = non_negative("render.specular_intensity", self.specular_intensity)?;
+        if rho_s > 10.0 {
+            return Err(Error::parameter(
+                "render.specular_intensity",
+                format!("must be ≤ 10, got {rho_s}"),
+            ));
+        }
+        let region = one_of("render.region", &self.region, &REGIONS)?;
+        if !(1..=2).contains(&self.subject) {
+            return Err(Error::parameter(
+                "render.subject",
+                format!("must be 1 or 2, got {}", self.subject),
+            ));
+        }
+        let micro_lobes = match self.lobes {
+            Some([m1, m2, w]) => {
+                for (name, m) in [("m1", m1), ("m2", m2)] {
+                    if !(m.is_finite() && (0.02..=1.0).contains(&m)) {
+                        return Err(Error::parameter(
+                            "render.lobes",
+                            format!("{name} must be in [0.02, 1], got {m}"),
+                        ));
+                    }
+                }
+                if !(0.0..=1.0).contains(&w) {
+                    return Err(Error::parameter(
+                        "render.lobes",
+                        format!("w must be in [0, 1], got {w}"),
+                    ));
+                }
+                Lobes { m1, m2, w }
+            }
+            None => region_lobes(region, self.subject, true).expect("region and subject checked"),
+        };
+        let meso_lobes =
+            region_lobes(region, self.subject, false).expect("region and subject checked");
+        let roughness = match one_of(
+            "render.roughness",
+            &self.roughness,
+            &["microgeometry", "anisotropic"],
+        )? {
+            "microgeometry" => Roughness::Microgeometry,
+            _ => Roughness::Anisotropic,
+        };
+        let albedo = if self.albedo == "procedural" {
+            AlbedoSource::Procedural
+        } else {
+            let path = base.join(&self.albedo);
+            if !path.is_file() {
+                return Err(Error::parameter(
+                    "render.albedo",
+                    format!(
+                        "\"procedural\" or an image file; {} does not exist",
+                        path.display()
+                    ),
+                ));
+            }
+            AlbedoSource::File(path)
+        };
+        let lights = match &self.lights {
+            Some(list) => {
+                if list.len() > MAX_LIGHTS {
+                    return Err(Error::parameter(
+                        "render.lights",
+                        format!("at most {MAX_LIGHTS} lights, got {}", list.len()),
+                    ));
+                }
+                list.iter()
+                    .enumerate()
+                    .map(|(k, l)| l.light(k))
+                    .collect::<Result<_>>()?
+            }
+            None => vec![Light {
+                kind: LightKind::Directional(Vec3::new(0.45, 0.6, -0.66).normalize()),
+                color: Vec3::new(1.0, 0.97, 0.92),
+                intensity: 2.5,
+            }],
+        };
+        Ok(RenderSetup {
+            width,
+            height,
+            supersample,
+            modes,
+            format,
+            frame_stride: self.frame_stride,
+            mp4: self.mp4,
+            texture_px: in_range("render.texture_px", self.texture_px, 16, 8192)?,
+            shadow_map_px: in_range("render.shadow_map_px", self.shadow_map_px, 16, 8192)?,
+            tessellate: in_range("render.tessellate", self.tessellate, 1, 8)?,
+            mix_ratio: mix_ratio as f32,
+            draw_probe: self.draw_probe,
+            translucency: self.translucency,
+            albedo,
+            micro_lobes,
+            meso_lobes,
+            specular_intensity: rho_s as f32,
+            roughness,
+            camera: self.camera.camera()?,
+            lights,
+            environment: self.environment.environment()?,
+        })
+    }
+}
