@@ -131,7 +131,19 @@ pub fn read_texture_rgba32(
     width: usize,
     height: usize,
 ) -> Result<Vec<[f32; 4]>> {
-    let row = (width * 16) as u32;
+    read_texture_texels(ctx, texture, width, height)
+}
+
+/// Reads a 2D texture row by row as texels of type `T` (whose size must be
+/// the format's bytes per texel).
+pub fn read_texture_texels<T: Pod>(
+    ctx: &Context,
+    texture: &wgpu::Texture,
+    width: usize,
+    height: usize,
+) -> Result<Vec<T>> {
+    let texel = std::mem::size_of::<T>();
+    let row = (width * texel) as u32;
     let padded = row.next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
     let staging = staging(ctx, padded as u64 * height as u64);
     let mut encoder = ctx
@@ -154,8 +166,8 @@ pub fn read_texture_rgba32(
         },
     );
     ctx.queue.submit([encoder.finish()]);
-    let words: Vec<[f32; 4]> = map_read(ctx, &staging, padded as usize / 16 * height)?;
-    let stride = padded as usize / 16;
+    let stride = padded as usize / texel;
+    let words: Vec<T> = map_read(ctx, &staging, stride * height)?;
     Ok((0..height)
         .flat_map(|j| words[j * stride..j * stride + width].iter().copied())
         .collect())

@@ -149,3 +149,66 @@ impl DiffusionStage {
         }
     }
 }
+
+/// Runs the chain once on the GPU for `irradiance` and `stretch` (square,
+/// same size) and reads the six blurred textures back: the comparison with
+/// [`super::profile::diffuse`] in the tests.
+pub fn diffuse_on_gpu(
+    ctx: &Context,
+    irradiance: &super::profile::Texture,
+    stretch: &super::profile::Texture,
+) -> crate::error::Result<Vec<super::profile::Texture>> {
+    let size = irradiance.width;
+    let upload = |label, t: &super::profile::Texture| {
+        let halves: Vec<u16> = t
+            .texels
+            .iter()
+            .flatten()
+            .map(|&x| half::f16::from_f32(x).to_bits())
+            .collect();
+        super::renderer::upload_texture(
+            ctx,
+            label,
+            (size, size),
+            FORMAT,
+            8,
+            bytemuck::cast_slice(&halves),
+        )
+    };
+    let (irr, st) = (upload("irradiance", irradiance), upload("stretch", stretch));
+    let usage = wgpu::TextureUsages::STORAGE_BINDING
+        | wgpu::TextureUsages::TEXTURE_BINDING
+        | wgpu::TextureUsages::COPY_SRC;
+    let make = |label| buffers::texture(ctx, label, (size, size), FORMAT, usage);
+    let scratch = make("blur scratch");
+    let outputs: Vec<wgpu::Texture> = (0..6).map(|_| make("blurred")).collect();
+    let view = |t: &wgpu::Texture| t.create_view(&wgpu::TextureViewDescriptor::default());
+    let out_views: Vec<wgpu::TextureView> = outputs.iter().map(view).collect();
+    let stage = DiffusionStage::new(
+        ctx,
+        size,
+        &view(&irr),
+        &view(&st),
+        &view(&scratch),
+        &out_views,
+    );
+    let mut enc = crate::gpu::encoder(ctx);
+    stage.encode(&mut enc);
+    ctx.queue.submit([enc.finish()]);
+    let result = outputs
+        .iter()
+        .map(|t| {
+            let texels = buffers::read_texture_texels::<[u16; 4]>(ctx, t, size, size)?
+                .into_iter()
+                .map(|h| h.map(|b| half::f16::from_bits(b).to_f32()))
+                .collect();
+            Ok(super::profile::Texture {
+                width: size,
+                height: size,
+                texels,
+            })
+        })
+        .collect();
+    ctx.finish()?;
+    result
+}

@@ -71,7 +71,7 @@ fn view(texture: &wgpu::Texture) -> wgpu::TextureView {
 }
 
 /// Uploads a 2D texture of `format` from raw texel bytes.
-fn upload_texture(
+pub(crate) fn upload_texture(
     ctx: &Context,
     label: &str,
     (width, height): (usize, usize),
