@@ -343,3 +343,246 @@ fn golden_images_of_the_three_modes() {
         "none and dynamic nearly identical: {diff}"
     );
 }
+
+/// Static and dynamic microstructure renders of the same deformed patch
+/// agree where the skin is unstrained and differ where it is stretched.
+/// The patch is stretched by 1.3 along x only for x > 0.5 mm; a top-down
+/// orthographic camera maps pixels to the surface, and the light grazes so
+/// the specular detail is prominent.
+#[test]
+fn dynamic_and_static_differ_only_where_strained() {
+    use skinpatch::micro::procedural::{generate, SkinParams};
+    use skinpatch::micro::KernelModel;
+    use skinpatch::render::albedo::Albedo;
+    use skinpatch::render::{Mode, NormalMap, Renderer};
+    use skinpatch::strain::SurfaceField;
+
+    let Some(ctx) = context() else { return };
+    let mesh = skinpatch::mesh::io::read_mesh(&root().join("meshes/patch_3k.node")).unwrap();
+    let x: Vec<_> = mesh
+        .positions
+        .iter()
+        .map(|p| {
+            let mut q = *p;
+            if p.x > 0.5 {
+                q.x = 0.5 + 1.3 * (p.x - 0.5);
+            }
+            q
+        })
+        .collect();
+    let field = SurfaceField::new(&mesh.top, &mesh.positions, &x);
+    let neutral = generate(&SkinParams {
+        size_px: 512,
+        extent_mm: 10.0,
+        seed: 9,
+        ..SkinParams::default()
+    })
+    .unwrap();
+    let model = KernelModel::forehead();
+    let mut chain = skinpatch::gpu::micro::GpuMicro::new(ctx, &neutral, &model, 4).unwrap();
+    chain.submit(&field, true);
+    let text = "[render]\nwidth_px = 160\nheight_px = 160\nsupersample = 1\nmodes = [\"static\", \"dynamic\"]\n\
+        texture_px = 256\nshadow_map_px = 256\ndraw_probe = false\n\
+        [render.camera]\nprojection = \"orthographic\"\neye_mm = [0, 0, 20]\ntarget_mm = [0, 0, 0]\n\
+        up = [0, 1, 0]\nheight_mm = 10\n\
+        [[render.lights]]\nkind = \"directional\"\ndirection = [0.0, 0.8, -0.6]\nintensity = 3.0\n\
+        [render.environment]\npreset = \"none\"\n";
+    let scenario = skinpatch::scenario::Scenario::parse(text, Path::new("t.toml")).unwrap();
+    let setup = scenario
+        .render
+        .unwrap()
+        .setup(Path::new("."), true)
+        .unwrap();
+    let normals = skinpatch::micro::normals::normal_map(&neutral);
+    let mut renderer = Renderer::new(
+        chain.context(),
+        &setup,
+        &Albedo::procedural(256, 10.0),
+        Some(NormalMap {
+            normals: &normals,
+            width: neutral.width,
+            height: neutral.height,
+        }),
+        Some(chain.normals_texture()),
+        [1.0; 16],
+    )
+    .unwrap();
+    let geometry = skinpatch::render::scene::build(&mesh, &x, &field, None, 1);
+    renderer.set_geometry(chain.context(), &geometry);
+    let stat = renderer.render(chain.context(), Mode::Static).unwrap();
+    let dynamic = renderer.render(chain.context(), Mode::Dynamic).unwrap();
+    // Pixel column → x: the view spans x ∈ [−5, 5] mm over 160 px.
+    let region = |x0: f32, x1: f32| {
+        let (mut sum, mut mean_level, mut n) = (0.0f64, 0.0f64, 0);
+        for j in 10..150 {
+            for i in 0..160 {
+                let x = -5.0 + (i as f32 + 0.5) / 16.0;
+                if x > x0 && x < x1 {
+                    let (a, b) = (stat.pixels[j * 160 + i], dynamic.pixels[j * 160 + i]);
+                    for c in 0..3 {
+                        sum += (a[c] - b[c]).abs() as f64;
+                        mean_level += a[c] as f64;
+                    }
+                    n += 3;
+                }
+            }
+        }
+        (sum / n as f64, mean_level / n as f64)
+    };
+    let (unstrained, level) = region(-4.8, -0.5);
+    let (strained, _) = region(1.5, 4.8);
+    println!("mean |dynamic − static|: unstrained {unstrained:.2e}, stretched {strained:.2e} (mean level {level:.3})");
+    assert!(
+        unstrained < 1e-3 * level,
+        "unstrained region differs: {unstrained}"
+    );
+    assert!(
+        strained > 20.0 * unstrained.max(1e-5),
+        "stretched region: {strained} vs {unstrained}"
+    );
+}
+
+fn render_error(extra: &str) -> String {
+    let text = format!("[microstructure]\n{extra}");
+    match skinpatch::scenario::Scenario::parse(&text, Path::new("bad.toml")) {
+        Err(e) => e.to_string(),
+        Ok(s) => s
+            .render
+            .expect("a [render] section")
+            .setup(Path::new("."), s.microstructure.is_some())
+            .expect_err("bad render settings were accepted")
+            .to_string(),
+    }
+}
+
+#[test]
+fn bad_camera_and_light_parameters_are_named() {
+    for (text, expected) in [
+        ("[render.camera]\nfov_deg = 0\n", "render.camera.fov_deg must be in (0, 170), got 0"),
+        ("[render.camera]\nfov_deg = nan\n", "render.camera.fov_deg"),
+        ("[render.camera]\neye_mm = [0, 0, 5]\ntarget_mm = [0, 0, 5]\n", "render.camera.target_mm must differ"),
+        ("[render.camera]\neye_mm = [0, 0, 9]\ntarget_mm = [0, 0, 0]\nup = [0, 0, 1]\n", "render.camera.up must not be parallel"),
+        ("[render.camera]\nprojection = \"fisheye\"\n", "render.camera.projection must be one of"),
+        ("[render.camera]\nprojection = \"orthographic\"\nheight_mm = -2\n", "render.camera.height_mm must be > 0"),
+        ("[[render.lights]]\nkind = \"point\"\nintensity = 1\n", "render.lights[0].position_mm is required"),
+        ("[[render.lights]]\nkind = \"directional\"\ndirection = [0, 0, 0]\nintensity = 1\n", "render.lights[0].direction must not be zero"),
+        ("[[render.lights]]\nkind = \"directional\"\ndirection = [0, 0, -1]\nintensity = -1\n", "render.lights[0].intensity must be ≥ 0, got -1"),
+        ("[[render.lights]]\nkind = \"point\"\nposition_mm = [0, 0, 9]\ncolor = [1, nan, 1]\nintensity = 1\n", "render.lights[0].color"),
+        ("[[render.lights]]\nkind = \"spot\"\nintensity = 1\n", "render.lights[0].kind must be one of"),
+        ("[render.environment]\ncoefficients = [[1, 1, 1]]\n", "must hold 9 RGB triples"),
+        ("[render]\nsupersample = 5\n", "render.supersample must be in 1 … 4, got 5"),
+        ("[render]\nmodes = [\"dynamic\", \"dynamic\"]\n", "render.modes[1] \"dynamic\" is listed twice"),
+        ("[render]\nmix_ratio = 1.5\n", "render.mix_ratio must be in [0, 1]"),
+        ("[render]\nregion = \"elbow\"\n", "render.region must be one of"),
+        ("[render]\nlobes = [0.3, 0.0, 0.5]\n", "m2 must be in [0.02, 1]"),
+        ("[render]\nalbedo = \"missing.png\"\n", "render.albedo"),
+        ("[render]\nformat = \"jpeg\"\n", "render.format must be one of"),
+        ("[render]\nwidht_px = 3\n", "unknown key render.widht_px; did you mean width_px?"),
+    ] {
+        let err = render_error(text);
+        assert!(err.contains(expected), "{text}: {err}");
+    }
+    let five = "[[render.lights]]\nkind = \"directional\"\ndirection = [0, 0, -1]\nintensity = 1\n"
+        .repeat(5);
+    assert!(render_error(&five).contains("at most 4 lights, got 5"));
+    // Microstructure modes need a microstructure.
+    let s = skinpatch::scenario::Scenario::parse(
+        "[render]\nmodes = [\"static\"]\n",
+        Path::new("x.toml"),
+    )
+    .unwrap();
+    let err = s
+        .render
+        .unwrap()
+        .setup(Path::new("."), false)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("needs a [microstructure] section"), "{err}");
+}
+
+/// An output folder that cannot be created is an error naming it, before
+/// any simulation work.
+#[test]
+fn unwritable_output_folder_is_a_clear_error() {
+    let Some(_ctx) = context() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("not-a-folder");
+    std::fs::write(&file, b"x").unwrap();
+    let err = run_render_small(&file.join("out"), "")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("not-a-folder"), "{err}");
+}
+
+/// A run killed while it renders leaves only complete frames: every
+/// `frame_*.png` present decodes at full size (frames are renamed into
+/// place), and the next run clears any temporary file left behind.
+#[test]
+fn an_interrupted_run_leaves_only_complete_frames() {
+    let Some(_ctx) = context() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(root().join("tests/fixtures/render_small.toml"))
+        .unwrap()
+        .replace("../../meshes", root().join("meshes").to_str().unwrap())
+        .replace("frame_rate_hz = 2.0", "frame_rate_hz = 40.0")
+        .replace(
+            "width_px = 128\nheight_px = 128",
+            "width_px = 256\nheight_px = 256",
+        );
+    let scenario = dir.path().join("long.toml");
+    std::fs::write(&scenario, text).unwrap();
+    let out = dir.path().join("out");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_skinpatch"))
+        .args([
+            "run",
+            scenario.to_str().unwrap(),
+            "--output",
+            out.to_str().unwrap(),
+        ])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let folder = out.join("render/dynamic");
+    let start = std::time::Instant::now();
+    let frames = |f: &Path| -> Vec<PathBuf> {
+        std::fs::read_dir(f)
+            .map(|d| d.flatten().map(|e| e.path()).collect())
+            .unwrap_or_default()
+    };
+    while frames(&folder)
+        .iter()
+        .filter(|p| p.extension().is_some_and(|e| e == "png"))
+        .count()
+        < 3
+    {
+        assert!(
+            start.elapsed().as_secs() < 120,
+            "no frames within 2 minutes"
+        );
+        if child.try_wait().unwrap().is_some() {
+            panic!("the run ended before it could be interrupted");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let mut complete = 0;
+    for path in frames(&folder) {
+        let name = path.file_name().unwrap().to_string_lossy().to_string();
+        if name.ends_with(".png") {
+            let (w, h, _) = read_png(&path);
+            assert_eq!((w, h), (256, 256), "{name}");
+            complete += 1;
+        } else {
+            assert!(name.contains(".tmp"), "unexpected file {name}");
+        }
+    }
+    assert!(complete >= 3);
+    // A stale temporary file is removed by the next run's setup.
+    let stale = folder.join("frame_9999.png.tmp12345");
+    std::fs::write(&stale, b"partial").unwrap();
+    let e = run_render_small(&out, "").map(|_| ());
+    assert!(e.is_ok(), "{e:?}");
+    assert!(!stale.exists(), "stale temporary frame kept");
+}
