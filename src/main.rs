@@ -63,8 +63,13 @@ enum Command {
     /// convolution passes, normals) on the GPU and on the CPU references at
     /// each map size, on the scenario's mesh under a fixed deformation, and
     /// prints both times, their ratio and the largest difference.
+    ///
+    /// `bench render` simulates the first frames of the scenario and times
+    /// per frame the FEM step, the microstructure chain, the geometry and
+    /// the render at `--width × --height` (dynamic mode), and prints frames
+    /// per second for rendering alone and for the whole frame.
     Bench {
-        /// Stage to benchmark: `fem` or `micro`.
+        /// Stage to benchmark: `fem`, `micro` or `render`.
         stage: String,
         /// Scenario (its mesh and, for `micro`, its kernel model).
         #[arg(long, default_value = "examples/press.toml")]
@@ -75,6 +80,12 @@ enum Command {
         /// Map sides for `micro` (texels).
         #[arg(long, value_delimiter = ',', default_value = "1024,2048,4096")]
         sizes: Vec<usize>,
+        /// Image width for `render` (px).
+        #[arg(long, default_value_t = 1920)]
+        width: usize,
+        /// Image height for `render` (px).
+        #[arg(long, default_value_t = 1080)]
+        height: usize,
     },
     /// List the GPU adapters (Vulkan) with the limits the stages depend on,
     /// and the one `run` would use (`SKINPATCH_ADAPTER` picks by name).
@@ -194,8 +205,11 @@ fn main() -> ExitCode {
             scenario,
             frames,
             sizes,
+            width,
+            height,
         } => match stage.as_str() {
             "micro" => bench_micro(&scenario, frames, &sizes),
+            "render" => bench_render(&scenario, frames, width, height),
             _ => bench(&stage, &scenario, frames),
         },
         Command::GpuInfo => gpu_info(),
@@ -239,7 +253,7 @@ fn run(path: &Path, output: Option<PathBuf>) -> anyhow::Result<()> {
 fn bench(stage: &str, path: &Path, frames: usize) -> anyhow::Result<()> {
     use skinpatch::fem::integrate::LinearSolver;
     if stage != "fem" {
-        bail!("unknown stage '{stage}': `bench` knows `fem` and `micro`");
+        bail!("unknown stage '{stage}': `bench` knows `fem`, `micro` and `render`");
     }
     let mut setup = Setup::load(path).with_context(|| format!("scenario {}", path.display()))?;
     let mut report = format!(
@@ -316,6 +330,45 @@ fn bench_micro(path: &Path, frames: usize, sizes: &[usize]) -> anyhow::Result<()
         Some(a) => println!("GPU: {a}; GPU ms is the mean of {} frames", frames.max(1)),
         None => println!("no GPU adapter: CPU figures only"),
     }
+    Ok(())
+}
+
+fn bench_render(path: &Path, frames: usize, width: usize, height: usize) -> anyhow::Result<()> {
+    if !(8..=8192).contains(&width) || !(8..=8192).contains(&height) {
+        bail!("--width and --height must be in 8 … 8192 px");
+    }
+    let setup = Setup::load(path).with_context(|| format!("scenario {}", path.display()))?;
+    println!(
+        "bench render: {} ({} tets), first {} frames at {width} × {height} px",
+        path.display(),
+        setup.mesh.num_tets(),
+        frames
+    );
+    let b = skinpatch::pipeline::bench_render(&setup, frames, (width, height), 5)?;
+    let (w, h, ss) = b.size;
+    let full = b.fem_ms + b.micro_ms + b.geometry_ms + b.render_ms;
+    println!("GPU: {}", b.adapter);
+    println!(
+        "image {w} × {h} px, supersampling {ss}×{ss}; means over {} frames",
+        b.frames
+    );
+    println!("  FEM step (CPU)          {:>10.2} ms", b.fem_ms);
+    println!("  microstructure (GPU)    {:>10.2} ms", b.micro_ms);
+    println!("  geometry (CPU, upload)  {:>10.2} ms", b.geometry_ms);
+    println!(
+        "  render (GPU)            {:>10.2} ms  = {:.1} frames/s",
+        b.render_ms,
+        1e3 / b.render_ms
+    );
+    println!(
+        "  render + read-back      {:>10.2} ms",
+        b.render_readback_ms
+    );
+    println!(
+        "  whole frame             {:>10.2} ms  = {:.2} frames/s",
+        full,
+        1e3 / full
+    );
     Ok(())
 }
 

@@ -16,6 +16,8 @@ use std::time::Instant;
 
 mod render;
 
+pub use render::{bench_render, RenderBench};
+
 use crate::error::{Error, Result};
 use crate::export::{self, FrameMetrics, MetricsWriter};
 use crate::fem::contact::{solve_with_contact, ContactState};
