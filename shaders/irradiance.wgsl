@@ -5,6 +5,8 @@
 //   target 1: millimetres per texel along u and v (stretch correction)
 //   target 2: rgb = light transmitted through the patch from lights behind
 //             it (translucent shadow map), already summed over the profile
+//   target 3: the shadow factor of light k in component k (the skin pass
+//             reads it instead of filtering the shadow maps again)
 // Rust side: src/render/irradiance.rs. Prepended: lighting.wgsl.
 
 // Mirrors `SurfaceVertex` in src/render/scene.rs.
@@ -29,6 +31,7 @@ struct Targets {
     @location(0) irradiance: vec4<f32>,
     @location(1) stretch: vec4<f32>,
     @location(2) transmitted: vec4<f32>,
+    @location(3) shadows: vec4<f32>,
 };
 
 @vertex
@@ -50,11 +53,13 @@ fn fs_main(in: Varyings) -> Targets {
     let env_atten = select(globals.params.z, globals.params.w, globals.flags.y == 0u);
     var e = env_atten * sh_irradiance(n);
     var transmitted = vec3<f32>(0.0);
+    var shadows = vec4<f32>(0.0);
     for (var k = 0u; k < globals.flags.x; k++) {
         let inc = incident(k, p);
         let nl = dot(n, inc.dir);
         if (nl > 0.0) {
             let shadow = shadow_pcf(k, p, inc.distance);
+            shadows[k] = shadow;
             e += shadow * energy_factor(nl, lobes) * nl * inc.irradiance;
         } else if (globals.flags.w != 0u) {
             // Back-lit: distance through the patch to the light-facing
@@ -82,5 +87,6 @@ fn fs_main(in: Varyings) -> Targets {
     out.irradiance = vec4<f32>(pre * e / PI, 1.0);
     out.stretch = vec4<f32>(mm, 0.0, 1.0);
     out.transmitted = vec4<f32>(pre * transmitted / PI, 1.0);
+    out.shadows = shadows;
     return out;
 }

@@ -1,4 +1,4 @@
-// Shadow and translucent shadow map of one light: every boundary face of
+// Shadow and translucent shadow map of one light (Rg32Float): every boundary face of
 // the deformed patch (and the probe) drawn from the light. Each texel keeps
 // the nearest surface's distance to the light (mm) and the irradiance
 // factor it receives (cosine x point-light falloff), which the translucent

@@ -13,6 +13,8 @@
 @group(1) @binding(6) var transmitted: texture_2d<f32>;
 // Tangent-space normals of the displacement map (static or deformed).
 @group(1) @binding(7) var micro_normals: texture_2d<f32>;
+// Shadow factor of light k in component k, in texture space.
+@group(1) @binding(8) var shadow_factors: texture_2d<f32>;
 
 // Mirrors `SurfaceVertex` in src/render/scene.rs.
 struct SurfaceVertex {
@@ -164,12 +166,13 @@ fn fs_skin(in: SurfaceVaryings) -> @location(0) vec4<f32> {
     let scale = vec2<f32>(roughness_scale(in.strain.x), roughness_scale(in.strain.y));
 
     var specular = vec3<f32>(0.0);
+    let shadows = textureSampleLevel(shadow_factors, linear_clamp, in.uv, 0.0);
     for (var k = 0u; k < globals.flags.x; k++) {
         let inc = incident(k, p);
         if (dot(n, inc.dir) <= 0.0) {
             continue;
         }
-        let shadow = shadow_pcf(k, p, inc.distance);
+        let shadow = shadows[k];
         var brdf: f32;
         if (mode != 0u && anisotropic) {
             brdf = ks_specular_aniso(frame, inc.dir, v, lobes, scale);

@@ -1,7 +1,8 @@
 //! Texture-space irradiance (`shaders/irradiance.wgsl`, with
 //! `lighting.wgsl` prepended): the top surface drawn into UV space writes
-//! the pre-scatter irradiance, the stretch map (mm per texel along u and v)
-//! and the light transmitted from behind (translucent shadow map).
+//! the pre-scatter irradiance, the stretch map (mm per texel along u and v),
+//! the light transmitted from behind (translucent shadow map) and each
+//! light's shadow factor.
 
 use super::stage::{render_pipeline, surface_layout, PipelineSpec};
 use crate::gpu::Context;
@@ -9,7 +10,7 @@ use crate::gpu::Context;
 /// The shader source (without `lighting.wgsl`).
 pub const SHADER: &str = include_str!("../../shaders/irradiance.wgsl");
 
-/// Format of the three targets (irradiance, stretch, transmitted).
+/// Format of the four targets (irradiance, stretch, transmitted, shadows).
 pub const FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 
 /// The whole module as compiled.
@@ -35,7 +36,7 @@ impl IrradianceStage {
                     layouts: &[lighting],
                     vertex: ("vs_main", surface_layout()),
                     fragment: "fs_main",
-                    targets: &[FORMAT; 3],
+                    targets: &[FORMAT; 4],
                     depth: false,
                     cull: false,
                 },
@@ -43,12 +44,13 @@ impl IrradianceStage {
         }
     }
 
-    /// Records the pass into `targets` (irradiance, stretch, transmitted).
+    /// Records the pass into `targets` (irradiance, stretch, transmitted,
+    /// shadow factors).
     pub fn encode(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         lighting: &wgpu::BindGroup,
-        targets: [&wgpu::TextureView; 3],
+        targets: [&wgpu::TextureView; 4],
         surface: (&wgpu::Buffer, u32),
     ) {
         let clear = wgpu::Color::TRANSPARENT;

@@ -116,7 +116,7 @@ pub struct Renderer {
     shadow_depth: wgpu::TextureView,
     lighting: wgpu::BindGroup,
     irradiance: IrradianceStage,
-    irradiance_views: [wgpu::TextureView; 3],
+    irradiance_views: [wgpu::TextureView; 4],
     diffusion: DiffusionStage,
     skin: SkinStage,
     // Group 1 of the skin pass with the neutral and the dynamic normals.
@@ -258,7 +258,7 @@ impl Renderer {
         // Texture-space targets and the diffusion chain.
         let target_usage =
             wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
-        let irradiance_views = ["irradiance", "stretch", "transmitted"].map(|label| {
+        let irradiance_views = ["irradiance", "stretch", "transmitted", "shadow factors"].map(|label| {
             view(&buffers::texture(
                 ctx,
                 label,
@@ -294,6 +294,7 @@ impl Renderer {
         let mut diffused_entries: Vec<wgpu::BindGroupLayoutEntry> =
             (0..7).map(|k| texture_entry(k, true, false)).collect();
         diffused_entries.push(texture_entry(7, false, false));
+        diffused_entries.push(texture_entry(8, true, false));
         let diffused_layout =
             ctx.device
                 .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -332,6 +333,7 @@ impl Renderer {
                 .collect();
             resources.push(wgpu::BindingResource::TextureView(&irradiance_views[2]));
             resources.push(wgpu::BindingResource::TextureView(normals));
+            resources.push(wgpu::BindingResource::TextureView(&irradiance_views[3]));
             bind_group(ctx, &diffused_layout, &resources)
         });
 
@@ -445,7 +447,7 @@ impl Renderer {
         self.irradiance.encode(
             &mut enc,
             &self.lighting,
-            [&v[0], &v[1], &v[2]],
+            [&v[0], &v[1], &v[2], &v[3]],
             (&self.surface.buffer, self.surface.count),
         );
         self.diffusion.encode(&mut enc);

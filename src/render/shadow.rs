@@ -1,5 +1,5 @@
 //! Shadow and translucent shadow maps (`shaders/shadow.wgsl`): per light,
-//! one layer of an `Rgba32Float` array holding the nearest surface's
+//! one layer of an `Rg32Float` array holding the nearest surface's
 //! distance to the light and its irradiance factor.
 
 use bytemuck::{Pod, Zeroable};
@@ -12,7 +12,7 @@ use crate::gpu::Context;
 pub const SHADER: &str = include_str!("../../shaders/shadow.wgsl");
 
 /// Format of the shadow-map layers.
-pub const FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
+pub const FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rg32Float;
 
 /// Value of a texel no surface covers (mm).
 pub const FAR_MM: f64 = 1e9;

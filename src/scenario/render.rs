@@ -38,7 +38,7 @@ pub struct RenderSection {
     pub mp4: bool,
     /// Side of the texture-space irradiance textures (texels). Default 1024.
     pub texture_px: usize,
-    /// Side of each light's shadow map (texels). Default 2048.
+    /// Side of each light's shadow map (texels). Default 1024.
     pub shadow_map_px: usize,
     /// Subdivisions of each surface-triangle edge (1 … 8). Default 1.
     pub tessellate: usize,
@@ -84,7 +84,7 @@ impl Default for RenderSection {
             frame_stride: 1,
             mp4: false,
             texture_px: 1024,
-            shadow_map_px: 2048,
+            shadow_map_px: 1024,
             tessellate: 1,
             mix_ratio: 0.5,
             draw_probe: true,
