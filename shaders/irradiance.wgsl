@@ -58,7 +58,7 @@ fn fs_main(in: Varyings) -> Targets {
         let inc = incident(k, p);
         let nl = dot(n, inc.dir);
         if (nl > 0.0) {
-            let shadow = shadow_pcf(k, p, inc.distance);
+            let shadow = shadow_pcf(k, p, n);
             shadows[k] = shadow;
             e += shadow * energy_factor(nl, lobes) * nl * inc.irradiance;
         } else if (globals.flags.w != 0u) {

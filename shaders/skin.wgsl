@@ -195,7 +195,7 @@ fn lambert(p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
         let inc = incident(k, p);
         let nl = dot(n, inc.dir);
         if (nl > 0.0) {
-            e += shadow_pcf(k, p, inc.distance) * nl * inc.irradiance;
+            e += shadow_pcf(k, p, n) * nl * inc.irradiance;
         }
     }
     return e / PI;

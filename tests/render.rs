@@ -586,3 +586,55 @@ fn an_interrupted_run_leaves_only_complete_frames() {
     assert!(e.is_ok(), "{e:?}");
     assert!(!stale.exists(), "stale temporary frame kept");
 }
+
+/// Every shipped example validates (meshes loaded or generated, render
+/// settings checked).
+#[test]
+fn every_example_validates() {
+    let mut count = 0;
+    for entry in std::fs::read_dir(root().join("examples")).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            skinpatch::scenario::Setup::load(&path)
+                .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            count += 1;
+        }
+    }
+    assert!(count >= 6, "{count} examples");
+}
+
+/// `render.mp4 = true` without ffmpeg stops before any work with a message
+/// saying how to get it.
+#[test]
+fn missing_ffmpeg_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(root().join("tests/fixtures/render_small.toml"))
+        .unwrap()
+        .replace("../../meshes", root().join("meshes").to_str().unwrap())
+        .replace("[render]\n", "[render]\nmp4 = true\n");
+    let scenario = dir.path().join("mp4.toml");
+    std::fs::write(&scenario, text).unwrap();
+    let out = dir.path().join("out");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_skinpatch"))
+        .args([
+            "run",
+            scenario.to_str().unwrap(),
+            "--output",
+            out.to_str().unwrap(),
+        ])
+        .env("PATH", dir.path())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(stderr.contains("needs ffmpeg on the PATH"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(
+        !out.join("metrics.csv").exists()
+            || std::fs::read_to_string(out.join("metrics.csv"))
+                .unwrap()
+                .lines()
+                .count()
+                <= 1
+    );
+}

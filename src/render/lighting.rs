@@ -20,7 +20,7 @@ pub const SHADER: &str = include_str!("../../shaders/lighting.wgsl");
 pub struct GpuLight {
     /// Direction of travel (w = 0) or position in mm (w = 1).
     pub where_: [f32; 4],
-    /// Irradiance at normal incidence (rgb).
+    /// Irradiance at normal incidence (rgb); w: shadow texel size (mm).
     pub radiance: [f32; 4],
     /// The light's shadow-map projection.
     pub view_proj: [[f32; 4]; 4],
@@ -95,6 +95,24 @@ pub fn light_view_proj(light: &Light, (centre, radius): Bounds) -> Mat4 {
     }
 }
 
+/// Size of one shadow-map texel at the scene's centre (mm).
+pub fn shadow_texel_mm(light: &Light, (centre, radius): Bounds, side: usize) -> f32 {
+    let r = radius.max(1e-3);
+    let extent = match light.kind {
+        LightKind::Directional(_) => 2.0 * r,
+        LightKind::Point(p) => {
+            let dist = (centre - p).length().max(1e-3);
+            let half = if dist > r * 1.05 {
+                (r / dist).asin() * 1.05
+            } else {
+                1.1
+            };
+            2.0 * dist * half.tan()
+        }
+    };
+    extent / side as f32
+}
+
 impl Globals {
     /// Uniforms for `mode` with camera aspect `aspect` and scene `bounds`;
     /// `curve` is m(r)/m(1) at [`curve_ratios`].
@@ -116,7 +134,9 @@ impl Globals {
             };
             *g = GpuLight {
                 where_: where_.to_array(),
-                radiance: (l.color * l.intensity).extend(0.0).to_array(),
+                radiance: (l.color * l.intensity)
+                    .extend(shadow_texel_mm(l, bounds, setup.shadow_map_px))
+                    .to_array(),
                 view_proj: light_view_proj(l, bounds).to_cols_array_2d(),
             };
         }

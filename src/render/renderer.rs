@@ -258,15 +258,16 @@ impl Renderer {
         // Texture-space targets and the diffusion chain.
         let target_usage =
             wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
-        let irradiance_views = ["irradiance", "stretch", "transmitted", "shadow factors"].map(|label| {
-            view(&buffers::texture(
-                ctx,
-                label,
-                (tex, tex),
-                super::irradiance::FORMAT,
-                target_usage,
-            ))
-        });
+        let irradiance_views =
+            ["irradiance", "stretch", "transmitted", "shadow factors"].map(|label| {
+                view(&buffers::texture(
+                    ctx,
+                    label,
+                    (tex, tex),
+                    super::irradiance::FORMAT,
+                    target_usage,
+                ))
+            });
         let blur_usage =
             wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING;
         let blur_texture = |label| {
