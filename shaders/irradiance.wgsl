@@ -9,17 +9,6 @@
 //             reads it instead of filtering the shadow maps again)
 // Rust side: src/render/irradiance.rs. Prepended: lighting.wgsl.
 
-// Mirrors `SurfaceVertex` in src/render/scene.rs.
-struct SurfaceVertex {
-    @location(0) position: vec4<f32>,
-    @location(1) normal: vec4<f32>,
-    @location(2) tangent: vec4<f32>,
-    // uv in xy; zw unused here.
-    @location(3) uv: vec4<f32>,
-    // r_s, r_t, and the s axis in uv (anisotropic roughness).
-    @location(4) strain: vec4<f32>,
-};
-
 struct Varyings {
     @builtin(position) clip: vec4<f32>,
     @location(0) world: vec3<f32>,

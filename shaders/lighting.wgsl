@@ -5,6 +5,17 @@
 
 const PI: f32 = 3.14159265358979;
 
+// Mirrors `SurfaceVertex` in src/render/scene.rs: a top-surface vertex.
+struct SurfaceVertex {
+    @location(0) position: vec4<f32>,
+    @location(1) normal: vec4<f32>,
+    @location(2) tangent: vec4<f32>,
+    // uv in xy; zw unused.
+    @location(3) uv: vec4<f32>,
+    // r_s, r_t, and the s axis in uv (anisotropic roughness).
+    @location(4) strain: vec4<f32>,
+};
+
 // Mirrors `GpuLight` in src/render/lighting.rs.
 struct Light {
     // xyz: direction of travel (w = 0) or position in mm (w = 1).

@@ -16,15 +16,6 @@
 // Shadow factor of light k in component k, in texture space.
 @group(1) @binding(8) var shadow_factors: texture_2d<f32>;
 
-// Mirrors `SurfaceVertex` in src/render/scene.rs.
-struct SurfaceVertex {
-    @location(0) position: vec4<f32>,
-    @location(1) normal: vec4<f32>,
-    @location(2) tangent: vec4<f32>,
-    @location(3) uv: vec4<f32>,
-    @location(4) strain: vec4<f32>,
-};
-
 // Mirrors `MeshVertex` in src/render/scene.rs.
 struct MeshVertex {
     @location(0) position: vec4<f32>,
@@ -163,7 +154,11 @@ fn fs_skin(in: SurfaceVaryings) -> @location(0) vec4<f32> {
     var s_axis = t * s_uv.x + b * s_uv.y;
     s_axis = select(t, normalize(s_axis), dot(s_axis, s_axis) > 1e-8);
     let frame = mat3x3<f32>(s_axis, cross(n, s_axis), n);
-    let scale = vec2<f32>(roughness_scale(in.strain.x), roughness_scale(in.strain.y));
+    // The static mode keeps the neutral (isotropic) roughness.
+    var scale = vec2<f32>(1.0);
+    if (mode == 2u) {
+        scale = vec2<f32>(roughness_scale(in.strain.x), roughness_scale(in.strain.y));
+    }
 
     var specular = vec3<f32>(0.0);
     let shadows = textureSampleLevel(shadow_factors, linear_clamp, in.uv, 0.0);

@@ -347,17 +347,17 @@ fn golden_images_of_the_three_modes() {
 /// Static and dynamic microstructure renders of the same deformed patch
 /// agree where the skin is unstrained and differ where it is stretched.
 /// The patch is stretched by 1.3 along x only for x > 0.5 mm; a top-down
-/// orthographic camera maps pixels to the surface, and the light grazes so
-/// the specular detail is prominent.
-#[test]
-fn dynamic_and_static_differ_only_where_strained() {
+/// orthographic camera maps pixels to the surface; a grazing light makes the
+/// microstructure's specular detail prominent.
+/// Mean |dynamic − static| where unstrained and where stretched, and the
+/// mean level, with `roughness` (`microgeometry` or `anisotropic`).
+fn static_vs_dynamic(ctx: Context, roughness: &str, light: [f32; 3]) -> (f64, f64, f64) {
     use skinpatch::micro::procedural::{generate, SkinParams};
     use skinpatch::micro::KernelModel;
     use skinpatch::render::albedo::Albedo;
     use skinpatch::render::{Mode, NormalMap, Renderer};
     use skinpatch::strain::SurfaceField;
 
-    let Some(ctx) = context() else { return };
     let mesh = skinpatch::mesh::io::read_mesh(&root().join("meshes/patch_3k.node")).unwrap();
     let x: Vec<_> = mesh
         .positions
@@ -381,19 +381,24 @@ fn dynamic_and_static_differ_only_where_strained() {
     let model = KernelModel::forehead();
     let mut chain = skinpatch::gpu::micro::GpuMicro::new(ctx, &neutral, &model, 4).unwrap();
     chain.submit(&field, true);
-    let text = "[render]\nwidth_px = 160\nheight_px = 160\nsupersample = 1\nmodes = [\"static\", \"dynamic\"]\n\
-        texture_px = 256\nshadow_map_px = 256\ndraw_probe = false\n\
+    let text = format!("[render]\nwidth_px = 160\nheight_px = 160\nsupersample = 1\nmodes = [\"static\", \"dynamic\"]\n\
+        texture_px = 256\nshadow_map_px = 256\ndraw_probe = false\nroughness = \"{roughness}\"\n\
         [render.camera]\nprojection = \"orthographic\"\neye_mm = [0, 0, 20]\ntarget_mm = [0, 0, 0]\n\
         up = [0, 1, 0]\nheight_mm = 10\n\
-        [[render.lights]]\nkind = \"directional\"\ndirection = [0.0, 0.8, -0.6]\nintensity = 3.0\n\
-        [render.environment]\npreset = \"none\"\n";
-    let scenario = skinpatch::scenario::Scenario::parse(text, Path::new("t.toml")).unwrap();
+        [[render.lights]]\nkind = \"directional\"\ndirection = {light:?}\nintensity = 3.0\n\
+        [render.environment]\npreset = \"none\"\n");
+    let scenario = skinpatch::scenario::Scenario::parse(&text, Path::new("t.toml")).unwrap();
     let setup = scenario
         .render
         .unwrap()
         .setup(Path::new("."), true)
         .unwrap();
     let normals = skinpatch::micro::normals::normal_map(&neutral);
+    // m(r)/m(1) of the map under the model (anisotropic roughness).
+    let ratios = skinpatch::render::lighting::curve_ratios();
+    let table = skinpatch::micro::roughness::tabulate(&neutral, &model, &ratios);
+    let m1 = table.points[6].1;
+    let curve: [f32; 16] = std::array::from_fn(|i| (table.points[i].1 / m1) as f32);
     let mut renderer = Renderer::new(
         chain.context(),
         &setup,
@@ -404,7 +409,7 @@ fn dynamic_and_static_differ_only_where_strained() {
             height: neutral.height,
         }),
         Some(chain.normals_texture()),
-        [1.0; 16],
+        curve,
     )
     .unwrap();
     let geometry = skinpatch::render::scene::build(&mesh, &x, &field, None, 1);
@@ -431,7 +436,16 @@ fn dynamic_and_static_differ_only_where_strained() {
     };
     let (unstrained, level) = region(-4.8, -0.5);
     let (strained, _) = region(1.5, 4.8);
-    println!("mean |dynamic − static|: unstrained {unstrained:.2e}, stretched {strained:.2e} (mean level {level:.3})");
+    println!(
+        "{roughness}: mean |dynamic − static|: unstrained {unstrained:.2e}, stretched {strained:.2e} (mean level {level:.3})"
+    );
+    (unstrained, strained, level)
+}
+
+#[test]
+fn dynamic_and_static_differ_only_where_strained() {
+    let Some(ctx) = context() else { return };
+    let (unstrained, strained, level) = static_vs_dynamic(ctx, "microgeometry", [0.0, 0.8, -0.6]);
     assert!(
         unstrained < 1e-3 * level,
         "unstrained region differs: {unstrained}"
@@ -439,6 +453,23 @@ fn dynamic_and_static_differ_only_where_strained() {
     assert!(
         strained > 20.0 * unstrained.max(1e-5),
         "stretched region: {strained} vs {unstrained}"
+    );
+}
+
+/// The same with the strain-driven anisotropic roughness (seed 003), lit
+/// from near the view direction so the mesoscale highlight fills the view:
+/// the lobes change only where r ≠ 1.
+#[test]
+fn anisotropic_roughness_changes_only_where_strained() {
+    let Some(ctx) = context() else { return };
+    let (unstrained, strained, level) = static_vs_dynamic(ctx, "anisotropic", [0.0, 0.15, -0.99]);
+    assert!(
+        unstrained < 1e-3 * level,
+        "unstrained region differs: {unstrained}"
+    );
+    assert!(
+        strained > 1e-3 * level,
+        "stretched region: {strained} vs level {level}"
     );
 }
 

@@ -15,8 +15,7 @@ use crate::fem::contact::{ProbePose, ProbeShape};
 use crate::mesh::{TetMesh, Vec3};
 use crate::strain::SurfaceField;
 
-/// A top-surface vertex; mirrors WGSL `SurfaceVertex` (irradiance.wgsl,
-/// skin.wgsl).
+/// A top-surface vertex; mirrors WGSL `SurfaceVertex` (lighting.wgsl).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct SurfaceVertex {
