@@ -508,6 +508,10 @@ fn bad_camera_and_light_parameters_are_named() {
         ("[render]\nlobes = [0.3, 0.0, 0.5]\n", "m2 must be in [0.02, 1]"),
         ("[render]\nalbedo = \"missing.png\"\n", "render.albedo"),
         ("[render]\nformat = \"jpeg\"\n", "render.format must be one of"),
+        (
+            "[render]\nformat = \"exr\"\nmp4 = true\n",
+            "render.mp4 needs PNG frames",
+        ),
         ("[render]\nwidht_px = 3\n", "unknown key render.widht_px; did you mean width_px?"),
     ] {
         let err = render_error(text);

@@ -147,9 +147,13 @@ impl Renderer {
     ) -> Result<Renderer> {
         let (w, h, f) = (setup.width, setup.height, setup.supersample);
         let tex = setup.texture_px;
-        ctx.check_map(w * f, h * f, 8)?;
-        ctx.check_map(tex, tex, 16)?;
-        ctx.check_map(setup.shadow_map_px, setup.shadow_map_px, 16)?;
+        // Texture sides and the largest storage bindings: the resolved image
+        // (16 B a pixel) and the albedo.
+        ctx.check_map(w * f, h * f, 0)?;
+        ctx.check_map(w, h, 16)?;
+        ctx.check_map(tex, tex, 0)?;
+        ctx.check_map(setup.shadow_map_px, setup.shadow_map_px, 0)?;
+        ctx.check_map(albedo.width, albedo.height, 0)?;
         let table = EnergyTable::skin();
         let globals = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("globals"),

@@ -4,7 +4,6 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::scene::MeshVertex;
 use super::stage::{mesh_layout, render_pipeline, PipelineSpec};
 use crate::gpu::Context;
 
@@ -100,6 +99,3 @@ impl ShadowStage {
         }
     }
 }
-
-/// Size of a [`MeshVertex`] (checked against WGSL in the tests).
-pub const MESH_VERTEX_BYTES: usize = std::mem::size_of::<MeshVertex>();

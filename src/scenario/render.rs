@@ -377,6 +377,12 @@ impl RenderSection {
                 "must be ≥ 1, got 0",
             ));
         }
+        if self.mp4 && format == FrameFormat::Exr {
+            return Err(Error::parameter(
+                "render.mp4",
+                "needs PNG frames (render.format = \"png8\" or \"png16\"), not exr",
+            ));
+        }
         let mix_ratio = self.mix_ratio;
         if !(0.0..=1.0).contains(&mix_ratio) {
             return Err(Error::parameter(
