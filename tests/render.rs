@@ -673,3 +673,38 @@ fn missing_ffmpeg_is_a_clear_error() {
                 <= 1
     );
 }
+
+/// `skinpatch bench render` prints positive timings for each part.
+#[test]
+fn bench_render_reports_timings() {
+    let Some(_ctx) = context() else { return };
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_skinpatch"))
+        .args([
+            "bench",
+            "render",
+            "--scenario",
+            "tests/fixtures/render_small.toml",
+        ])
+        .args(["--frames", "1", "--width", "64", "--height", "48"])
+        .current_dir(root())
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    for label in ["FEM step", "microstructure", "render (GPU)", "whole frame"] {
+        let line = stdout
+            .lines()
+            .find(|l| l.contains(label))
+            .unwrap_or_else(|| panic!("no {label} line: {stdout}"));
+        let ms: f64 = line
+            .split_whitespace()
+            .find_map(|w| w.parse().ok())
+            .unwrap_or_else(|| panic!("no number in {line}"));
+        assert!(ms > 0.0, "{line}");
+    }
+    assert!(stdout.contains("64 × 48 px"), "{stdout}");
+}
