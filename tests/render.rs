@@ -708,3 +708,48 @@ fn bench_render_reports_timings() {
     }
     assert!(stdout.contains("64 × 48 px"), "{stdout}");
 }
+
+/// With `mp4 = true` every rendered frame becomes one video frame at the
+/// scenario's frame rate over the frame stride. Needs ffmpeg and ffprobe
+/// (`.ci/run` installs them and sets SKINPATCH_REQUIRE_FFMPEG=1; elsewhere
+/// the test is skipped with a note when they are missing).
+#[test]
+fn mp4_holds_every_rendered_frame() {
+    let Some(_ctx) = context() else { return };
+    if !skinpatch::export::frames::ffmpeg_available() {
+        let required = std::env::var("SKINPATCH_REQUIRE_FFMPEG").is_ok_and(|v| v == "1");
+        assert!(
+            !required,
+            "ffmpeg is required (SKINPATCH_REQUIRE_FFMPEG=1) but not found"
+        );
+        eprintln!("no ffmpeg: skipped");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let with_mp4 = dir.path().join("mp4");
+    // 2 Hz over 1 s, every frame: frames 0, 1, 2.
+    let text = std::fs::read_to_string(root().join("tests/fixtures/render_small.toml"))
+        .unwrap()
+        .replace("[render]\n", "[render]\nmp4 = true\n");
+    let path = root().join("tests/fixtures/render_small.toml");
+    let scenario = skinpatch::scenario::Scenario::parse(&text, &path).unwrap();
+    let mut setup = skinpatch::scenario::Setup::from_scenario(&scenario, &path).unwrap();
+    setup.output_dir = with_mp4.clone();
+    skinpatch::pipeline::run(&setup, |_, _| {}).unwrap();
+    for mode in ["none", "static", "dynamic"] {
+        let video = with_mp4.join(format!("render/{mode}.mp4"));
+        let o = std::process::Command::new("ffprobe")
+            .args(["-v", "error", "-count_frames", "-show_entries"])
+            .args([
+                "stream=width,height,nb_read_frames,r_frame_rate",
+                "-of",
+                "csv=p=0",
+            ])
+            .arg(&video)
+            .output()
+            .expect("ffprobe runs");
+        let text = String::from_utf8_lossy(&o.stdout).trim().to_string();
+        assert_eq!(text, "128,128,2/1,3", "{mode}: {text}");
+        assert!(!with_mp4.join(format!("render/{mode}.partial.mp4")).exists());
+    }
+}

@@ -1,7 +1,8 @@
 //! Rendered frame files: numbered sequences as 8-bit or 16-bit sRGB PNG or
 //! linear float EXR, each written atomically (a temporary file renamed into
 //! place, so an interrupted run leaves only complete frames), and an
-//! optional MP4 per sequence through an installed `ffmpeg`.
+//! optional MP4 per sequence through an installed `ffmpeg` (also renamed
+//! into place when complete).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -81,9 +82,12 @@ pub fn ffmpeg_available() -> bool {
 }
 
 /// Encodes the PNG frames of `folder` (`frame_NNNN.png`, `frame_numbers`
-/// in order) into `out` (H.264, yuv420p) at `fps` with ffmpeg. Frames are
-/// passed through a concat list so gaps from a frame stride are fine.
+/// in order) into `out` (H.264, yuv420p) at `fps` with ffmpeg: the files are
+/// piped to it in order, one video frame each, so gaps from a frame stride
+/// do not matter.
 pub fn encode_mp4(folder: &Path, frame_numbers: &[usize], fps: f64, out: &Path) -> Result<PathBuf> {
+    use std::io::Write as _;
+    use std::process::Stdio;
     if !ffmpeg_available() {
         return Err(Error::MissingTool(format!(
             "render.mp4 needs ffmpeg on the PATH (e.g. `apt-get install ffmpeg`); \
@@ -91,48 +95,38 @@ pub fn encode_mp4(folder: &Path, frame_numbers: &[usize], fps: f64, out: &Path) 
             folder.display()
         )));
     }
-    let list = folder.join("frames.txt");
-    let mut text = String::new();
-    for &f in frame_numbers {
-        text.push_str(&format!(
-            "file '{}'\nduration {}\n",
-            frame_name(f, FrameFormat::Png8),
-            1.0 / fps
-        ));
+    let failed = |e: std::io::Error| Error::io(out, e);
+    // Encoded beside the target and renamed into place when complete.
+    let partial = out.with_extension("partial.mp4");
+    let mut child = Command::new("ffmpeg")
+        .args(["-y", "-loglevel", "error", "-f", "image2pipe", "-framerate"])
+        .arg(format!("{fps}"))
+        .args(["-i", "-", "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2"])
+        .args(["-c:v", "libx264", "-pix_fmt", "yuv420p"])
+        .arg(&partial)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .map_err(failed)?;
+    let fed = (|| -> Result<()> {
+        let mut stdin = child.stdin.take().expect("stdin was piped");
+        for &f in frame_numbers {
+            let path = folder.join(frame_name(f, FrameFormat::Png8));
+            let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+            stdin.write_all(&bytes).map_err(failed)?;
+        }
+        Ok(())
+    })();
+    let output = child.wait_with_output().map_err(failed)?;
+    if !output.status.success() || fed.is_err() {
+        let _ = std::fs::remove_file(&partial);
+        fed?;
+        return Err(failed(std::io::Error::other(format!(
+            "ffmpeg failed: {}",
+            String::from_utf8_lossy(&output.stderr).trim()
+        ))));
     }
-    write_atomically(&list, text.as_bytes())?;
-    let output = Command::new("ffmpeg")
-        .args([
-            "-y",
-            "-loglevel",
-            "error",
-            "-f",
-            "concat",
-            "-safe",
-            "0",
-            "-i",
-        ])
-        .arg(&list)
-        .args([
-            "-vf",
-            "pad=ceil(iw/2)*2:ceil(ih/2)*2",
-            "-c:v",
-            "libx264",
-            "-pix_fmt",
-            "yuv420p",
-        ])
-        .arg(out)
-        .output()
-        .map_err(|e| Error::io(out, e))?;
-    let _ = std::fs::remove_file(&list);
-    if !output.status.success() {
-        return Err(Error::io(
-            out,
-            std::io::Error::other(format!(
-                "ffmpeg failed: {}",
-                String::from_utf8_lossy(&output.stderr).trim()
-            )),
-        ));
-    }
+    std::fs::rename(&partial, out).map_err(failed)?;
     Ok(out.to_path_buf())
 }
