@@ -11,6 +11,8 @@
 
 mod common;
 
+use common::context;
+
 use nalgebra::Matrix2;
 use skinpatch::gpu::{self, Context};
 use skinpatch::mesh::{io, TetMesh, Vec3};
@@ -23,19 +25,6 @@ use skinpatch::micro::{
 };
 use skinpatch::strain::raster::DILATE_TEXELS;
 use skinpatch::strain::{StrainRaster, SurfaceField, Svd2};
-
-/// The adapter, or `None` (test skipped with a note) when there is none
-/// and a GPU is not required.
-fn context() -> Option<Context> {
-    match gpu::acquire() {
-        Ok(Some(ctx)) => Some(ctx),
-        Ok(None) => {
-            eprintln!("no GPU adapter: skipped (set SKINPATCH_REQUIRE_GPU=1 to fail instead)");
-            None
-        }
-        Err(e) => panic!("{e}"),
-    }
-}
 
 /// A small deterministic generator (xorshift64*), uniform in [lo, hi).
 struct Rng(u64);

@@ -11,27 +11,16 @@ use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
 use glam::Vec3 as G3;
-use skinpatch::gpu::{self, Context};
+use skinpatch::gpu::Context;
 use skinpatch::render::light::{Environment, GRACE_CATHEDRAL};
 use skinpatch::render::profile::{self, Texture, VARIANCES_MM2, WEIGHTS};
 use skinpatch::render::specular::{
     beckmann, beckmann_aniso, directional_albedo, ks_brdf, smith_g1, EnergyTable, SKIN_F0,
 };
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
+mod common;
 
-fn context() -> Option<Context> {
-    match gpu::acquire() {
-        Ok(Some(ctx)) => Some(ctx),
-        Ok(None) => {
-            eprintln!("no GPU adapter: skipped (set SKINPATCH_REQUIRE_GPU=1 to fail instead)");
-            None
-        }
-        Err(e) => panic!("{e}"),
-    }
-}
+use common::{context, root};
 
 #[test]
 fn six_gaussian_weights_sum_to_one_per_channel() {

@@ -9,10 +9,11 @@ use super::MicroEngine;
 use crate::error::{Error, Result};
 use crate::export::frames;
 use crate::fem::contact::ProbePose;
+use crate::gpu::micro::GpuMicro;
 use crate::gpu::Context;
 use crate::mesh::{TetMesh, Vec3};
 use crate::render::albedo::Albedo;
-use crate::render::{AlbedoSource, Mode, NormalMap, RenderSetup, Renderer, Roughness};
+use crate::render::{Mode, NormalMap, RenderSetup, Renderer, Roughness};
 use crate::scenario::MicroSetup;
 use crate::strain::SurfaceField;
 
@@ -75,12 +76,7 @@ impl RenderEngine {
             remove_stale_temporaries(&folder);
             folders.push((mode, folder));
         }
-        let albedo = match &setup.albedo {
-            AlbedoSource::Procedural => {
-                Albedo::procedural(setup.texture_px.min(2048), patch_width_mm)
-            }
-            AlbedoSource::File(path) => Albedo::load(path)?,
-        };
+        let albedo = Albedo::from_source(&setup.albedo, setup.texture_px, patch_width_mm)?;
         let neutral_normals = micro.map(|m| crate::micro::normals::normal_map(&m.neutral));
         let neutral = match (micro, &neutral_normals) {
             (Some(m), Some(n)) => Some(NormalMap {
@@ -207,6 +203,14 @@ fn remove_stale_temporaries(folder: &Path) {
     }
 }
 
+/// The device of the microstructure chain, or `own` without one.
+fn device<'a>(chain: Option<&'a GpuMicro>, own: Option<&'a Context>) -> &'a Context {
+    chain
+        .map(GpuMicro::context)
+        .or(own)
+        .expect("a device: the chain's or its own")
+}
+
 /// Figures of `skinpatch bench render` (means over the timed frames, ms).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct RenderBench {
@@ -259,12 +263,9 @@ pub fn bench_render(
     let adapter = ctx.describe();
     let mut ctx = Some(ctx);
     let (lo, hi) = setup.mesh.bounds();
-    let albedo = match &render.albedo {
-        AlbedoSource::Procedural => Albedo::procedural(render.texture_px.min(2048), hi.x - lo.x),
-        AlbedoSource::File(path) => Albedo::load(path)?,
-    };
+    let albedo = Albedo::from_source(&render.albedo, render.texture_px, hi.x - lo.x)?;
     let mut chain = match &micro {
-        Some(m) => Some(crate::gpu::micro::GpuMicro::new(
+        Some(m) => Some(GpuMicro::new(
             ctx.take().expect("the device is unused so far"),
             &m.neutral,
             &m.model,
@@ -274,10 +275,7 @@ pub fn bench_render(
     };
     let own = ctx;
     let mut renderer = {
-        let ctx = match &chain {
-            Some(c) => c.context(),
-            None => own.as_ref().expect("a device without a chain"),
-        };
+        let ctx = device(chain.as_ref(), own.as_ref());
         Renderer::new(
             ctx,
             &render,
@@ -300,10 +298,7 @@ pub fn bench_render(
             chain.run(&field)?;
         }
         let micro_ms = start.elapsed().as_secs_f64() * 1e3;
-        let ctx = match &chain {
-            Some(c) => c.context(),
-            None => own.as_ref().expect("a device without a chain"),
-        };
+        let ctx = device(chain.as_ref(), own.as_ref());
         let start = Instant::now();
         let probe = setup.simulation.probe.as_ref().map(|p| p.pose(m.time_s));
         let geometry =

@@ -67,6 +67,15 @@ impl Albedo {
         }
     }
 
+    /// The albedo a render setup asks for: procedural at `size` texels (at
+    /// most 2048) over a patch of `width_mm`, or the scenario's file.
+    pub fn from_source(source: &super::AlbedoSource, size: usize, width_mm: f64) -> Result<Albedo> {
+        match source {
+            super::AlbedoSource::Procedural => Ok(Albedo::procedural(size.min(2048), width_mm)),
+            super::AlbedoSource::File(path) => Albedo::load(path),
+        }
+    }
+
     /// Reads an 8- or 16-bit sRGB PNG and converts it to linear RGBA.
     pub fn load(path: &Path) -> Result<Albedo> {
         let img = image::ImageReader::open(path)

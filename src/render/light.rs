@@ -14,9 +14,6 @@ use glam::Vec3;
 /// Most lights a scene may have.
 pub const MAX_LIGHTS: usize = 4;
 
-/// Distance at which a point light delivers its `intensity` (mm).
-pub const POINT_REFERENCE_MM: f32 = 100.0;
-
 /// Where light comes from.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum LightKind {
@@ -35,22 +32,6 @@ pub struct Light {
     pub color: Vec3,
     /// Irradiance at normal incidence (at 100 mm for a point light).
     pub intensity: f32,
-}
-
-impl Light {
-    /// Unit vector from `p` towards the light and the irradiance (RGB) it
-    /// delivers at normal incidence there.
-    pub fn incident(&self, p: Vec3) -> (Vec3, Vec3) {
-        match self.kind {
-            LightKind::Directional(d) => (-d, self.color * self.intensity),
-            LightKind::Point(q) => {
-                let to = q - p;
-                let d2 = to.length_squared().max(1e-12);
-                let falloff = POINT_REFERENCE_MM * POINT_REFERENCE_MM / d2;
-                (to / d2.sqrt(), self.color * self.intensity * falloff)
-            }
-        }
-    }
 }
 
 /// Irradiance convolution constants of Ramamoorthi & Hanrahan (2001).

@@ -62,55 +62,38 @@ pub fn curve_ratios() -> [f64; 16] {
 /// The bounding sphere of the scene (centre, radius in mm).
 pub type Bounds = (Vec3, f32);
 
-/// A light's shadow-map projection covering the sphere `bounds`.
-pub fn light_view_proj(light: &Light, (centre, radius): Bounds) -> Mat4 {
+/// A light's shadow-map projection covering the sphere `bounds`, and the
+/// width the map spans at the scene's centre (mm).
+pub fn light_view(light: &Light, (centre, radius): Bounds) -> (Mat4, f32) {
     let r = radius.max(1e-3);
+    let up_for = |dir: Vec3| {
+        if dir.cross(Vec3::Z).length() > 1e-3 {
+            Vec3::Z
+        } else {
+            Vec3::X
+        }
+    };
     match light.kind {
         LightKind::Directional(d) => {
             let eye = centre - d * 2.0 * r;
-            let up = if d.cross(Vec3::Z).length() > 1e-3 {
-                Vec3::Z
-            } else {
-                Vec3::X
-            };
-            Mat4::orthographic_rh(-r, r, -r, r, 0.0, 4.0 * r) * Mat4::look_at_rh(eye, centre, up)
+            let m = Mat4::orthographic_rh(-r, r, -r, r, 0.0, 4.0 * r)
+                * Mat4::look_at_rh(eye, centre, up_for(d));
+            (m, 2.0 * r)
         }
         LightKind::Point(p) => {
             let to = centre - p;
             let dist = to.length().max(1e-3);
-            let dir = to / dist;
-            let up = if dir.cross(Vec3::Z).length() > 1e-3 {
-                Vec3::Z
-            } else {
-                Vec3::X
-            };
             let half = if dist > r * 1.05 {
                 (r / dist).asin() * 1.05
             } else {
                 1.1
             };
             let near = (dist - r).max(dist * 1e-3).max(1e-3);
-            Mat4::perspective_rh(2.0 * half, 1.0, near, dist + r) * Mat4::look_at_rh(p, centre, up)
+            let m = Mat4::perspective_rh(2.0 * half, 1.0, near, dist + r)
+                * Mat4::look_at_rh(p, centre, up_for(to / dist));
+            (m, 2.0 * dist * half.tan())
         }
     }
-}
-
-/// Size of one shadow-map texel at the scene's centre (mm).
-pub fn shadow_texel_mm(light: &Light, (centre, radius): Bounds, side: usize) -> f32 {
-    let r = radius.max(1e-3);
-    let extent = match light.kind {
-        LightKind::Directional(_) => 2.0 * r,
-        LightKind::Point(p) => {
-            let dist = (centre - p).length().max(1e-3);
-            let half = if dist > r * 1.05 {
-                (r / dist).asin() * 1.05
-            } else {
-                1.1
-            };
-            2.0 * dist * half.tan()
-        }
-    };
-    extent / side as f32
 }
 
 impl Globals {
@@ -132,12 +115,14 @@ impl Globals {
                 LightKind::Directional(d) => d.extend(0.0),
                 LightKind::Point(p) => p.extend(1.0),
             };
+            let (view_proj, extent_mm) = light_view(l, bounds);
             *g = GpuLight {
                 where_: where_.to_array(),
+                // w: the shadow map's texel size at the scene (mm).
                 radiance: (l.color * l.intensity)
-                    .extend(shadow_texel_mm(l, bounds, setup.shadow_map_px))
+                    .extend(extent_mm / setup.shadow_map_px as f32)
                     .to_array(),
-                view_proj: light_view_proj(l, bounds).to_cols_array_2d(),
+                view_proj: view_proj.to_cols_array_2d(),
             };
         }
         let mut sh = [[0.0; 4]; 9];
@@ -213,7 +198,7 @@ mod tests {
                 color: Vec3::ONE,
                 intensity: 1.0,
             };
-            let m = light_view_proj(&light, bounds);
+            let (m, _) = light_view(&light, bounds);
             for d in [Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z] {
                 let p = m.project_point3(bounds.0 + d * 7.9);
                 assert!(p.x.abs() <= 1.0 && p.y.abs() <= 1.0, "{kind:?}: {p}");

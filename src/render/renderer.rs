@@ -7,7 +7,7 @@ use glam::Vec3;
 use super::albedo::{linear_to_srgb, Albedo};
 use super::diffusion::DiffusionStage;
 use super::irradiance::IrradianceStage;
-use super::lighting::{light_view_proj, Bounds, Globals};
+use super::lighting::{Bounds, Globals};
 use super::resolve::ResolveStage;
 use super::scene::FrameGeometry;
 use super::shadow::{ShadowInfo, ShadowStage};
@@ -417,14 +417,11 @@ impl Renderer {
         );
         ctx.queue
             .write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
-        for (light, info) in self.setup.lights.iter().zip(&self.shadow_infos) {
-            let where_ = match light.kind {
-                super::light::LightKind::Directional(d) => d.extend(0.0),
-                super::light::LightKind::Point(p) => p.extend(1.0),
-            };
+        // The shadow passes use the lights exactly as the shading sees them.
+        for (light, info) in globals.lights.iter().zip(&self.shadow_infos) {
             let value = ShadowInfo {
-                view_proj: light_view_proj(light, self.bounds).to_cols_array_2d(),
-                where_: where_.to_array(),
+                view_proj: light.view_proj,
+                where_: light.where_,
             };
             ctx.queue.write_buffer(info, 0, bytemuck::bytes_of(&value));
         }

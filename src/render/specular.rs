@@ -59,22 +59,6 @@ pub struct Lobes {
     pub w: f64,
 }
 
-impl Lobes {
-    /// One lobe of roughness `m`.
-    pub fn single(m: f64) -> Lobes {
-        Lobes {
-            m1: m,
-            m2: m,
-            w: 1.0,
-        }
-    }
-
-    /// The mixed distribution at `cos θ_h`.
-    pub fn d(&self, cos_h: f64) -> f64 {
-        self.w * beckmann(cos_h, self.m1) + (1.0 - self.w) * beckmann(cos_h, self.m2)
-    }
-}
-
 /// Measured two-lobe fits (seed 002): microscale (Table 1) and mesoscale
 /// (Table 2) parameters per facial region, for subjects 1 and 2.
 pub fn region_lobes(region: &str, subject: usize, microscale: bool) -> Option<Lobes> {

@@ -10,6 +10,20 @@ pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// The GPU adapter, or `None` (test skipped with a note) when there is
+/// none and a GPU is not required (`SKINPATCH_REQUIRE_GPU=1` makes a
+/// missing adapter a failure).
+pub fn context() -> Option<skinpatch::gpu::Context> {
+    match skinpatch::gpu::acquire() {
+        Ok(Some(ctx)) => Some(ctx),
+        Ok(None) => {
+            eprintln!("no GPU adapter: skipped (set SKINPATCH_REQUIRE_GPU=1 to fail instead)");
+            None
+        }
+        Err(e) => panic!("{e}"),
+    }
+}
+
 /// A two-layer patch spec with small limits so tests stay fast.
 pub fn small_patch(refine: Option<RefineZone>) -> PatchSpec {
     PatchSpec {
