@@ -329,24 +329,8 @@ impl EnvironmentSection {
 }
 
 impl RenderSection {
-    /// Validates the section; `base` resolves an albedo file and
-    /// `has_micro` says whether the scenario has a microstructure.
-    pub fn setup(&self, base: &Path, has_micro: bool) -> Result<RenderSetup> {
-        let width = in_range("render.width_px", self.width_px, 8, 8192)?;
-        let height = in_range("render.height_px", self.height_px, 8, 8192)?;
-        let supersample = in_range("render.supersample", self.supersample, 1, 4)?;
-        if width * supersample > 16384 || height * supersample > 16384 {
-            return Err(Error::parameter(
-                "render.supersample",
-                format!("{width} × {height} px × {supersample} exceeds 16384 px per side"),
-            ));
-        }
-        if self.modes.is_empty() {
-            return Err(Error::parameter(
-                "render.modes",
-                "must name at least one mode",
-            ));
-        }
+    /// `modes`: known, needing a microstructure where they do, each once.
+    fn modes(&self, has_micro: bool) -> Result<Vec<Mode>> {
         let mut modes = Vec::new();
         for (k, m) in self.modes.iter().enumerate() {
             let key = format!("render.modes[{k}]");
@@ -366,6 +350,106 @@ impl RenderSection {
             }
             modes.push(mode);
         }
+        Ok(modes)
+    }
+
+    /// Microscale lobes (explicit or the region's) and mesoscale lobes.
+    fn lobes(&self) -> Result<(Lobes, Lobes)> {
+        let region = one_of("render.region", &self.region, &REGIONS)?;
+        if !(1..=2).contains(&self.subject) {
+            return Err(Error::parameter(
+                "render.subject",
+                format!("must be 1 or 2, got {}", self.subject),
+            ));
+        }
+        let micro_lobes = match self.lobes {
+            Some([m1, m2, w]) => {
+                for (name, m) in [("m1", m1), ("m2", m2)] {
+                    if !(m.is_finite() && (0.02..=1.0).contains(&m)) {
+                        return Err(Error::parameter(
+                            "render.lobes",
+                            format!("{name} must be in [0.02, 1], got {m}"),
+                        ));
+                    }
+                }
+                if !(0.0..=1.0).contains(&w) {
+                    return Err(Error::parameter(
+                        "render.lobes",
+                        format!("w must be in [0, 1], got {w}"),
+                    ));
+                }
+                Lobes { m1, m2, w }
+            }
+            None => region_lobes(region, self.subject, true).expect("region and subject checked"),
+        };
+        let meso_lobes =
+            region_lobes(region, self.subject, false).expect("region and subject checked");
+        Ok((micro_lobes, meso_lobes))
+    }
+
+    /// `albedo`: procedural or an existing file relative to `base`.
+    fn albedo(&self, base: &Path) -> Result<AlbedoSource> {
+        let albedo = if self.albedo == "procedural" {
+            AlbedoSource::Procedural
+        } else {
+            let path = base.join(&self.albedo);
+            if !path.is_file() {
+                return Err(Error::parameter(
+                    "render.albedo",
+                    format!(
+                        "\"procedural\" or an image file; {} does not exist",
+                        path.display()
+                    ),
+                ));
+            }
+            AlbedoSource::File(path)
+        };
+        Ok(albedo)
+    }
+
+    /// `lights`: at most four, each validated; one default light without.
+    fn lights(&self) -> Result<Vec<Light>> {
+        let lights = match &self.lights {
+            Some(list) => {
+                if list.len() > MAX_LIGHTS {
+                    return Err(Error::parameter(
+                        "render.lights",
+                        format!("at most {MAX_LIGHTS} lights, got {}", list.len()),
+                    ));
+                }
+                list.iter()
+                    .enumerate()
+                    .map(|(k, l)| l.light(k))
+                    .collect::<Result<_>>()?
+            }
+            None => vec![Light {
+                kind: LightKind::Directional(Vec3::new(0.45, 0.6, -0.66).normalize()),
+                color: Vec3::new(1.0, 0.97, 0.92),
+                intensity: 2.5,
+            }],
+        };
+        Ok(lights)
+    }
+
+    /// Validates the section; `base` resolves an albedo file and
+    /// `has_micro` says whether the scenario has a microstructure.
+    pub fn setup(&self, base: &Path, has_micro: bool) -> Result<RenderSetup> {
+        let width = in_range("render.width_px", self.width_px, 8, 8192)?;
+        let height = in_range("render.height_px", self.height_px, 8, 8192)?;
+        let supersample = in_range("render.supersample", self.supersample, 1, 4)?;
+        if width * supersample > 16384 || height * supersample > 16384 {
+            return Err(Error::parameter(
+                "render.supersample",
+                format!("{width} × {height} px × {supersample} exceeds 16384 px per side"),
+            ));
+        }
+        if self.modes.is_empty() {
+            return Err(Error::parameter(
+                "render.modes",
+                "must name at least one mode",
+            ));
+        }
+        let modes = self.modes(has_micro)?;
         let format = match one_of("render.format", &self.format, &["png8", "png16", "exr"])? {
             "png8" => FrameFormat::Png8,
             "png16" => FrameFormat::Png16,
@@ -397,35 +481,7 @@ impl RenderSection {
                 format!("must be ≤ 10, got {rho_s}"),
             ));
         }
-        let region = one_of("render.region", &self.region, &REGIONS)?;
-        if !(1..=2).contains(&self.subject) {
-            return Err(Error::parameter(
-                "render.subject",
-                format!("must be 1 or 2, got {}", self.subject),
-            ));
-        }
-        let micro_lobes = match self.lobes {
-            Some([m1, m2, w]) => {
-                for (name, m) in [("m1", m1), ("m2", m2)] {
-                    if !(m.is_finite() && (0.02..=1.0).contains(&m)) {
-                        return Err(Error::parameter(
-                            "render.lobes",
-                            format!("{name} must be in [0.02, 1], got {m}"),
-                        ));
-                    }
-                }
-                if !(0.0..=1.0).contains(&w) {
-                    return Err(Error::parameter(
-                        "render.lobes",
-                        format!("w must be in [0, 1], got {w}"),
-                    ));
-                }
-                Lobes { m1, m2, w }
-            }
-            None => region_lobes(region, self.subject, true).expect("region and subject checked"),
-        };
-        let meso_lobes =
-            region_lobes(region, self.subject, false).expect("region and subject checked");
+        let (micro_lobes, meso_lobes) = self.lobes()?;
         let roughness = match one_of(
             "render.roughness",
             &self.roughness,
@@ -434,40 +490,8 @@ impl RenderSection {
             "microgeometry" => Roughness::Microgeometry,
             _ => Roughness::Anisotropic,
         };
-        let albedo = if self.albedo == "procedural" {
-            AlbedoSource::Procedural
-        } else {
-            let path = base.join(&self.albedo);
-            if !path.is_file() {
-                return Err(Error::parameter(
-                    "render.albedo",
-                    format!(
-                        "\"procedural\" or an image file; {} does not exist",
-                        path.display()
-                    ),
-                ));
-            }
-            AlbedoSource::File(path)
-        };
-        let lights = match &self.lights {
-            Some(list) => {
-                if list.len() > MAX_LIGHTS {
-                    return Err(Error::parameter(
-                        "render.lights",
-                        format!("at most {MAX_LIGHTS} lights, got {}", list.len()),
-                    ));
-                }
-                list.iter()
-                    .enumerate()
-                    .map(|(k, l)| l.light(k))
-                    .collect::<Result<_>>()?
-            }
-            None => vec![Light {
-                kind: LightKind::Directional(Vec3::new(0.45, 0.6, -0.66).normalize()),
-                color: Vec3::new(1.0, 0.97, 0.92),
-                intensity: 2.5,
-            }],
-        };
+        let albedo = self.albedo(base)?;
+        let lights = self.lights()?;
         Ok(RenderSetup {
             width,
             height,
