@@ -175,6 +175,18 @@ impl Assembly {
         }
     }
 
+    /// Adds `k` to node `i`'s diagonal block.
+    pub fn add_to_diagonal_block(&mut self, i: usize, k: &Matrix3<f64>) {
+        let n = self.neighbour_start[i + 1] - self.neighbour_start[i];
+        let base = 9 * self.neighbour_start[i] + 3 * self.diagonal_slot[i];
+        let values = self.matrix.values_mut();
+        for row in 0..3 {
+            for col in 0..3 {
+                values[base + 3 * n * row + col] += k[(row, col)];
+            }
+        }
+    }
+
     /// The diagonal 3×3 block of node `i`.
     pub fn diagonal_block(&self, i: usize) -> Matrix3<f64> {
         self.block(i, self.diagonal_slot[i])

@@ -233,11 +233,14 @@ pub struct ContactState {
     pub active: std::collections::BTreeMap<usize, NodeContact>,
     /// Probe pose at the end of the previous solve.
     last_pose: Option<ProbePose>,
-    /// Where each active node would be had it moved rigidly with the probe
-    /// since the current solve started (to detect re-sticking).
-    carried: std::collections::BTreeMap<usize, Vec3>,
-    /// Limit on active-set rounds per solve.
-    pub max_rounds: usize,
+    /// Per active node the slip reference: where the node would be had it
+    /// moved rigidly with the probe since the solve started (or, for a node
+    /// that touched during the solve, where it touched). Slip is measured
+    /// from it and a sticking node is held at its projection.
+    reference: std::collections::BTreeMap<usize, Vec3>,
+    /// Complementarity constants: each node's rest stiffness (N/mm), which
+    /// turns a gap or a slip into a comparable force.
+    stiffness: Vec<f64>,
 }
 
 /// What a contact solve found.
@@ -255,13 +258,11 @@ pub struct ContactReport {
     /// Largest penetration relative to the local element size (the mean
     /// edge length at the node); the contact solve keeps it ≤ 0.01.
     pub max_penetration_ratio: f64,
-    /// Active-set rounds taken.
-    pub rounds: usize,
-    /// Newton iterations over all rounds.
+    /// Newton iterations of the solve.
     pub newton_iterations: usize,
-    /// CG iterations over all rounds.
+    /// Linear-solver iterations of the solve.
     pub cg_iterations: usize,
-    /// Final relative residual of the last equilibrium solve.
+    /// Final relative residual.
     pub rel_residual: f64,
 }
 
@@ -303,8 +304,8 @@ impl ContactState {
                 .collect(),
             active: Default::default(),
             last_pose: None,
-            carried: Default::default(),
-            max_rounds: 40,
+            reference: Default::default(),
+            stiffness: Vec::new(),
         }
     }
 
@@ -314,8 +315,48 @@ impl ContactState {
     }
 }
 
+/// After this many Newton iterations the contact update stops switching
+/// nodes on a knife edge: it activates only nodes past the penetration
+/// tolerance and releases only clearly adhesive ones (hysteresis against
+/// cycling).
+const HYSTERESIS_AFTER: usize = 12;
+
+/// After this many Newton iterations the active set and the stick/slip
+/// states are frozen (with a warning), so the solve can still converge.
+const FREEZE_AFTER: usize = 30;
+
+/// Friction forces are kept consistent with the normal reactions and slip
+/// directions to this fraction of their size.
+const FRICTION_TOL: f64 = 1e-3;
+
+/// Slip (relative to the penetration tolerance) below which a sliding node's
+/// friction keeps its direction instead of following the slip.
+const MIN_SLIP: f64 = 0.01;
+
+/// One contact solve: the probe, the mode and the base problem.
+struct Frame<'a> {
+    base_filters: &'a [super::solve::Filter],
+    base_targets: &'a [Vec3],
+    base_ext: &'a [Vec3],
+    pose: &'a ProbePose,
+    mode: ContactMode,
+}
+
 /// Solves static equilibrium with the probe at `pose`, on top of the base
 /// constraints (`filters`, `targets`) and loads (`f_ext`).
+///
+/// Contact is resolved inside one Newton loop, a primal–dual active set
+/// (semi-smooth Newton; Hüeber, Stadler & Wohlmuth 2008): at every Newton
+/// iteration, from the current positions and reactions, a node is in
+/// contact when `F_n − c·g > 0` (normal reaction `F_n`, signed gap `g`,
+/// node stiffness `c`), and a Coulomb node sticks when
+/// `|−F_t + c·s_t| ≤ μ F_n` (tangential force `F_t`, slip `s_t` since the
+/// solve started) and otherwise slides against the friction force
+/// `−μ F_n` along that vector. Sliding nodes are re-projected onto the probe
+/// every iteration, so the constraint normal is always the one at the
+/// node's closest point. The solve has converged when an iteration changes
+/// no contact or stick/slip state and the residual and constraint gaps are
+/// within tolerance.
 pub fn solve_with_contact(
     sim: &mut super::integrate::Simulation,
     base: (&[super::solve::Filter], &[Vec3], &[Vec3]),
@@ -325,11 +366,14 @@ pub fn solve_with_contact(
     context: &str,
 ) -> crate::error::Result<ContactReport> {
     let (base_filters, base_targets, base_ext) = base;
+    if state.stiffness.len() != sim.num_nodes() {
+        state.stiffness = sim.rest_node_stiffness();
+    }
     let previous = state.last_pose.unwrap_or(*pose);
-    // A new frame: sticking nodes ride along with the probe; sliding nodes
-    // keep sliding with last frame's friction (a steady drag then settles in
-    // a round or two) and stick again if they end up moving with the probe.
-    state.carried = state
+    // A new solve: every active node's slip reference rides along with the
+    // probe from where the node is; sticking nodes are held there, sliding
+    // ones keep last solve's friction as their first guess.
+    state.reference = state
         .active
         .keys()
         .map(|&v| (v, previous.carry(pose, &sim.x[v])))
@@ -341,162 +385,227 @@ pub fn solve_with_contact(
             },
             (ContactMode::Coulomb(_), slide @ NodeContact::Slide { .. }) => slide,
             _ => NodeContact::Stick {
-                anchor: pose.project(&previous.carry(pose, &sim.x[v])).0,
+                anchor: pose.project(&state.reference[&v]).0,
             },
         };
     }
-    let mut report = ContactReport::default();
-    // Rounds solve loosely until the active set settles, then once tightly
-    // (and check again): most rounds then cost one or two Newton iterations.
-    let final_tol = sim.settings.rel_tol;
-    let loose_tol = final_tol.max(1e-3);
-    let mut tight = false;
-    let mut outcome = Ok(());
-    for round in 0..state.max_rounds {
-        report.rounds = round + 1;
-        sim.filters.copy_from_slice(base_filters);
-        sim.targets.copy_from_slice(base_targets);
-        sim.f_ext.copy_from_slice(base_ext);
-        for (&v, c) in &state.active {
-            match *c {
-                NodeContact::Stick { anchor } => {
-                    sim.filters[v] = super::solve::Filter::Fixed;
-                    sim.targets[v] = anchor;
-                }
-                NodeContact::Slide { friction } => {
-                    let (q, n) = pose.project(&sim.x[v]);
-                    sim.filters[v] = sim.filters[v].constrain(&n);
-                    sim.targets[v] = q;
-                    sim.f_ext[v] += friction;
-                }
+    let frame = Frame {
+        base_filters,
+        base_targets,
+        base_ext,
+        pose,
+        mode,
+    };
+    let mut warned = false;
+    let stats = sim.solve_with(context, |sim, it| {
+        let changed = if it < FREEZE_AFTER {
+            update_active_set(sim, &frame, state, it >= HYSTERESIS_AFTER)
+        } else {
+            if !warned {
+                log::warn!(
+                    "{context}: contact set still changing after {FREEZE_AFTER} Newton iterations; frozen"
+                );
+                warned = true;
             }
-        }
-        sim.settings.rel_tol = if tight { final_tol } else { loose_tol };
-        let stats = match sim.solve_static(context) {
-            Ok(s) => s,
-            Err(e) => {
-                outcome = Err(e);
-                break;
-            }
+            update_friction(sim, &frame, state);
+            false
         };
-        report.newton_iterations += stats.iterations;
-        report.cg_iterations += stats.cg_iterations;
-        report.rel_residual = stats.rel_residual;
-        let changed = update_active_set(sim, base_ext, pose, mode, state, tight);
-        match (changed, tight) {
-            (false, true) => break,
-            (false, false) => tight = true,
-            (true, _) if round + 1 == state.max_rounds => log::warn!(
-                "{context}: contact set still changing after {} rounds; keeping the last equilibrium",
-                state.max_rounds
-            ),
-            (true, _) => {}
-        }
-    }
-    sim.settings.rel_tol = final_tol;
-    outcome?;
+        apply_contact(sim, &frame, state);
+        changed
+    })?;
     state.last_pose = Some(*pose);
+    let mut report = ContactReport {
+        newton_iterations: stats.iterations,
+        cg_iterations: stats.cg_iterations,
+        rel_residual: stats.rel_residual,
+        ..Default::default()
+    };
     finish_report(sim, base_ext, pose, state, &mut report);
     Ok(report)
 }
 
-/// Contact force on node `v` at equilibrium: what balances the rest.
+/// Contact force on node `v`: what balances the rest (at equilibrium; at an
+/// iterate, the force the constraints exert).
 fn contact_force(sim: &super::integrate::Simulation, base_ext: &[Vec3], v: usize) -> Vec3 {
     -(sim.internal_forces()[v] + base_ext[v])
 }
 
-/// Releases adhesive nodes, switches stick/slip, adds penetrating nodes and
-/// flags nodes that drifted off a curved surface. Returns whether anything changed.
+/// `v` without its component along the unit vector `n`.
+fn tangential(v: &Vec3, n: &Vec3) -> Vec3 {
+    v - n * v.dot(n)
+}
+
+/// The semi-smooth Newton update of the contact set and the stick/slip
+/// states from the current positions and reactions (see
+/// [`solve_with_contact`]). `settled` switches on the hysteresis. Returns
+/// whether any node entered or left contact or changed between stick and slip.
 fn update_active_set(
     sim: &super::integrate::Simulation,
-    base_ext: &[Vec3],
-    pose: &ProbePose,
-    mode: ContactMode,
+    frame: &Frame,
     state: &mut ContactState,
-    tight: bool,
+    settled: bool,
 ) -> bool {
-    // Friction forces are settled to 1e-3 of their size in tight rounds, 1e-2 before.
-    let friction_tol = if tight { 1e-3 } else { 1e-2 };
     let mut changed = false;
+    let mut counts = [0usize; 4];
     let forces: Vec<(usize, Vec3)> = state
         .active
         .keys()
-        .map(|&v| (v, contact_force(sim, base_ext, v)))
+        .map(|&v| (v, contact_force(sim, frame.base_ext, v)))
         .collect();
     let largest = forces.iter().map(|(_, f)| f.norm()).fold(0.0, f64::max);
+    let release_below = if settled { -1e-3 } else { -1e-9 } * largest;
     for (v, f) in forces {
-        let (dist, n) = pose.distance(&sim.x[v]);
+        let (gap, n) = frame.pose.distance(&sim.x[v]);
         let normal = f.dot(&n);
-        if mode != ContactMode::Bonded && normal < -1e-9 * largest {
+        let c = state.stiffness[v];
+        if frame.mode != ContactMode::Bonded && normal - c * gap < release_below {
             state.active.remove(&v);
+            state.reference.remove(&v);
             changed = true;
+            counts[0] += 1;
             continue;
         }
-        let tol = state.tolerance[v];
+        let ContactMode::Coulomb(mu) = frame.mode else {
+            continue;
+        };
+        let limit = mu * normal.max(0.0);
         let entry = state.active.get_mut(&v).expect("active node");
-        match (mode, *entry) {
-            (ContactMode::Coulomb(mu), NodeContact::Stick { .. }) => {
-                let ft = f - n * normal;
-                if ft.norm() > mu * normal.max(0.0) * (1.0 + 1e-9) {
+        let reference = state.reference[&v];
+        match *entry {
+            NodeContact::Stick { anchor } => {
+                let xi = tangential(&(c * (sim.x[v] - anchor) - f), &n);
+                if xi.norm() > limit * (1.0 + 1e-9) + 1e-12 * largest {
                     *entry = NodeContact::Slide {
-                        friction: ft.normalize() * (mu * normal.max(0.0)),
+                        friction: -xi.normalize() * limit,
                     };
                     changed = true;
+                    counts[1] += 1;
                 }
             }
-            (ContactMode::Coulomb(mu), NodeContact::Slide { friction }) => {
-                // Slip over this solve relative to the probe surface: if the
-                // node ends up moving along its friction force, it sticks.
-                if let Some(&carried) = state.carried.get(&v) {
-                    let slip = sim.x[v] - carried;
-                    let slip_t = slip - n * slip.dot(&n);
-                    if friction.dot(&slip_t) > 0.0 && slip_t.norm() > 0.1 * tol {
-                        *entry = NodeContact::Stick {
-                            anchor: pose.project(&carried).0,
-                        };
-                        changed = true;
-                        continue;
-                    }
-                }
-                let magnitude = mu * normal.max(0.0);
-                let dir = if friction.norm() > 0.0 {
-                    friction.normalize()
+            NodeContact::Slide { friction } => {
+                let (dir, _) = slip_direction(&sim.x[v], &reference, &n, &friction, state.tolerance[v]);
+                let now = -dir * friction.norm();
+                let xi = tangential(&(c * (sim.x[v] - reference) - now), &n);
+                if xi.norm() <= limit {
+                    *entry = NodeContact::Stick {
+                        anchor: frame.pose.project(&reference).0,
+                    };
+                    changed = true;
+                    counts[2] += 1;
                 } else {
-                    Vec3::zeros()
-                };
-                // Keep the direction, tangent to the current normal.
-                let dir = (dir - n * dir.dot(&n)).try_normalize(1e-12).unwrap_or(dir);
-                let updated = dir * magnitude;
-                if (updated - friction).norm() > friction_tol * magnitude.max(1e-12) {
-                    *entry = NodeContact::Slide { friction: updated };
-                    changed = true;
-                }
-                if dist.abs() > tol {
-                    changed = true;
+                    // The magnitude follows the normal reaction; changes
+                    // below FRICTION_TOL of it are not taken (they would
+                    // keep the residual from settling).
+                    let magnitude = if (limit - friction.norm()).abs() > FRICTION_TOL * limit {
+                        limit
+                    } else {
+                        friction.norm()
+                    };
+                    *entry = NodeContact::Slide {
+                        friction: -dir * magnitude,
+                    };
                 }
             }
-            (_, NodeContact::Slide { .. }) if dist.abs() > tol => changed = true,
-            _ => {}
         }
     }
+    let activate_below = if settled { 1.0 } else { 0.1 };
     for &v in &state.candidates {
         if state.active.contains_key(&v) {
             continue;
         }
-        let (dist, _) = pose.distance(&sim.x[v]);
-        if dist < -state.tolerance[v] {
-            let (q, _) = pose.project(&sim.x[v]);
-            let c = match mode {
+        let (gap, _) = frame.pose.distance(&sim.x[v]);
+        if gap < -activate_below * state.tolerance[v] {
+            let q = frame.pose.project(&sim.x[v]).0;
+            let c = match frame.mode {
                 ContactMode::Frictionless => NodeContact::Slide {
                     friction: Vec3::zeros(),
                 },
                 _ => NodeContact::Stick { anchor: q },
             };
             state.active.insert(v, c);
+            state.reference.insert(v, q);
             changed = true;
+            counts[3] += 1;
         }
     }
+    if changed {
+        log::debug!(
+            "contact: {} released, {} stick→slip, {} slip→stick, {} new",
+            counts[0],
+            counts[1],
+            counts[2],
+            counts[3]
+        );
+    }
     changed
+}
+
+/// Friction magnitudes follow the normal reactions (states frozen).
+fn update_friction(sim: &super::integrate::Simulation, frame: &Frame, state: &mut ContactState) {
+    let ContactMode::Coulomb(mu) = frame.mode else {
+        return;
+    };
+    for (&v, entry) in state.active.iter_mut() {
+        if let NodeContact::Slide { friction } = entry {
+            let (_, n) = frame.pose.distance(&sim.x[v]);
+            let normal = contact_force(sim, frame.base_ext, v).dot(&n);
+            let dir = tangential(friction, &n).try_normalize(1e-300);
+            *friction = dir.map_or(Vec3::zeros(), |d| d * mu * normal.max(0.0));
+        }
+    }
+}
+
+/// Sets the solver's constraints and loads for the current contact state:
+/// sticking nodes fixed at their anchors, sliding nodes held along the
+/// normal at their closest probe point with their friction force.
+fn apply_contact(sim: &mut super::integrate::Simulation, frame: &Frame, state: &ContactState) {
+    sim.filters.copy_from_slice(frame.base_filters);
+    sim.targets.copy_from_slice(frame.base_targets);
+    sim.f_ext.copy_from_slice(frame.base_ext);
+    sim.slip_loads.clear();
+    for (&v, c) in &state.active {
+        match *c {
+            NodeContact::Stick { anchor } => {
+                sim.filters[v] = super::solve::Filter::Fixed;
+                sim.targets[v] = anchor;
+            }
+            NodeContact::Slide { friction } => {
+                let (q, n) = frame.pose.project(&sim.x[v]);
+                sim.filters[v] = sim.filters[v].constrain(&n);
+                sim.targets[v] = q;
+                if friction != Vec3::zeros() {
+                    let reference = state.reference[&v];
+                    let tol = state.tolerance[v];
+                    let (_, fallback) = slip_direction(&sim.x[v], &reference, &n, &friction, tol);
+                    sim.slip_loads.push(super::integrate::SlipLoad {
+                        node: v,
+                        reference,
+                        normal: n,
+                        magnitude: friction.norm(),
+                        fallback,
+                        min_slip: MIN_SLIP * tol,
+                    });
+                }
+            }
+        }
+    }
+}
+
+/// The slip direction of a sliding node at `x`: along its tangential slip
+/// from `reference`, or — below `MIN_SLIP` of the penetration tolerance
+/// `tol` — opposite to its current friction force. Returns the direction in
+/// use and that fallback.
+fn slip_direction(x: &Vec3, reference: &Vec3, n: &Vec3, friction: &Vec3, tol: f64) -> (Vec3, Vec3) {
+    let fallback = tangential(&-friction, n)
+        .try_normalize(1e-300)
+        .unwrap_or_else(Vec3::zeros);
+    let s = tangential(&(x - reference), n);
+    let dir = if s.norm() > MIN_SLIP * tol {
+        s.normalize()
+    } else {
+        fallback
+    };
+    (dir, fallback)
 }
 
 fn finish_report(

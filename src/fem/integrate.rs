@@ -28,7 +28,7 @@
 use nalgebra::Matrix3;
 use rayon::prelude::*;
 
-use super::assembly::Assembly;
+use super::assembly::{multiply, Assembly};
 use super::corotation::{Corotation, RestElement, Tangent, TangentKind};
 use super::material::Material;
 use super::solve::{self, CgSettings, CgWorkspace, DirectSolver, Filter};
@@ -106,6 +106,56 @@ pub struct NewtonStats {
     pub scale: f64,
 }
 
+/// A Coulomb sliding-friction load on one node: a force of fixed magnitude
+/// opposing the node's tangential slip from `reference`,
+/// `f = −m·ŝ`, `ŝ = s/|s|`, `s = (I − n nᵀ)(x − reference)`. Its derivative
+/// enters the Newton matrix as `(m/|s|)(I − n nᵀ − ŝ ŝᵀ)` — symmetric and
+/// positive semi-definite, the stiffness of `m·|s|` — so a slipping node's
+/// direction converges with Newton's rate instead of as a fixed point.
+/// Below a slip of `min_slip` the direction is `fallback` (a node that just
+/// started to slip) and the stiffness is capped at `m / min_slip`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SlipLoad {
+    /// The node.
+    pub node: usize,
+    /// Where slip is measured from (mm).
+    pub reference: Vec3,
+    /// Unit normal of the contact surface.
+    pub normal: Vec3,
+    /// Force magnitude `μ·F_n` (N).
+    pub magnitude: f64,
+    /// Slip direction while the slip is below `min_slip` (unit, tangent).
+    pub fallback: Vec3,
+    /// Slip below which `fallback` is used (mm).
+    pub min_slip: f64,
+}
+
+impl SlipLoad {
+    /// The tangential slip at `x` and its direction.
+    fn slip(&self, x: &Vec3) -> (f64, Vec3) {
+        let d = x - self.reference;
+        let s = d - self.normal * d.dot(&self.normal);
+        let len = s.norm();
+        if len > self.min_slip {
+            (len, s / len)
+        } else {
+            (self.min_slip, self.fallback)
+        }
+    }
+
+    /// The friction force on the node at `x` (N).
+    pub fn force(&self, x: &Vec3) -> Vec3 {
+        -self.slip(x).1 * self.magnitude
+    }
+
+    /// Its contribution to the node's diagonal stiffness block (N/mm).
+    fn stiffness(&self, x: &Vec3) -> Matrix3<f64> {
+        let (len, dir) = self.slip(x);
+        let n = self.normal;
+        (Matrix3::identity() - n * n.transpose() - dir * dir.transpose()) * (self.magnitude / len)
+    }
+}
+
 /// The simulated patch: rest data, state and workspaces.
 #[derive(Clone, Debug)]
 pub struct Simulation {
@@ -117,6 +167,8 @@ pub struct Simulation {
     pub x: Vec<Vec3>,
     /// External nodal loads (N).
     pub f_ext: Vec<Vec3>,
+    /// Sliding-friction loads, which depend on the positions (see [`SlipLoad`]).
+    pub slip_loads: Vec<SlipLoad>,
     /// Per-node constraint filters.
     pub filters: Vec<Filter>,
     /// Positions imposed on each node's constrained directions.
@@ -143,7 +195,12 @@ pub struct Simulation {
     direct: DirectSolver,
     dx: Vec<f64>,
     rhs: Vec<f64>,
+    r_free: Vec<f64>,
+    f_slip: Vec<Vec3>,
+    prescribed: Vec<f64>,
+    kd: Vec<f64>,
     force_floor: f64,
+    position_tol: f64,
     tangent_kind: TangentKind,
 }
 
@@ -170,6 +227,7 @@ impl Simulation {
             elements,
             x: mesh.positions.clone(),
             f_ext: vec![Vec3::zeros(); n],
+            slip_loads: Vec::new(),
             filters: vec![Filter::Free; n],
             targets: mesh.positions.clone(),
             settings: NewtonSettings::default(),
@@ -185,7 +243,12 @@ impl Simulation {
             direct: DirectSolver::default(),
             dx: vec![0.0; 3 * n],
             rhs: vec![0.0; 3 * n],
+            r_free: vec![0.0; 3 * n],
+            f_slip: vec![Vec3::zeros(); n],
+            prescribed: vec![0.0; 3 * n],
+            kd: vec![0.0; 3 * n],
             force_floor: 1e-15 * stiffest * size * size,
+            position_tol: 1e-7 * size,
             tangent_kind: TangentKind::Exact,
         }
     }
@@ -285,6 +348,10 @@ impl Simulation {
             let diagonal: Vec<f64> = self.mass.iter().map(|m| m * c).collect();
             self.assembly.add_to_diagonal(&diagonal);
         }
+        for load in &self.slip_loads {
+            let k = load.stiffness(&self.x[load.node]);
+            self.assembly.add_to_diagonal_block(load.node, &k);
+        }
         self.timings.assembly_s += start.elapsed().as_secs_f64();
     }
 
@@ -297,21 +364,58 @@ impl Simulation {
         }
     }
 
+    /// Per node the stiffness of its rest diagonal block, `tr(K0_ii)/3`
+    /// (N/mm): the force it takes to move the node alone by 1 mm.
+    pub fn rest_node_stiffness(&self) -> Vec<f64> {
+        let mut k = vec![0.0; self.num_nodes()];
+        for (tet, e) in self.tets.iter().zip(&self.elements) {
+            for (a, &v) in tet.iter().enumerate() {
+                k[v] += e.k0[a][a].trace() / 3.0;
+            }
+        }
+        k
+    }
+
     /// Residual norms after [`Simulation::evaluate_forces`]: (‖S r‖, scale).
+    /// Leaves `S r` in `rhs`.
     fn residual(&mut self) -> (f64, f64) {
         let mut free = 0.0;
         let mut reaction = 0.0;
         let mut external = 0.0;
+        self.f_slip.iter_mut().for_each(|f| *f = Vec3::zeros());
+        self.f_slip.resize(self.num_nodes(), Vec3::zeros());
+        for load in &self.slip_loads {
+            self.f_slip[load.node] += load.force(&self.x[load.node]);
+        }
         for i in 0..self.num_nodes() {
-            let r = self.f_int[i] + self.f_ext[i];
+            let r = self.f_int[i] + self.f_ext[i] + self.f_slip[i];
             let s = self.filters[i].apply(&r);
             self.rhs[3 * i..3 * i + 3].copy_from_slice(s.as_slice());
             free += s.norm_squared();
             reaction += (self.f_int[i] - self.filters[i].apply(&self.f_int[i])).norm_squared();
-            external += self.f_ext[i].norm_squared();
+            external += (self.f_ext[i] + self.f_slip[i]).norm_squared();
         }
         let scale = reaction.sqrt().max(external.sqrt()).max(self.force_floor);
         (free.sqrt(), scale)
+    }
+
+    /// Fills `prescribed` with each node's move onto its targets along its
+    /// constrained directions, `(I − S)(target − x)`, and returns the
+    /// largest such distance (mm).
+    fn constraint_violation(&mut self) -> f64 {
+        let mut largest: f64 = 0.0;
+        for i in 0..self.num_nodes() {
+            let f = &self.filters[i];
+            let d = if *f == Filter::Free {
+                Vec3::zeros()
+            } else {
+                let gap = self.targets[i] - self.x[i];
+                gap - f.apply(&gap)
+            };
+            largest = largest.max(d.norm());
+            self.prescribed[3 * i..3 * i + 3].copy_from_slice(d.as_slice());
+        }
+        largest
     }
 
     /// The reported relative residual: 0 for a load-free state at round-off
@@ -332,21 +436,44 @@ impl Simulation {
     /// Solves for static equilibrium with the current constraints and loads.
     /// `context` names the step in errors (e.g. `frame 12`).
     pub fn solve_static(&mut self, context: &str) -> Result<NewtonStats> {
-        self.apply_targets();
+        self.solve_with(context, |_, _| false)
+    }
+
+    /// Solves for equilibrium while `update` may change the problem: it is
+    /// called at the start of every Newton iteration, with the forces
+    /// evaluated at the current positions, may set new filters, targets and
+    /// loads, and returns whether it changed anything that decides the
+    /// solution (a contact set, a stick/slip state). The solve converges on
+    /// an iteration whose update changed nothing, whose residual is within
+    /// tolerance and whose nodes sit on their targets (within 1e-7 of the
+    /// mesh size). Each Newton step moves the constrained directions onto
+    /// their targets and solves the free ones with that move's coupling
+    /// (`S K S y = S (r − K d)`), so a target that moves every iteration —
+    /// a contact node re-projected onto a curved probe — costs no extra solve.
+    pub fn solve_with<U>(&mut self, context: &str, mut update: U) -> Result<NewtonStats>
+    where
+        U: FnMut(&mut Simulation, usize) -> bool,
+    {
         self.evaluate_forces();
-        let (mut norm, mut scale) = self.residual();
         let mut stats = NewtonStats::default();
         self.tangent_kind = TangentKind::Exact;
-        for it in 0..self.settings.max_iterations {
+        for it in 0..=self.settings.max_iterations {
+            let changed = update(self, it);
+            let (norm, scale) = self.residual();
+            let violation = self.constraint_violation();
             stats.iterations = it;
             stats.rel_residual = self.relative(norm, scale);
             stats.scale = scale;
-            if !stats.rel_residual.is_finite() {
+            if !stats.rel_residual.is_finite() || !violation.is_finite() {
                 return Err(not_converged(context, it, stats.rel_residual));
             }
-            if self.converged(norm, scale) {
+            if !changed && violation <= self.position_tol && self.converged(norm, scale) {
                 return Ok(stats);
             }
+            if it == self.settings.max_iterations {
+                break;
+            }
+            self.r_free.clone_from(&self.rhs);
             self.assemble_tangent();
             let forcing = self.forcing(norm / scale);
             let (mut iterations, solved) = self.linear_solve(forcing);
@@ -360,30 +487,21 @@ impl Simulation {
                 iterations += more;
             }
             stats.cg_iterations += iterations;
-            let old_norm = norm;
-            (norm, scale) = self.line_search(norm)?;
-            let descended = norm < old_norm;
+            let (new_norm, new_scale, descended) = self.line_search(norm);
             if !descended && self.tangent_kind == TangentKind::Exact {
                 // The exact step was no descent direction: project from now on.
                 self.tangent_kind = TangentKind::Projected;
             }
             log::debug!(
-                "{context}: Newton {it}: {iterations} linear iterations, residual {:.3e} ({norm:.3e} N of {scale:.3e} N)",
-                norm / scale
+                "{context}: Newton {it}: {iterations} linear iterations, residual {:.3e} ({new_norm:.3e} N of {new_scale:.3e} N), constraints {violation:.2e} mm",
+                new_norm / new_scale
             );
         }
-        stats.iterations = self.settings.max_iterations;
-        stats.rel_residual = self.relative(norm, scale);
-        stats.scale = scale;
-        if self.converged(norm, scale) {
-            Ok(stats)
-        } else {
-            Err(not_converged(
-                context,
-                self.settings.max_iterations,
-                stats.rel_residual,
-            ))
-        }
+        Err(not_converged(
+            context,
+            self.settings.max_iterations,
+            stats.rel_residual,
+        ))
     }
 
     /// Relative tolerance of the linear solve at relative residual `rel`
@@ -397,12 +515,30 @@ impl Simulation {
             .clamp(self.settings.cg.rel_tol, 0.1)
     }
 
-    /// Solves for the Newton step into `dx`; returns the linear iterations
-    /// (1 for a direct solve) and whether the solve succeeded: a factorisation
-    /// or a conjugate-gradient run that met no non-positive curvature and
-    /// reached its tolerance.
+    /// The right-hand side of the free directions, `S (r − K d)`, from the
+    /// filtered residual `r_free` and the prescribed move `d`.
+    fn step_rhs(&mut self) {
+        self.rhs.clone_from(&self.r_free);
+        if self.prescribed.iter().all(|&d| d == 0.0) {
+            return;
+        }
+        multiply(&self.assembly.matrix, &self.prescribed, &mut self.kd);
+        for (i, f) in self.filters.iter().enumerate() {
+            let kd = Vec3::new(self.kd[3 * i], self.kd[3 * i + 1], self.kd[3 * i + 2]);
+            let s = f.apply(&kd);
+            for c in 0..3 {
+                self.rhs[3 * i + c] -= s[c];
+            }
+        }
+    }
+
+    /// Solves for the free part of the Newton step into `dx`; returns the
+    /// linear iterations (1 for a direct solve) and whether the solve
+    /// succeeded: a factorisation or a conjugate-gradient run that met no
+    /// non-positive curvature and reached its tolerance.
     fn linear_solve(&mut self, forcing: f64) -> (usize, bool) {
         let start = std::time::Instant::now();
+        self.step_rhs();
         let outcome = self.linear_solve_untimed(forcing);
         self.timings.linear_s += start.elapsed().as_secs_f64();
         outcome
@@ -436,25 +572,57 @@ impl Simulation {
         (cg.iterations, cg.converged)
     }
 
-    /// Takes the step `dx`, halving it while the residual grows (at most 6 times).
-    fn line_search(&mut self, old_norm: f64) -> Result<(f64, f64)> {
+    /// Positions `x_start + d + alpha·dx` (the prescribed move in full).
+    fn set_trial(&mut self, alpha: f64) {
+        for (i, x) in self.x.iter_mut().enumerate() {
+            let k = 3 * i;
+            let d = Vec3::new(self.prescribed[k], self.prescribed[k + 1], self.prescribed[k + 2]);
+            let y = Vec3::new(self.dx[k], self.dx[k + 1], self.dx[k + 2]);
+            *x = self.x_start[i] + d + y * alpha;
+        }
+    }
+
+    /// Takes the step, halving its free part while the residual does not
+    /// decrease (at most 6 times). When the step also moves constrained
+    /// directions, descent after a failed full step is measured from the
+    /// moved state (`alpha = 0`). Without descent the trial with the smallest
+    /// residual is kept (the Newton loop decides). Returns the new
+    /// (‖S r‖, scale) and whether the residual decreased.
+    fn line_search(&mut self, old_norm: f64) -> (f64, f64, bool) {
         self.x_start.clone_from(&self.x);
+        let moves = self.prescribed.iter().any(|&d| d != 0.0);
+        let mut reference = old_norm;
+        let mut best: Option<(f64, f64)> = None;
         let mut alpha = 1.0;
-        for _ in 0..6 {
-            for (i, x) in self.x.iter_mut().enumerate() {
-                let d = Vec3::new(self.dx[3 * i], self.dx[3 * i + 1], self.dx[3 * i + 2]);
-                *x = self.x_start[i] + d * alpha;
-            }
+        for k in 0..7 {
+            self.set_trial(alpha);
             self.evaluate_forces();
             let (norm, scale) = self.residual();
-            if norm.is_finite() && norm < old_norm {
-                return Ok((norm, scale));
+            if norm.is_finite() && norm < reference {
+                return (norm, scale, true);
+            }
+            if norm.is_finite() && best.is_none_or(|(n, _)| norm < n) {
+                best = Some((norm, alpha));
+            }
+            if k == 0 && moves {
+                self.set_trial(0.0);
+                self.evaluate_forces();
+                let (norm, _) = self.residual();
+                if norm.is_finite() {
+                    reference = norm;
+                    if best.is_none_or(|(n, _)| norm < n) {
+                        best = Some((norm, 0.0));
+                    }
+                }
             }
             alpha *= 0.5;
         }
-        // No decrease found: keep the smallest step (the Newton loop decides).
+        // No decrease found: keep the best trial (the smallest step if none was finite).
+        let alpha = best.map_or(alpha * 2.0, |(_, a)| a);
+        self.set_trial(alpha);
+        self.evaluate_forces();
         let (norm, scale) = self.residual();
-        Ok((norm, scale))
+        (norm, scale, false)
     }
 }
 
