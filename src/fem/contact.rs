@@ -330,7 +330,7 @@ const FREEZE_AFTER: usize = 30;
 const FRICTION_TOL: f64 = 1e-3;
 
 /// Slip (relative to the penetration tolerance) below which a sliding node's
-/// friction keeps its direction instead of following the slip.
+/// friction force is regularised (proportional to the slip).
 const MIN_SLIP: f64 = 0.01;
 
 /// One contact solve: the probe, the mode and the base problem.
@@ -483,9 +483,20 @@ fn update_active_set(
                 }
             }
             NodeContact::Slide { friction } => {
-                let (dir, _) = slip_direction(&sim.x[v], &reference, &n, &friction, state.tolerance[v]);
-                let now = -dir * friction.norm();
-                let xi = tangential(&(c * (sim.x[v] - reference) - now), &n);
+                let load = super::integrate::SlipLoad {
+                    node: v,
+                    reference,
+                    normal: n,
+                    magnitude: friction.norm(),
+                    min_slip: MIN_SLIP * state.tolerance[v],
+                };
+                // Against the friction of the last step: a node that now
+                // moves along its friction force (or not at all) sticks.
+                let xi = tangential(&(c * (sim.x[v] - reference) - friction), &n);
+                let dir = -load
+                    .force(&sim.x[v])
+                    .try_normalize(1e-300)
+                    .unwrap_or_else(Vec3::zeros);
                 if xi.norm() <= limit {
                     *entry = NodeContact::Stick {
                         anchor: frame.pose.project(&reference).0,
@@ -574,38 +585,17 @@ fn apply_contact(sim: &mut super::integrate::Simulation, frame: &Frame, state: &
                 sim.filters[v] = sim.filters[v].constrain(&n);
                 sim.targets[v] = q;
                 if friction != Vec3::zeros() {
-                    let reference = state.reference[&v];
-                    let tol = state.tolerance[v];
-                    let (_, fallback) = slip_direction(&sim.x[v], &reference, &n, &friction, tol);
                     sim.slip_loads.push(super::integrate::SlipLoad {
                         node: v,
-                        reference,
+                        reference: state.reference[&v],
                         normal: n,
                         magnitude: friction.norm(),
-                        fallback,
-                        min_slip: MIN_SLIP * tol,
+                        min_slip: MIN_SLIP * state.tolerance[v],
                     });
                 }
             }
         }
     }
-}
-
-/// The slip direction of a sliding node at `x`: along its tangential slip
-/// from `reference`, or — below `MIN_SLIP` of the penetration tolerance
-/// `tol` — opposite to its current friction force. Returns the direction in
-/// use and that fallback.
-fn slip_direction(x: &Vec3, reference: &Vec3, n: &Vec3, friction: &Vec3, tol: f64) -> (Vec3, Vec3) {
-    let fallback = tangential(&-friction, n)
-        .try_normalize(1e-300)
-        .unwrap_or_else(Vec3::zeros);
-    let s = tangential(&(x - reference), n);
-    let dir = if s.norm() > MIN_SLIP * tol {
-        s.normalize()
-    } else {
-        fallback
-    };
-    (dir, fallback)
 }
 
 fn finish_report(

@@ -112,8 +112,9 @@ pub struct NewtonStats {
 /// enters the Newton matrix as `(m/|s|)(I − n nᵀ − ŝ ŝᵀ)` — symmetric and
 /// positive semi-definite, the stiffness of `m·|s|` — so a slipping node's
 /// direction converges with Newton's rate instead of as a fixed point.
-/// Below a slip of `min_slip` the direction is `fallback` (a node that just
-/// started to slip) and the stiffness is capped at `m / min_slip`.
+/// Below a slip of `min_slip` the force is regularised to `−m·s/min_slip`
+/// (stiffness `(m/min_slip)(I − n nᵀ)`), so force and stiffness stay
+/// consistent through `s = 0`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SlipLoad {
     /// The node.
@@ -124,35 +125,35 @@ pub struct SlipLoad {
     pub normal: Vec3,
     /// Force magnitude `μ·F_n` (N).
     pub magnitude: f64,
-    /// Slip direction while the slip is below `min_slip` (unit, tangent).
-    pub fallback: Vec3,
-    /// Slip below which `fallback` is used (mm).
+    /// Slip below which the force is regularised (mm, > 0).
     pub min_slip: f64,
 }
 
 impl SlipLoad {
-    /// The tangential slip at `x` and its direction.
-    fn slip(&self, x: &Vec3) -> (f64, Vec3) {
+    /// The tangential slip at `x`.
+    fn slip(&self, x: &Vec3) -> Vec3 {
         let d = x - self.reference;
-        let s = d - self.normal * d.dot(&self.normal);
-        let len = s.norm();
-        if len > self.min_slip {
-            (len, s / len)
-        } else {
-            (self.min_slip, self.fallback)
-        }
+        d - self.normal * d.dot(&self.normal)
     }
 
     /// The friction force on the node at `x` (N).
     pub fn force(&self, x: &Vec3) -> Vec3 {
-        -self.slip(x).1 * self.magnitude
+        let s = self.slip(x);
+        -s * (self.magnitude / s.norm().max(self.min_slip))
     }
 
     /// Its contribution to the node's diagonal stiffness block (N/mm).
     fn stiffness(&self, x: &Vec3) -> Matrix3<f64> {
-        let (len, dir) = self.slip(x);
+        let s = self.slip(x);
+        let len = s.norm();
         let n = self.normal;
-        (Matrix3::identity() - n * n.transpose() - dir * dir.transpose()) * (self.magnitude / len)
+        let tangent = Matrix3::identity() - n * n.transpose();
+        if len > self.min_slip {
+            let dir = s / len;
+            (tangent - dir * dir.transpose()) * (self.magnitude / len)
+        } else {
+            tangent * (self.magnitude / self.min_slip)
+        }
     }
 }
 
@@ -459,6 +460,10 @@ impl Simulation {
         self.tangent_kind = TangentKind::Exact;
         for it in 0..=self.settings.max_iterations {
             let changed = update(self, it);
+            if changed {
+                // A new contact problem: start again from the exact tangent.
+                self.tangent_kind = TangentKind::Exact;
+            }
             let (norm, scale) = self.residual();
             let violation = self.constraint_violation();
             stats.iterations = it;
@@ -490,6 +495,7 @@ impl Simulation {
             let (new_norm, new_scale, descended) = self.line_search(norm);
             if !descended && self.tangent_kind == TangentKind::Exact {
                 // The exact step was no descent direction: project from now on.
+                log::debug!("{context}: Newton {it}: no descent with the exact tangent; projecting");
                 self.tangent_kind = TangentKind::Projected;
             }
             log::debug!(
@@ -617,8 +623,9 @@ impl Simulation {
             }
             alpha *= 0.5;
         }
-        // No decrease found: keep the best trial (the smallest step if none was finite).
-        let alpha = best.map_or(alpha * 2.0, |(_, a)| a);
+        // No decrease found: keep the best trial with some step (the
+        // smallest step if none was finite).
+        let alpha = best.filter(|&(_, a)| a > 0.0).map_or(alpha * 2.0, |(_, a)| a);
         self.set_trial(alpha);
         self.evaluate_forces();
         let (norm, scale) = self.residual();
