@@ -238,6 +238,11 @@ pub struct ContactState {
     /// that touched during the solve, where it touched). Slip is measured
     /// from it and a sticking node is held at its projection.
     reference: std::collections::BTreeMap<usize, Vec3>,
+    /// Per sliding node the constraint plane in use (point, normal): kept
+    /// while the node lies within the solver's position tolerance of the
+    /// probe, re-projected otherwise (a sphere on a free block is a neutral
+    /// mode that planes following the nodes every iteration would let drift).
+    planes: std::collections::BTreeMap<usize, (Vec3, Vec3)>,
     /// Complementarity constants: each node's rest stiffness (N/mm), which
     /// turns a gap or a slip into a comparable force.
     stiffness: Vec<f64>,
@@ -305,6 +310,7 @@ impl ContactState {
             active: Default::default(),
             last_pose: None,
             reference: Default::default(),
+            planes: Default::default(),
             stiffness: Vec::new(),
         }
     }
@@ -389,6 +395,7 @@ pub fn solve_with_contact(
             },
         };
     }
+    state.planes.clear();
     let frame = Frame {
         base_filters,
         base_targets,
@@ -569,11 +576,12 @@ fn update_friction(sim: &super::integrate::Simulation, frame: &Frame, state: &mu
 /// Sets the solver's constraints and loads for the current contact state:
 /// sticking nodes fixed at their anchors, sliding nodes held along the
 /// normal at their closest probe point with their friction force.
-fn apply_contact(sim: &mut super::integrate::Simulation, frame: &Frame, state: &ContactState) {
+fn apply_contact(sim: &mut super::integrate::Simulation, frame: &Frame, state: &mut ContactState) {
     sim.filters.copy_from_slice(frame.base_filters);
     sim.targets.copy_from_slice(frame.base_targets);
     sim.f_ext.copy_from_slice(frame.base_ext);
     sim.slip_loads.clear();
+    state.planes.retain(|v, _| state.active.contains_key(v));
     for (&v, c) in &state.active {
         match *c {
             NodeContact::Stick { anchor } => {
@@ -581,7 +589,18 @@ fn apply_contact(sim: &mut super::integrate::Simulation, frame: &Frame, state: &
                 sim.targets[v] = anchor;
             }
             NodeContact::Slide { friction } => {
-                let (q, n) = frame.pose.project(&sim.x[v]);
+                let (q, n) = match state.planes.get(&v) {
+                    Some(&plane)
+                        if frame.pose.distance(&sim.x[v]).0.abs() <= sim.position_tol() =>
+                    {
+                        plane
+                    }
+                    _ => {
+                        let plane = frame.pose.project(&sim.x[v]);
+                        state.planes.insert(v, plane);
+                        plane
+                    }
+                };
                 sim.filters[v] = sim.filters[v].constrain(&n);
                 sim.targets[v] = q;
                 if friction != Vec3::zeros() {

@@ -259,6 +259,12 @@ impl Simulation {
         self.x.len()
     }
 
+    /// How close (mm) a constrained node must be to its target for a solve
+    /// to converge: 1e-7 of the mesh diagonal.
+    pub fn position_tol(&self) -> f64 {
+        self.position_tol
+    }
+
     /// Internal elastic forces at the last evaluation (N).
     pub fn internal_forces(&self) -> &[Vec3] {
         &self.f_int
