@@ -327,12 +327,14 @@ impl ContactState {
 /// cycling).
 const HYSTERESIS_AFTER: usize = 12;
 
-/// After this many Newton iterations the active set and the stick/slip
-/// states are frozen (with a warning), so the solve can still converge.
+/// After this many Newton iterations the active set, the stick/slip states
+/// and the friction magnitudes are frozen (with a warning), so the solve
+/// converges on a fixed problem.
 const FREEZE_AFTER: usize = 30;
 
-/// Friction forces are kept consistent with the normal reactions and slip
-/// directions to this fraction of their size.
+/// Friction magnitudes are kept consistent with the normal reactions to this
+/// fraction of their size (ten times it once the hysteresis is on: with
+/// μ ≫ 1 the magnitudes converge only linearly, as a fixed point).
 const FRICTION_TOL: f64 = 1e-3;
 
 /// Slip (relative to the penetration tolerance) below which a sliding node's
@@ -414,7 +416,6 @@ pub fn solve_with_contact(
                 );
                 warned = true;
             }
-            update_friction(sim, &frame, state);
             false
         };
         apply_contact(sim, &frame, state);
@@ -514,7 +515,8 @@ fn update_active_set(
                     // The magnitude follows the normal reaction; changes
                     // below FRICTION_TOL of it are not taken (they would
                     // keep the residual from settling).
-                    let magnitude = if (limit - friction.norm()).abs() > FRICTION_TOL * limit {
+                    let tol = if settled { 10.0 } else { 1.0 } * FRICTION_TOL;
+                    let magnitude = if (limit - friction.norm()).abs() > tol * limit {
                         limit
                     } else {
                         friction.norm()
@@ -556,21 +558,6 @@ fn update_active_set(
         );
     }
     changed
-}
-
-/// Friction magnitudes follow the normal reactions (states frozen).
-fn update_friction(sim: &super::integrate::Simulation, frame: &Frame, state: &mut ContactState) {
-    let ContactMode::Coulomb(mu) = frame.mode else {
-        return;
-    };
-    for (&v, entry) in state.active.iter_mut() {
-        if let NodeContact::Slide { friction } = entry {
-            let (_, n) = frame.pose.distance(&sim.x[v]);
-            let normal = contact_force(sim, frame.base_ext, v).dot(&n);
-            let dir = tangential(friction, &n).try_normalize(1e-300);
-            *friction = dir.map_or(Vec3::zeros(), |d| d * mu * normal.max(0.0));
-        }
-    }
 }
 
 /// Sets the solver's constraints and loads for the current contact state:
