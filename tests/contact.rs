@@ -193,7 +193,9 @@ fn frictionless_forces_are_normal_node_by_node() {
         worst_gap = worst_gap.max(gap.abs());
         loaded += 1;
     }
-    println!("{loaded} loaded nodes: tangential/normal ≤ {worst_ratio:.2e}, |gap| ≤ {worst_gap:.2e} mm");
+    println!(
+        "{loaded} loaded nodes: tangential/normal ≤ {worst_ratio:.2e}, |gap| ≤ {worst_gap:.2e} mm"
+    );
     assert!(loaded >= 10, "{loaded} loaded nodes");
     assert!(worst_ratio <= 2e-3, "tangential/normal {worst_ratio:.3e}");
     assert!(worst_gap <= 1e-5, "gap {worst_gap:.3e} mm");

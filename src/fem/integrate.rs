@@ -501,7 +501,9 @@ impl Simulation {
             let (new_norm, new_scale, descended) = self.line_search(norm);
             if !descended && self.tangent_kind == TangentKind::Exact {
                 // The exact step was no descent direction: project from now on.
-                log::debug!("{context}: Newton {it}: no descent with the exact tangent; projecting");
+                log::debug!(
+                    "{context}: Newton {it}: no descent with the exact tangent; projecting"
+                );
                 self.tangent_kind = TangentKind::Projected;
             }
             log::debug!(
@@ -588,7 +590,11 @@ impl Simulation {
     fn set_trial(&mut self, alpha: f64) {
         for (i, x) in self.x.iter_mut().enumerate() {
             let k = 3 * i;
-            let d = Vec3::new(self.prescribed[k], self.prescribed[k + 1], self.prescribed[k + 2]);
+            let d = Vec3::new(
+                self.prescribed[k],
+                self.prescribed[k + 1],
+                self.prescribed[k + 2],
+            );
             let y = Vec3::new(self.dx[k], self.dx[k + 1], self.dx[k + 2]);
             *x = self.x_start[i] + d + y * alpha;
         }
@@ -631,7 +637,9 @@ impl Simulation {
         }
         // No decrease found: keep the best trial with some step (the
         // smallest step if none was finite).
-        let alpha = best.filter(|&(_, a)| a > 0.0).map_or(alpha * 2.0, |(_, a)| a);
+        let alpha = best
+            .filter(|&(_, a)| a > 0.0)
+            .map_or(alpha * 2.0, |(_, a)| a);
         self.set_trial(alpha);
         self.evaluate_forces();
         let (norm, scale) = self.residual();
