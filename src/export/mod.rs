@@ -38,7 +38,7 @@ pub struct FrameMetrics {
     pub folded_vertices: usize,
     /// Largest penetration (mm).
     pub max_penetration_mm: f64,
-    /// Newton iterations over the frame's substeps and contact rounds.
+    /// Newton iterations over the frame's substeps.
     pub newton_iterations: usize,
     /// Linear-solver iterations.
     pub linear_iterations: usize,

@@ -5,23 +5,26 @@
 //! radius, pressing along −z; its rim is sharp). A keyframed path gives the
 //! centre (and the capsule's axis) over time, linearly interpolated.
 //!
-//! Contact is node-to-surface with exact constraints (an active set):
+//! Contact is node-to-surface with exact constraints, resolved inside one
+//! Newton loop as a primal–dual active set (semi-smooth Newton; Hüeber,
+//! Stadler & Wohlmuth 2008), see [`solve_with_contact`]:
 //!
-//! * a top-surface node that penetrates the probe becomes active;
-//! * frictionless (and slipping) nodes are held on the probe surface along
-//!   its normal — a filter direction in the solver — and slide freely or
-//!   against a Coulomb force `μ·λ_n` opposing the reaction that held them;
+//! * at every Newton iteration a top-surface node is in contact when its
+//!   normal reaction minus its stiffness times its signed gap is positive;
+//! * frictionless and slipping nodes are held on the tangent plane of their
+//!   closest probe point and slide freely or against a Coulomb slip load of
+//!   magnitude `μ·F_n` opposing their slip (its stiffness is in the Newton
+//!   matrix);
 //! * sticking and bonded nodes are held at an anchor that moves rigidly with
 //!   the probe from where the node was at the start of the frame;
-//! * a node whose normal reaction turns adhesive (pulls the probe) is
-//!   released, except when bonded; a sticking node whose tangential reaction
-//!   exceeds `μ·λ_n` starts to slip.
+//! * a Coulomb node sticks while `|c·s_t − F_t| ≤ μ F_n` and slides
+//!   otherwise; bonded nodes are never released.
 //!
-//! The active set, slip states and constraint normals are updated between
-//! equilibrium solves until nothing changes and every node lies within
-//! `penetration_tol` of the surface. The probe force is minus the sum of the
-//! contact forces on the nodes; at equilibrium it also equals the supports'
-//! total reaction, which the tests check.
+//! A solve has converged when an iteration changes no contact or stick/slip
+//! state and the residual and every constraint are within tolerance. The
+//! probe force is minus the sum of the contact forces on the nodes; at
+//! equilibrium it also equals the supports' total reaction, which the tests
+//! check.
 
 use nalgebra::Vector3;
 

@@ -13,7 +13,10 @@
 //! evaluates rotations and forces in a parallel element loop, gathers them
 //! per node, assembles the consistent tangent (see [`super::corotation`])
 //! and solves the filtered system (see [`super::solve`]), with a
-//! backtracking line search on the residual. Each solve starts with the
+//! backtracking line search on the residual. [`Simulation::solve_with`]
+//! lets a caller change constraints and loads at every iteration (the
+//! contact solve does); each step moves constrained directions onto their
+//! targets and solves the free ones with that move's coupling. Each solve starts with the
 //! exact tangent, which converges quadratically; if the linear solver meets
 //! a direction of non-positive curvature (compressed tets no longer held by
 //! their neighbours) the solve switches to the positive semi-definite
