@@ -411,7 +411,7 @@ pub fn solve_with_contact(
     let mut warned = false;
     let stats = sim.solve_with(context, |sim, it| {
         let changed = if it < FREEZE_AFTER {
-            update_active_set(sim, &frame, state, it >= HYSTERESIS_AFTER)
+            update_active_set(sim, &frame, state, it)
         } else {
             if !warned {
                 log::warn!(
@@ -448,21 +448,31 @@ fn tangential(v: &Vec3, n: &Vec3) -> Vec3 {
 
 /// The semi-smooth Newton update of the contact set and the stick/slip
 /// states from the current positions and reactions (see
-/// [`solve_with_contact`]). `settled` switches on the hysteresis. Returns
+/// [`solve_with_contact`]) at Newton `iteration` (the hysteresis is on from
+/// [`HYSTERESIS_AFTER`]). Returns
 /// whether any node entered or left contact or changed between stick and slip.
 fn update_active_set(
     sim: &super::integrate::Simulation,
     frame: &Frame,
     state: &mut ContactState,
-    settled: bool,
+    iteration: usize,
 ) -> bool {
+    let settled = iteration >= HYSTERESIS_AFTER;
     let mut changed = false;
     let mut counts = [0usize; 4];
-    let forces: Vec<(usize, Vec3)> = state
-        .active
-        .keys()
-        .map(|&v| (v, contact_force(sim, frame.base_ext, v)))
-        .collect();
+    // Before the first step the positions and reactions are the last
+    // solve's, not yet moved with the probe: judging the carried-over nodes
+    // on them would release every node the probe moves away from. They keep
+    // the states set up for the solve; only new contacts are found.
+    let forces: Vec<(usize, Vec3)> = if iteration == 0 {
+        Vec::new()
+    } else {
+        state
+            .active
+            .keys()
+            .map(|&v| (v, contact_force(sim, frame.base_ext, v)))
+            .collect()
+    };
     let largest = forces.iter().map(|(_, f)| f.norm()).fold(0.0, f64::max);
     let release_below = if settled { -1e-3 } else { -1e-9 } * largest;
     for (v, f) in forces {
