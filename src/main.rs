@@ -258,7 +258,7 @@ fn bench(stage: &str, path: &Path, frames: usize) -> anyhow::Result<()> {
     let mut setup = Setup::load(path).with_context(|| format!("scenario {}", path.display()))?;
     let mut report = format!(
         "bench fem: {} ({} tets), first {} frames\n\
-         {:<8} {:>9} {:>9} {:>8} {:>10} {:>9} {:>9} {:>9} {:>9}\n",
+         {:<8} {:>9} {:>9} {:>8} {:>10} {:>9} {:>9} {:>9} {:>9} {:>9}\n",
         path.display(),
         setup.mesh.num_tets(),
         frames,
@@ -270,16 +270,21 @@ fn bench(stage: &str, path: &Path, frames: usize) -> anyhow::Result<()> {
         "forces s",
         "assemb s",
         "linear s",
+        "factor s",
         "other s"
     );
     let mut walls = Vec::new();
-    for (name, solver) in [("cg", LinearSolver::Cg), ("direct", LinearSolver::Direct)] {
+    for (name, solver) in [
+        ("cg", LinearSolver::Cg),
+        ("factored", LinearSolver::FactoredCg),
+        ("direct", LinearSolver::Direct),
+    ] {
         setup.simulation.newton.linear = solver;
         let f = skinpatch::pipeline::bench_fem(&setup, frames)?;
         let t = f.timings;
         let other = f.wall_s - t.forces_s - t.assembly_s - t.linear_s;
         report += &format!(
-            "{name:<8} {:>9.3} {:>9.2} {:>8} {:>10} {:>9.2} {:>9.2} {:>9.2} {:>9.2}\n",
+            "{name:<8} {:>9.3} {:>9.2} {:>8} {:>10} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2}\n",
             f.frames as f64 / f.wall_s,
             f.wall_s,
             f.newton_iterations,
@@ -287,11 +292,16 @@ fn bench(stage: &str, path: &Path, frames: usize) -> anyhow::Result<()> {
             t.forces_s,
             t.assembly_s,
             t.linear_s,
+            t.factor_s,
             other
         );
         walls.push(f.wall_s);
     }
-    report += &format!("direct / cg wall-time ratio: {:.2}\n", walls[1] / walls[0]);
+    report += &format!(
+        "wall-time ratios: cg / factored {:.2}, direct / factored {:.2}\n",
+        walls[0] / walls[1],
+        walls[2] / walls[1]
+    );
     print_stdout(&report)
 }
 

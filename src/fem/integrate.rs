@@ -34,7 +34,7 @@ use rayon::prelude::*;
 use super::assembly::{multiply, Assembly};
 use super::corotation::{Corotation, RestElement, Tangent, TangentKind};
 use super::material::Material;
-use super::solve::{self, CgSettings, CgWorkspace, DirectSolver, Filter};
+use super::solve::{self, CgSettings, CgWorkspace, Factor, Filter, Preconditioner};
 use crate::error::{Error, Result};
 use crate::mesh::{TetMesh, Vec3};
 
@@ -45,7 +45,15 @@ pub enum LinearSolver {
     Cg,
     /// Sparse Cholesky (falls back to CG if the factorisation fails).
     Direct,
+    /// Conjugate gradients preconditioned by a Cholesky factor of an earlier
+    /// Newton matrix, reused across iterations and frames and refactorised
+    /// when a solve needs more than [`REFACTOR_AFTER`] iterations.
+    FactoredCg,
 }
+
+/// A factored-CG solve that needs more iterations than this refactorises
+/// (the factor has drifted too far from the matrix) and starts again.
+pub const REFACTOR_AFTER: usize = 12;
 
 /// Newton iteration settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -81,8 +89,12 @@ pub struct Timings {
     pub forces_s: f64,
     /// Element tangents and stiffness assembly.
     pub assembly_s: f64,
-    /// Linear solves.
+    /// Linear solves (including factorisations).
     pub linear_s: f64,
+    /// Of which Cholesky factorisations.
+    pub factor_s: f64,
+    /// Number of factorisations.
+    pub factorizations: usize,
 }
 
 /// Backward-Euler step size and Rayleigh damping.
@@ -196,7 +208,7 @@ pub struct Simulation {
     tet_forces: Vec<[Vec3; 4]>,
     f_int: Vec<Vec3>,
     cg: CgWorkspace,
-    direct: DirectSolver,
+    factor: Factor,
     dx: Vec<f64>,
     rhs: Vec<f64>,
     r_free: Vec<f64>,
@@ -244,7 +256,7 @@ impl Simulation {
             f_elastic_n: vec![Vec3::zeros(); n],
             f_int: vec![Vec3::zeros(); n],
             cg: CgWorkspace::default(),
-            direct: DirectSolver::default(),
+            factor: Factor::default(),
             dx: vec![0.0; 3 * n],
             rhs: vec![0.0; 3 * n],
             r_free: vec![0.0; 3 * n],
@@ -564,7 +576,7 @@ impl Simulation {
     fn linear_solve_untimed(&mut self, forcing: f64) -> (usize, bool) {
         if self.settings.linear == LinearSolver::Direct {
             if self
-                .direct
+                .factor
                 .solve(&self.assembly, &self.filters, &self.rhs, &mut self.dx)
             {
                 return (1, true);
@@ -572,6 +584,11 @@ impl Simulation {
             if self.tangent_kind == TangentKind::Exact {
                 // Not positive definite: the caller projects and retries.
                 return (1, false);
+            }
+        }
+        if self.settings.linear == LinearSolver::FactoredCg {
+            if let Some(outcome) = self.factored_cg(forcing) {
+                return outcome;
             }
         }
         self.dx.fill(0.0);
@@ -585,8 +602,49 @@ impl Simulation {
                 ..self.settings.cg
             },
             &mut self.cg,
+            Preconditioner::BlockJacobi,
         );
         (cg.iterations, cg.converged)
+    }
+
+    /// Conjugate gradients with the kept factor; a solve that stalls
+    /// refactorises the current matrix and runs again. `None` when the
+    /// current matrix cannot be factorised (block Jacobi takes over).
+    fn factored_cg(&mut self, forcing: f64) -> Option<(usize, bool)> {
+        let mut total = 0;
+        for fresh in [false, true] {
+            if fresh || !self.factor.is_factored() {
+                let start = std::time::Instant::now();
+                let factored = self.factor.factorize(&self.assembly, &self.filters);
+                self.timings.factor_s += start.elapsed().as_secs_f64();
+                self.timings.factorizations += 1;
+                if !factored {
+                    return None;
+                }
+            }
+            self.dx.fill(0.0);
+            let cg = solve::solve(
+                &self.assembly,
+                &self.filters,
+                &self.rhs,
+                &mut self.dx,
+                &CgSettings {
+                    rel_tol: forcing,
+                    max_iterations: if fresh {
+                        self.settings.cg.max_iterations
+                    } else {
+                        REFACTOR_AFTER
+                    },
+                },
+                &mut self.cg,
+                Preconditioner::Factor(&mut self.factor),
+            );
+            total += cg.iterations;
+            if cg.converged {
+                return Some((total, true));
+            }
+        }
+        Some((total, false))
     }
 
     /// Positions `x_start + d + alpha·dx` (the prescribed move in full).

@@ -136,8 +136,19 @@ fn apply_operator(asm: &Assembly, filters: &[Filter], x: &[f64], sx: &mut [f64],
         });
 }
 
-/// Solves `(S K S + I − S) x = S b` by block-Jacobi PCG, starting from `x`
-/// (a warm start; its constrained part is removed first).
+/// The preconditioner of a conjugate-gradient solve.
+pub enum Preconditioner<'a> {
+    /// Each node's filtered diagonal block, inverted.
+    BlockJacobi,
+    /// A Cholesky factor of the filtered matrix of an earlier Newton step
+    /// (possibly with other filters), followed by the current filter: exact
+    /// when neither the matrix nor the filters have changed since.
+    Factor(&'a mut Factor),
+}
+
+/// Solves `(S K S + I − S) x = S b` by preconditioned conjugate gradients,
+/// starting from `x` (a warm start; its constrained part is removed first).
+/// Every iterate stays in the free space of the filters.
 pub fn solve(
     asm: &Assembly,
     filters: &[Filter],
@@ -145,19 +156,30 @@ pub fn solve(
     x: &mut [f64],
     settings: &CgSettings,
     ws: &mut CgWorkspace,
+    mut preconditioner: Preconditioner,
 ) -> CgStats {
     let n = b.len();
     for v in [&mut ws.r, &mut ws.z, &mut ws.p, &mut ws.q] {
         v.resize(n, 0.0);
     }
-    ws.precond = (0..asm.num_nodes())
-        .into_par_iter()
-        .map(|i| {
-            let s = filters[i].matrix();
-            let d = s * asm.diagonal_block(i) * s + (Matrix3::identity() - s);
-            d.try_inverse().unwrap_or_else(Matrix3::identity)
-        })
-        .collect();
+    if let Preconditioner::BlockJacobi = preconditioner {
+        ws.precond = (0..asm.num_nodes())
+            .into_par_iter()
+            .map(|i| {
+                let s = filters[i].matrix();
+                let d = s * asm.diagonal_block(i) * s + (Matrix3::identity() - s);
+                d.try_inverse().unwrap_or_else(Matrix3::identity)
+            })
+            .collect();
+    }
+    let mut precondition = |r: &[f64], z: &mut [f64]| match &mut preconditioner {
+        Preconditioner::BlockJacobi => precondition_blocks(&ws.precond, r, z),
+        Preconditioner::Factor(factor) => {
+            z.copy_from_slice(r);
+            factor.solve_in_place(z);
+            filter_in_place(filters, z);
+        }
+    };
     filter_in_place(filters, x);
     // r = S b − A x
     ws.r.copy_from_slice(b);
@@ -173,7 +195,7 @@ pub fn solve(
     }
     apply_operator(asm, filters, x, &mut ws.z, &mut ws.q);
     ws.r.par_iter_mut().zip(&ws.q).for_each(|(r, q)| *r -= q);
-    precondition(&ws.precond, &ws.r, &mut ws.z);
+    precondition(&ws.r, &mut ws.z);
     ws.p.copy_from_slice(&ws.z);
     let mut rz = dot(&ws.r, &ws.z);
     for k in 0..settings.max_iterations {
@@ -202,7 +224,7 @@ pub fn solve(
         ws.r.par_iter_mut()
             .zip(&ws.q)
             .for_each(|(r, q)| *r -= alpha * q);
-        precondition(&ws.precond, &ws.r, &mut ws.z);
+        precondition(&ws.r, &mut ws.z);
         let rz_new = dot(&ws.r, &ws.z);
         let beta = rz_new / rz;
         rz = rz_new;
@@ -218,7 +240,7 @@ pub fn solve(
     }
 }
 
-fn precondition(blocks: &[Matrix3<f64>], r: &[f64], z: &mut [f64]) {
+fn precondition_blocks(blocks: &[Matrix3<f64>], r: &[f64], z: &mut [f64]) {
     z.par_chunks_mut(3)
         .zip(r.par_chunks(3))
         .zip(blocks)
@@ -268,37 +290,55 @@ mod tests {
     }
 }
 
-/// Sparse Cholesky solves of the filtered system (see the module docs).
+/// A sparse Cholesky factor of the filtered matrix `S K S + I − S` (see the
+/// module docs). The symbolic analysis (AMD ordering, supernodes) is done
+/// once for the fixed pattern; factorisation and solves run on one thread,
+/// so their results do not depend on the thread count.
 #[derive(Default)]
-pub struct DirectSolver {
-    symbolic: Option<faer::sparse::linalg::solvers::SymbolicLlt<usize>>,
+pub struct Factor {
+    symbolic: Option<faer::sparse::linalg::cholesky::SymbolicCholesky<usize>>,
+    /// The filtered matrix (the pattern of the assembly).
     values: Vec<f64>,
+    /// The factor's values; empty until a factorisation succeeded.
+    l_values: Vec<f64>,
+    scratch: Option<faer::dyn_stack::MemBuffer>,
 }
 
-impl std::fmt::Debug for DirectSolver {
+impl std::fmt::Debug for Factor {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("DirectSolver")
+        f.debug_struct("Factor")
             .field("analysed", &self.symbolic.is_some())
+            .field("factored", &self.is_factored())
             .finish()
     }
 }
 
-impl Clone for DirectSolver {
+impl Clone for Factor {
+    /// A clone shares nothing and must factorise again.
     fn clone(&self) -> Self {
-        DirectSolver {
-            symbolic: self.symbolic.clone(),
-            values: Vec::new(),
-        }
+        Factor::default()
     }
 }
 
-impl DirectSolver {
-    /// Solves `(S K S + I − S) x = S b` exactly; `x` is overwritten. Returns
-    /// `false` if the factorisation failed (matrix not positive definite).
-    pub fn solve(&mut self, asm: &Assembly, filters: &[Filter], b: &[f64], x: &mut [f64]) -> bool {
-        use faer::linalg::solvers::SolveCore;
-        use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+impl Factor {
+    /// Whether a factorisation is held.
+    pub fn is_factored(&self) -> bool {
+        !self.l_values.is_empty()
+    }
+
+    /// Drops the factorisation (the analysis is kept).
+    pub fn clear(&mut self) {
+        self.l_values.clear();
+    }
+
+    /// Factorises the filtered matrix of `asm`. Returns `false`, holding no
+    /// factor, if the matrix is not positive definite.
+    pub fn factorize(&mut self, asm: &Assembly, filters: &[Filter]) -> bool {
+        use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+        use faer::linalg::cholesky::llt::factor::LltRegularization;
+        use faer::sparse::linalg::cholesky::factorize_symbolic_cholesky;
         use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+        self.l_values.clear();
         let m = &asm.matrix;
         let n = m.nrows();
         self.values.resize(m.values().len(), 0.0);
@@ -311,23 +351,69 @@ impl DirectSolver {
             out
         });
         // The matrix is symmetric, so its CSR arrays are also its CSC arrays.
-        let symbolic_view =
+        let pattern =
             SymbolicSparseColMatRef::new_checked(n, n, m.row_offsets(), None, m.col_indices());
         if self.symbolic.is_none() {
-            match SymbolicLlt::try_new(symbolic_view, faer::Side::Lower) {
-                Ok(s) => self.symbolic = Some(s),
-                Err(_) => return false,
-            }
+            let Ok(symbolic) = factorize_symbolic_cholesky(
+                pattern,
+                faer::Side::Lower,
+                Default::default(),
+                Default::default(),
+            ) else {
+                return false;
+            };
+            let req = StackReq::any_of(&[
+                symbolic.factorize_numeric_llt_scratch::<f64>(faer::Par::Seq, Default::default()),
+                symbolic.solve_in_place_scratch::<f64>(1, faer::Par::Seq),
+            ]);
+            self.scratch = Some(MemBuffer::new(req));
+            self.symbolic = Some(symbolic);
         }
-        let symbolic = self.symbolic.clone().expect("analysed above");
-        let view = SparseColMatRef::new(symbolic_view, &self.values);
-        let Ok(llt) = Llt::try_new_with_symbolic(symbolic, view, faer::Side::Lower) else {
+        let symbolic = self.symbolic.as_ref().expect("analysed above");
+        let mut l_values = vec![0.0; symbolic.len_val()];
+        let factored = symbolic
+            .factorize_numeric_llt(
+                &mut l_values,
+                SparseColMatRef::new(pattern, &self.values),
+                faer::Side::Lower,
+                LltRegularization::default(),
+                faer::Par::Seq,
+                MemStack::new(self.scratch.as_mut().expect("allocated with the analysis")),
+                Default::default(),
+            )
+            .is_ok();
+        if factored && l_values.iter().all(|v| v.is_finite()) {
+            self.l_values = l_values;
+            true
+        } else {
+            false
+        }
+    }
+
+    /// Overwrites `x` with the factor's solve of `x` (needs a factor).
+    pub fn solve_in_place(&mut self, x: &mut [f64]) {
+        use faer::sparse::linalg::cholesky::LltRef;
+        let symbolic = self.symbolic.as_ref().expect("factorised before solving");
+        let llt = LltRef::new(symbolic, &self.l_values);
+        let n = x.len();
+        llt.solve_in_place_with_conj(
+            faer::Conj::No,
+            faer::MatMut::from_column_major_slice_mut(x, n, 1),
+            faer::Par::Seq,
+            faer::dyn_stack::MemStack::new(self.scratch.as_mut().expect("allocated with the analysis")),
+        );
+    }
+
+    /// Solves `(S K S + I − S) x = S b` exactly with a new factorisation;
+    /// `x` is overwritten. Returns `false` if the factorisation failed or
+    /// the solution is not finite.
+    pub fn solve(&mut self, asm: &Assembly, filters: &[Filter], b: &[f64], x: &mut [f64]) -> bool {
+        if !self.factorize(asm, filters) {
             return false;
-        };
+        }
         x.copy_from_slice(b);
         filter_in_place(filters, x);
-        let rhs = faer::MatMut::from_column_major_slice_mut(x, n, 1);
-        llt.solve_in_place_with_conj(faer::Conj::No, rhs);
+        self.solve_in_place(x);
         x.iter().all(|v| v.is_finite())
     }
 }

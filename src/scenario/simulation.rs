@@ -446,10 +446,11 @@ impl SolverSection {
         let linear = match self.linear.as_str() {
             "direct" => LinearSolver::Direct,
             "cg" => LinearSolver::Cg,
+            "factored-cg" => LinearSolver::FactoredCg,
             other => {
                 return Err(Error::parameter(
                     "solver.linear",
-                    format!("must be \"direct\" or \"cg\", got \"{other}\""),
+                    format!("must be \"cg\", \"factored-cg\" or \"direct\", got \"{other}\""),
                 ))
             }
         };
