@@ -241,6 +241,9 @@ pub struct ContactState {
     /// that touched during the solve, where it touched). Slip is measured
     /// from it and a sticking node is held at its projection.
     reference: std::collections::BTreeMap<usize, Vec3>,
+    /// Per active node its position at the end of the previous solve (the
+    /// next solve may start from a predicted state).
+    solved: std::collections::BTreeMap<usize, Vec3>,
     /// Per sliding node the constraint plane in use (point, normal): kept
     /// while the node lies within the solver's position tolerance of the
     /// probe, re-projected otherwise (a sphere on a free block is a neutral
@@ -313,6 +316,7 @@ impl ContactState {
             active: Default::default(),
             last_pose: None,
             reference: Default::default(),
+            solved: Default::default(),
             planes: Default::default(),
             stiffness: Vec::new(),
         }
@@ -387,7 +391,7 @@ pub fn solve_with_contact(
     state.reference = state
         .active
         .keys()
-        .map(|&v| (v, previous.carry(pose, &sim.x[v])))
+        .map(|&v| (v, previous.carry(pose, &state.solved[&v])))
         .collect();
     for (&v, c) in state.active.iter_mut() {
         *c = match (mode, *c) {
@@ -425,6 +429,7 @@ pub fn solve_with_contact(
         changed
     })?;
     state.last_pose = Some(*pose);
+    state.solved = state.active.keys().map(|&v| (v, sim.x[v])).collect();
     let mut report = ContactReport {
         newton_iterations: stats.iterations,
         cg_iterations: stats.cg_iterations,

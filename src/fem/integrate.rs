@@ -335,6 +335,16 @@ impl Simulation {
         self.f_elastic_n.copy_from_slice(&self.f_int);
     }
 
+    /// Moves every node on by `ratio` times its change since `previous`: a
+    /// constant-velocity prediction of the next solve's start. Constraints
+    /// and contact are imposed by the solve as usual.
+    pub fn predict(&mut self, previous: &[Vec3], ratio: f64) {
+        self.x
+            .par_iter_mut()
+            .zip(previous)
+            .for_each(|(x, p)| *x += (*x - p) * ratio);
+    }
+
     /// Ends a backward-Euler step: velocities from the position change.
     pub fn end_step(&mut self) {
         if let Some(d) = self.dynamics {

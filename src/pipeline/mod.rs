@@ -316,6 +316,9 @@ fn simulate(
     let mut contact = ContactState::new(mesh, &sides);
     let no_loads = vec![Vec3::zeros(); mesh.num_vertices()];
     let mut t_prev = 0.0;
+    // The last solved state and its time, for the predicted start of the
+    // next solve.
+    let mut last_solved: Option<(Vec<Vec3>, f64)> = None;
     for frame in 0..=s.frames {
         let start = Instant::now();
         let t = frame as f64 * s.frame_dt;
@@ -332,6 +335,18 @@ fn simulate(
             if sim.dynamics.is_some() {
                 sim.begin_step();
             }
+            // Start from the last state moved on by the last increment
+            // (constant velocity), scaled to this step's length.
+            let solved = sim.x.clone();
+            let t_solved = t_prev + (t - t_prev) * (k - 1) as f64 / substeps as f64;
+            if s.predict {
+                if let Some((before, t_before)) = &last_solved {
+                    if t_solved > *t_before {
+                        sim.predict(before, (ts - t_solved) / (t_solved - t_before));
+                    }
+                }
+            }
+            last_solved = Some((solved, t_solved));
             match &s.probe {
                 Some(probe) => {
                     let r = solve_with_contact(

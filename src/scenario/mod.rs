@@ -190,6 +190,7 @@ impl Scenario {
             frames,
             frame_dt,
             substeps,
+            predict: self.solver.predict,
             dynamics: self.time.dynamics(frame_dt, substeps)?,
         })
     }

@@ -116,6 +116,9 @@ pub struct SolverSection {
     pub linear_rel_tol: f64,
     /// Iteration limit of each linear solve. Default 3000.
     pub max_linear_iterations: usize,
+    /// Start each solve from the last state moved on by the last increment
+    /// (constant velocity) instead of the last state itself. Default true.
+    pub predict: bool,
 }
 
 impl Default for SolverSection {
@@ -126,6 +129,7 @@ impl Default for SolverSection {
             max_newton_iterations: 50,
             linear_rel_tol: 1e-4,
             max_linear_iterations: 3000,
+            predict: true,
         }
     }
 }
@@ -182,6 +186,8 @@ pub struct SimulationSetup {
     pub frame_dt: f64,
     /// Substeps per frame.
     pub substeps: usize,
+    /// Whether solves start from a constant-velocity prediction.
+    pub predict: bool,
     /// Backward-Euler dynamics (step = frame interval / substeps), or quasi-static.
     pub dynamics: Option<Dynamics>,
 }
