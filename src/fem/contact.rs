@@ -322,6 +322,11 @@ impl ContactState {
         }
     }
 
+    /// The nodes that may touch the probe.
+    pub fn candidates(&self) -> &[usize] {
+        &self.candidates
+    }
+
     /// Allowed penetration at node `v` (mm).
     pub fn tolerance(&self, v: usize) -> f64 {
         self.tolerance[v]

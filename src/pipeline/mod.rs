@@ -343,6 +343,9 @@ fn simulate(
                 if let Some((before, t_before)) = &last_solved {
                     if t_solved > *t_before {
                         sim.predict(before, (ts - t_solved) / (t_solved - t_before));
+                        for &v in contact.candidates() {
+                            sim.x[v] = solved[v];
+                        }
                     }
                 }
             }
