@@ -320,20 +320,25 @@ fn bench_fem_compares_solvers() {
     assert!(out.contains("frames/s"), "{out}");
     let rows: Vec<&str> = out
         .lines()
-        .filter(|l| (l.starts_with("cg ") || l.starts_with("direct ")) && !l.contains("ratio"))
+        .filter(|l| ["cg ", "factored ", "direct "].iter().any(|p| l.starts_with(p)))
         .collect();
-    assert_eq!(rows.len(), 2, "{out}");
+    assert_eq!(rows.len(), 3, "{out}");
     // Columns: solver, frames/s, wall s, Newton, linear iterations, ….
     let column =
         |row: &str, k: usize| -> usize { row.split_whitespace().nth(k).unwrap().parse().unwrap() };
-    let (cg, direct) = (rows[0], rows[1]);
+    let (cg, factored, direct) = (rows[0], rows[1], rows[2]);
     assert!(column(cg, 3) > 0 && column(cg, 4) > column(cg, 3), "{out}");
+    // The reused factor preconditions far better than block Jacobi.
+    assert!(
+        column(factored, 3) > 0 && column(factored, 4) * 2 < column(cg, 4),
+        "{out}"
+    );
     // One factorisation and solve per Newton iteration.
     assert!(
         column(direct, 3) > 0 && column(direct, 4) == column(direct, 3),
         "{out}"
     );
-    assert!(out.contains("direct / cg wall-time ratio"), "{out}");
+    assert!(out.contains("wall-time ratios: cg / factored"), "{out}");
 }
 
 /// `strain_images = true` writes three PNG maps per frame; the metrics carry
