@@ -320,7 +320,11 @@ fn bench_fem_compares_solvers() {
     assert!(out.contains("frames/s"), "{out}");
     let rows: Vec<&str> = out
         .lines()
-        .filter(|l| ["cg ", "factored ", "direct "].iter().any(|p| l.starts_with(p)))
+        .filter(|l| {
+            ["cg ", "factored ", "direct "]
+                .iter()
+                .any(|p| l.starts_with(p))
+        })
         .collect();
     assert_eq!(rows.len(), 3, "{out}");
     // Columns: solver, frames/s, wall s, Newton, linear iterations, ….

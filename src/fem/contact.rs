@@ -372,11 +372,13 @@ struct Frame<'a> {
 /// node stiffness `c`), and a Coulomb node sticks when
 /// `|−F_t + c·s_t| ≤ μ F_n` (tangential force `F_t`, slip `s_t` since the
 /// solve started) and otherwise slides against the friction force
-/// `−μ F_n` along that vector. Sliding nodes are re-projected onto the probe
-/// every iteration, so the constraint normal is always the one at the
-/// node's closest point. The solve has converged when an iteration changes
-/// no contact or stick/slip state and the residual and constraint gaps are
-/// within tolerance.
+/// `−μ F_n` along that vector. A sliding node is held on the tangent plane
+/// of its closest probe point, re-projected whenever it has left the probe
+/// by more than the solver's position tolerance. The first iteration judges
+/// no carried-over node (its positions and reactions are the last solve's).
+/// The solve has converged when an iteration changes no contact or
+/// stick/slip state and the residual and constraint gaps are within
+/// tolerance.
 pub fn solve_with_contact(
     sim: &mut super::integrate::Simulation,
     base: (&[super::solve::Filter], &[Vec3], &[Vec3]),

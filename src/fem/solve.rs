@@ -400,7 +400,9 @@ impl Factor {
             faer::Conj::No,
             faer::MatMut::from_column_major_slice_mut(x, n, 1),
             faer::Par::Seq,
-            faer::dyn_stack::MemStack::new(self.scratch.as_mut().expect("allocated with the analysis")),
+            faer::dyn_stack::MemStack::new(
+                self.scratch.as_mut().expect("allocated with the analysis"),
+            ),
         );
     }
 
