@@ -601,20 +601,31 @@ impl Simulation {
                 return outcome;
             }
         }
+        let cg = self.pcg(forcing, self.settings.cg.max_iterations, false);
+        (cg.iterations, cg.converged)
+    }
+
+    /// One conjugate-gradient solve of the step from zero, preconditioned by
+    /// the kept factor or by block Jacobi.
+    fn pcg(&mut self, rel_tol: f64, max_iterations: usize, factored: bool) -> solve::CgStats {
         self.dx.fill(0.0);
-        let cg = solve::solve(
+        let preconditioner = if factored {
+            Preconditioner::Factor(&mut self.factor)
+        } else {
+            Preconditioner::BlockJacobi
+        };
+        solve::solve(
             &self.assembly,
             &self.filters,
             &self.rhs,
             &mut self.dx,
             &CgSettings {
-                rel_tol: forcing,
-                ..self.settings.cg
+                rel_tol,
+                max_iterations,
             },
             &mut self.cg,
-            Preconditioner::BlockJacobi,
-        );
-        (cg.iterations, cg.converged)
+            preconditioner,
+        )
     }
 
     /// Conjugate gradients with the kept factor; a solve that stalls
@@ -632,23 +643,12 @@ impl Simulation {
                     return None;
                 }
             }
-            self.dx.fill(0.0);
-            let cg = solve::solve(
-                &self.assembly,
-                &self.filters,
-                &self.rhs,
-                &mut self.dx,
-                &CgSettings {
-                    rel_tol: forcing,
-                    max_iterations: if fresh {
-                        self.settings.cg.max_iterations
-                    } else {
-                        REFACTOR_AFTER
-                    },
-                },
-                &mut self.cg,
-                Preconditioner::Factor(&mut self.factor),
-            );
+            let limit = if fresh {
+                self.settings.cg.max_iterations
+            } else {
+                REFACTOR_AFTER
+            };
+            let cg = self.pcg(forcing, limit, true);
             total += cg.iterations;
             if cg.converged {
                 return Some((total, true));
