@@ -339,15 +339,10 @@ impl ContactState {
 /// cycling).
 const HYSTERESIS_AFTER: usize = 12;
 
-/// After this many Newton iterations the active set, the stick/slip states
-/// and the friction magnitudes are frozen (with a warning), so the solve
-/// converges on a fixed problem.
+/// After this many Newton iterations the active set and the stick/slip
+/// states are frozen (with a warning), so the solve converges on a fixed
+/// problem.
 const FREEZE_AFTER: usize = 30;
-
-/// Friction magnitudes are kept consistent with the normal reactions to this
-/// fraction of their size (ten times it once the hysteresis is on: with
-/// μ ≫ 1 the magnitudes converge only linearly, as a fixed point).
-const FRICTION_TOL: f64 = 1e-3;
 
 /// Slip (relative to the penetration tolerance) below which a sliding node's
 /// friction force is regularised (proportional to the slip).
@@ -521,6 +516,7 @@ fn update_active_set(
                     reference,
                     normal: n,
                     magnitude: friction.norm(),
+                    mu,
                     min_slip: MIN_SLIP * state.tolerance[v],
                 };
                 // Against the friction of the last step: a node that now
@@ -537,17 +533,12 @@ fn update_active_set(
                     changed = true;
                     counts[2] += 1;
                 } else {
-                    // The magnitude follows the normal reaction; changes
-                    // below FRICTION_TOL of it are not taken (they would
-                    // keep the residual from settling).
-                    let tol = if settled { 10.0 } else { 1.0 } * FRICTION_TOL;
-                    let magnitude = if (limit - friction.norm()).abs() > tol * limit {
-                        limit
-                    } else {
-                        friction.norm()
-                    };
+                    // The solver recomputes the magnitude from the normal
+                    // reaction at every residual (and its dependence on the
+                    // positions is in the Newton matrix); this is the
+                    // current value, for the stick test above.
                     *entry = NodeContact::Slide {
-                        friction: -dir * magnitude,
+                        friction: -dir * limit,
                     };
                 }
             }
@@ -621,6 +612,10 @@ fn apply_contact(sim: &mut super::integrate::Simulation, frame: &Frame, state: &
                         reference: state.reference[&v],
                         normal: n,
                         magnitude: friction.norm(),
+                        mu: match frame.mode {
+                            ContactMode::Coulomb(mu) => mu,
+                            _ => 0.0,
+                        },
                         min_slip: MIN_SLIP * state.tolerance[v],
                     });
                 }

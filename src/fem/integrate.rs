@@ -34,7 +34,7 @@ use rayon::prelude::*;
 use super::assembly::{multiply, Assembly};
 use super::corotation::{Corotation, RestElement, Tangent, TangentKind};
 use super::material::Material;
-use super::solve::{self, CgSettings, CgWorkspace, Factor, Filter, Preconditioner};
+use super::solve::{self, CgSettings, CgWorkspace, Coupling, Factor, Filter, Preconditioner};
 use crate::error::{Error, Result};
 use crate::mesh::{TetMesh, Vec3};
 
@@ -121,15 +121,17 @@ pub struct NewtonStats {
     pub scale: f64,
 }
 
-/// A Coulomb sliding-friction load on one node: a force of fixed magnitude
-/// opposing the node's tangential slip from `reference`,
-/// `f = −m·ŝ`, `ŝ = s/|s|`, `s = (I − n nᵀ)(x − reference)`. Its derivative
-/// enters the Newton matrix as `(m/|s|)(I − n nᵀ − ŝ ŝᵀ)` — symmetric and
-/// positive semi-definite, the stiffness of `m·|s|` — so a slipping node's
-/// direction converges with Newton's rate instead of as a fixed point.
-/// Below a slip of `min_slip` the force is regularised to `−m·s/min_slip`
-/// (stiffness `(m/min_slip)(I − n nᵀ)`), so force and stiffness stay
-/// consistent through `s = 0`.
+/// A Coulomb sliding-friction load on one node: a force of magnitude
+/// `m = μ F_n` (the node's normal reaction) opposing its tangential slip from
+/// `reference`, `f = −m·ŝ`, `ŝ = s/|s|`, `s = (I − n nᵀ)(x − reference)`.
+/// Its derivative at fixed `m` enters the Newton matrix as
+/// `(m/|s|)(I − n nᵀ − ŝ ŝᵀ)` — symmetric and positive semi-definite, the
+/// stiffness of `m·|s|` — so a slipping node's direction converges with
+/// Newton's rate instead of as a fixed point; the magnitude's dependence on
+/// the normal reaction enters as a [`Coupling`], which makes the matrix
+/// non-symmetric (solved by BiCGStab). Below a slip of `min_slip` the force
+/// is regularised to `−m·s/min_slip` (stiffness `(m/min_slip)(I − n nᵀ)`),
+/// so force and stiffness stay consistent through `s = 0`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SlipLoad {
     /// The node.
@@ -138,8 +140,13 @@ pub struct SlipLoad {
     pub reference: Vec3,
     /// Unit normal of the contact surface.
     pub normal: Vec3,
-    /// Force magnitude `μ·F_n` (N).
+    /// Force magnitude `μ·F_n` (N); with `mu > 0` recomputed from the
+    /// normal reaction at every residual evaluation.
     pub magnitude: f64,
+    /// The friction coefficient μ the magnitude follows (the normal
+    /// reaction's change enters the Newton matrix, see
+    /// [`solve::Coupling`]); 0 for a magnitude that does not.
+    pub mu: f64,
     /// Slip below which the force is regularised (mm, > 0).
     pub min_slip: f64,
 }
@@ -209,6 +216,8 @@ pub struct Simulation {
     f_int: Vec<Vec3>,
     cg: CgWorkspace,
     factor: Factor,
+    /// The friction couplings of the current Newton matrix.
+    couplings: Vec<Coupling>,
     dx: Vec<f64>,
     rhs: Vec<f64>,
     r_free: Vec<f64>,
@@ -257,6 +266,7 @@ impl Simulation {
             f_int: vec![Vec3::zeros(); n],
             cg: CgWorkspace::default(),
             factor: Factor::default(),
+            couplings: Vec::new(),
             dx: vec![0.0; 3 * n],
             rhs: vec![0.0; 3 * n],
             r_free: vec![0.0; 3 * n],
@@ -380,9 +390,19 @@ impl Simulation {
             let diagonal: Vec<f64> = self.mass.iter().map(|m| m * c).collect();
             self.assembly.add_to_diagonal(&diagonal);
         }
+        self.couplings.clear();
         for load in &self.slip_loads {
-            let k = load.stiffness(&self.x[load.node]);
+            let x = &self.x[load.node];
+            let k = load.stiffness(x);
             self.assembly.add_to_diagonal_block(load.node, &k);
+            if load.mu > 0.0 && load.magnitude > 0.0 {
+                let g = load.force(x) * (load.mu / load.magnitude);
+                self.couplings.push(Coupling {
+                    node: load.node,
+                    g: self.filters[load.node].apply(&g),
+                    n: load.normal,
+                });
+            }
         }
         self.timings.assembly_s += start.elapsed().as_secs_f64();
     }
@@ -416,8 +436,14 @@ impl Simulation {
         let mut external = 0.0;
         self.f_slip.iter_mut().for_each(|f| *f = Vec3::zeros());
         self.f_slip.resize(self.num_nodes(), Vec3::zeros());
-        for load in &self.slip_loads {
-            self.f_slip[load.node] += load.force(&self.x[load.node]);
+        for load in &mut self.slip_loads {
+            let i = load.node;
+            if load.mu > 0.0 {
+                // Coulomb: the magnitude follows the current normal reaction.
+                let normal = -load.normal.dot(&(self.f_int[i] + self.f_ext[i]));
+                load.magnitude = load.mu * normal.max(0.0);
+            }
+            self.f_slip[i] += load.force(&self.x[i]);
         }
         for i in 0..self.num_nodes() {
             let r = self.f_int[i] + self.f_ext[i] + self.f_slip[i];
@@ -554,19 +580,26 @@ impl Simulation {
             .clamp(self.settings.cg.rel_tol, 0.1)
     }
 
-    /// The right-hand side of the free directions, `S (r − K d)`, from the
-    /// filtered residual `r_free` and the prescribed move `d`.
+    /// The right-hand side of the free directions, `S (r − K d)` plus the
+    /// couplings' `g nᵀ (K d)_i`, from the filtered residual `r_free` and
+    /// the prescribed move `d`.
     fn step_rhs(&mut self) {
         self.rhs.clone_from(&self.r_free);
         if self.prescribed.iter().all(|&d| d == 0.0) {
             return;
         }
         multiply(&self.assembly.matrix, &self.prescribed, &mut self.kd);
+        let kd = |k: &[f64], i: usize| Vec3::new(k[3 * i], k[3 * i + 1], k[3 * i + 2]);
         for (i, f) in self.filters.iter().enumerate() {
-            let kd = Vec3::new(self.kd[3 * i], self.kd[3 * i + 1], self.kd[3 * i + 2]);
-            let s = f.apply(&kd);
+            let s = f.apply(&kd(&self.kd, i));
             for c in 0..3 {
                 self.rhs[3 * i + c] -= s[c];
+            }
+        }
+        for c in &self.couplings {
+            let w = c.g * c.n.dot(&kd(&self.kd, c.node));
+            for k in 0..3 {
+                self.rhs[3 * c.node + k] += w[k];
             }
         }
     }
@@ -585,7 +618,14 @@ impl Simulation {
 
     fn linear_solve_untimed(&mut self, forcing: f64) -> (usize, bool) {
         if self.settings.linear == LinearSolver::Direct {
-            if self
+            if !self.couplings.is_empty() {
+                // Not symmetric: BiCGStab preconditioned by this matrix's
+                // symmetric part, factorised.
+                if self.factor.factorize(&self.assembly, &self.filters) {
+                    let st = self.pcg(forcing, self.settings.cg.max_iterations, true);
+                    return (st.iterations, st.converged);
+                }
+            } else if self
                 .factor
                 .solve(&self.assembly, &self.filters, &self.rhs, &mut self.dx)
             {
@@ -615,8 +655,11 @@ impl Simulation {
             Preconditioner::BlockJacobi
         };
         solve::solve(
-            &self.assembly,
-            &self.filters,
+            solve::Operator {
+                asm: &self.assembly,
+                filters: &self.filters,
+                couplings: &self.couplings,
+            },
             &self.rhs,
             &mut self.dx,
             &CgSettings {
