@@ -337,11 +337,11 @@ fn bench_fem_compares_solvers() {
         column(factored, 3) > 0 && column(factored, 4) * 2 < column(cg, 4),
         "{out}"
     );
-    // One factorisation and solve per Newton iteration.
-    assert!(
-        column(direct, 3) > 0 && column(direct, 4) == column(direct, 3),
-        "{out}"
-    );
+    // One factorisation per Newton iteration: one solve, or (with sliding
+    // friction, whose coupling is not symmetric) one to three BiCGStab
+    // iterations preconditioned by it.
+    let (newton, linear) = (column(direct, 3), column(direct, 4));
+    assert!(newton > 0 && linear >= newton && linear <= 3 * newton, "{out}");
     assert!(out.contains("wall-time ratios: cg / factored"), "{out}");
 }
 
