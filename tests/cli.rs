@@ -341,7 +341,10 @@ fn bench_fem_compares_solvers() {
     // friction, whose coupling is not symmetric) one to three BiCGStab
     // iterations preconditioned by it.
     let (newton, linear) = (column(direct, 3), column(direct, 4));
-    assert!(newton > 0 && linear >= newton && linear <= 3 * newton, "{out}");
+    assert!(
+        newton > 0 && linear >= newton && linear <= 3 * newton,
+        "{out}"
+    );
     assert!(out.contains("wall-time ratios: cg / factored"), "{out}");
 }
 

@@ -104,10 +104,10 @@ pub struct CgWorkspace {
 
 /// A non-symmetric coupling of one node's equations to its own normal
 /// reaction: the node's row of the operator gains `−g nᵀ (K S x)_node`.
-/// A Coulomb friction force `f` whose magnitude `μ F_n` follows the normal
-/// reaction `F_n = nᵀ λ` changes by `(μ f / |f|) nᵀ δλ` when the positions
-/// move, and `δλ = (K δx)_node`; with `g = μ f / m` (`m` the magnitude the
-/// force is scaled from) this is the full semi-smooth Newton matrix.
+/// A Coulomb friction force `f`, scaled from a magnitude `m = μ F_n` that
+/// follows the normal reaction `F_n = nᵀ λ`, changes by `(μ f / m) nᵀ δλ`
+/// when the positions move, and `δλ = (K δx)_node`; with `g = μ f / m`
+/// this is the full semi-smooth Newton matrix.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Coupling {
     /// The node.
@@ -186,7 +186,7 @@ fn apply_operator(op: Operator, x: &[f64], sx: &mut [f64], y: &mut [f64]) {
     }
 }
 
-/// The preconditioner of a conjugate-gradient solve.
+/// The preconditioner of a conjugate-gradient or BiCGStab solve.
 pub enum Preconditioner<'a> {
     /// Each node's filtered diagonal block, inverted.
     BlockJacobi,
