@@ -143,6 +143,32 @@ fn drag(contact: &str) -> (skinpatch::pipeline::RunSummary, tempfile::TempDir) {
     })
 }
 
+/// A flat punch pressed 0.1 mm and dragged 0.5 mm with μ = 0.3 slides over
+/// the skin: once sliding, the tangential / normal probe force ratio is μ
+/// within 2% (measured 0.3000). Nodes the punch reaches during a step slip
+/// relative to the moving punch, so their friction drags the skin along.
+#[test]
+fn sliding_punch_force_ratio_is_mu() {
+    let (summary, _dir) = common::run_fixture("drag.toml", |t| {
+        let t = t
+            .replace("shape = \"sphere\"", "shape = \"punch\"")
+            .replace("radius_mm = 1.5", "radius_mm = 1.0")
+            .replace(
+                "path_mm = [[0.0, -0.25, 0.0, 1.5], [0.5, -0.25, 0.0, 1.0], [1.0, 0.25, 0.0, 1.0]]",
+                "path_mm = [[0.0, -0.25, 0.0, 0.0], [0.5, -0.25, 0.0, -0.1], [1.0, 0.25, 0.0, -0.1]]",
+            )
+            .replace("[time]", "contact = \"coulomb\"\nfriction = 0.3\n[time]");
+        assert!(t.contains("punch") && t.contains("-0.1]]"));
+        t
+    });
+    for m in &summary.frames[5..] {
+        let [fx, fy, fz] = m.probe_force_n;
+        let ratio = fx.hypot(fy) / fz;
+        assert!((ratio / 0.3 - 1.0).abs() < 0.02, "ratio {ratio}: {m:?}");
+        assert!(fx < 0.0, "the skin resists the drag along +x: {m:?}");
+    }
+}
+
 /// With μ = 0 a dragged probe carries no tangential force (up to the
 /// faceting of the mesh: under 0.5% of the normal force).
 #[test]

@@ -355,6 +355,10 @@ struct Frame<'a> {
     base_ext: &'a [Vec3],
     pose: &'a ProbePose,
     mode: ContactMode,
+    /// The probe at the end of the last solve.
+    previous: ProbePose,
+    /// Positions at the start of the solve.
+    start: Vec<Vec3>,
 }
 
 /// Solves static equilibrium with the probe at `pose`, on top of the base
@@ -413,6 +417,8 @@ pub fn solve_with_contact(
         base_ext,
         pose,
         mode,
+        previous,
+        start: sim.x.clone(),
     };
     let mut warned = false;
     let stats = sim.solve_with(context, |sim, it| {
@@ -552,14 +558,28 @@ fn update_active_set(
         let (gap, _) = frame.pose.distance(&sim.x[v]);
         if gap < -activate_below * state.tolerance[v] {
             let q = frame.pose.project(&sim.x[v]).0;
-            let c = match frame.mode {
-                ContactMode::Frictionless => NodeContact::Slide {
-                    friction: Vec3::zeros(),
-                },
-                _ => NodeContact::Stick { anchor: q },
+            let (c, reference) = match frame.mode {
+                ContactMode::Frictionless => (
+                    NodeContact::Slide {
+                        friction: Vec3::zeros(),
+                    },
+                    q,
+                ),
+                ContactMode::Bonded => (NodeContact::Stick { anchor: q }, q),
+                // Coulomb slip over the solve is relative to the probe:
+                // measured from where the node would be had it moved with
+                // the probe since the solve started (the probe slides over
+                // a node it reaches during the step). The node starts
+                // sliding; its friction follows its normal reaction.
+                ContactMode::Coulomb(_) => (
+                    NodeContact::Slide {
+                        friction: Vec3::zeros(),
+                    },
+                    frame.previous.carry(frame.pose, &frame.start[v]),
+                ),
             };
             state.active.insert(v, c);
-            state.reference.insert(v, q);
+            state.reference.insert(v, reference);
             changed = true;
             counts[3] += 1;
         }
@@ -606,16 +626,13 @@ fn apply_contact(sim: &mut super::integrate::Simulation, frame: &Frame, state: &
                 };
                 sim.filters[v] = sim.filters[v].constrain(&n);
                 sim.targets[v] = q;
-                if friction != Vec3::zeros() {
+                if let ContactMode::Coulomb(mu) = frame.mode {
                     sim.slip_loads.push(super::integrate::SlipLoad {
                         node: v,
                         reference: state.reference[&v],
                         normal: n,
                         magnitude: friction.norm(),
-                        mu: match frame.mode {
-                            ContactMode::Coulomb(mu) => mu,
-                            _ => 0.0,
-                        },
+                        mu,
                         min_slip: MIN_SLIP * state.tolerance[v],
                     });
                 }
