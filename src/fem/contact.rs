@@ -17,8 +17,13 @@
 //!   matrix);
 //! * sticking and bonded nodes are held at an anchor that moves rigidly with
 //!   the probe from where the node was at the start of the frame;
+//! * a Coulomb node's slip over a step is relative to the probe: from where
+//!   the node would be had it moved with the probe since the step began —
+//!   also for a node the probe reaches during the step, which starts
+//!   sliding (the probe slides over it; its friction drags the skin along);
 //! * a Coulomb node sticks while `|c·s_t − F_t| ≤ μ F_n` and slides
-//!   otherwise; bonded nodes are never released.
+//!   otherwise; bonded nodes are never released, and a bonded node that
+//!   touches sticks where it touched.
 //!
 //! A solve has converged when an iteration changes no contact or stick/slip
 //! state and the residual and every constraint are within tolerance. The
@@ -237,9 +242,10 @@ pub struct ContactState {
     /// Probe pose at the end of the previous solve.
     last_pose: Option<ProbePose>,
     /// Per active node the slip reference: where the node would be had it
-    /// moved rigidly with the probe since the solve started (or, for a node
-    /// that touched during the solve, where it touched). Slip is measured
-    /// from it and a sticking node is held at its projection.
+    /// moved rigidly with the probe since the solve started (for a bonded or
+    /// frictionless node that touched during the solve, where it touched).
+    /// Slip is measured from it and a sticking node is held at its
+    /// projection.
     reference: std::collections::BTreeMap<usize, Vec3>,
     /// Per active node its position at the end of the previous solve (the
     /// next solve may start from a predicted state).
