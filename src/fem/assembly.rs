@@ -251,34 +251,36 @@ pub fn multiply(matrix: &CsrMatrix<f64>, x: &[f64], y: &mut [f64]) {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::fem::{Material, RestElement};
 
-    fn two_tets() -> (Vec<Vec3>, Vec<[usize; 4]>) {
-        let p = vec![
+    /// Two positively oriented tets sharing a face, with their rest data
+    /// (E = 1 MPa, ν = 0.3).
+    pub(crate) fn two_tets() -> (Vec<[usize; 4]>, Vec<RestElement>) {
+        let p = [
             Vec3::new(0.0, 0.0, 0.0),
             Vec3::new(1.0, 0.0, 0.0),
             Vec3::new(0.0, 1.0, 0.0),
             Vec3::new(0.0, 0.0, 1.0),
             Vec3::new(1.0, 1.0, 1.0),
         ];
-        (p, vec![[0, 1, 2, 3], [1, 2, 3, 4]])
-    }
-
-    #[test]
-    fn assembled_matrix_matches_dense_sum() {
-        let (p, tets) = two_tets();
+        let tets = vec![[0, 1, 2, 3], [1, 2, 3, 4]];
         let m = Material {
             youngs_mpa: 1.0,
             poisson: 0.3,
             density_t_mm3: 1e-9,
         };
-        // Both tets are positively oriented.
-        let rest: Vec<RestElement> = tets
+        let rest = tets
             .iter()
-            .map(|t| RestElement::new(t.map(|v| p[v]), &m))
+            .map(|t: &[usize; 4]| RestElement::new(t.map(|v| p[v]), &m))
             .collect();
+        (tets, rest)
+    }
+
+    #[test]
+    fn assembled_matrix_matches_dense_sum() {
+        let (tets, rest) = two_tets();
         let rot = nalgebra::Rotation3::from_euler_angles(0.3, -0.2, 0.7).into_inner();
         let mut asm = Assembly::new(5, &tets);
         let rotations = [rot, Matrix3::identity()];

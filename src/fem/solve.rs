@@ -413,25 +413,7 @@ mod tests {
     /// factor matches the direct solve.
     #[test]
     fn coupled_solves_match_a_dense_reference() {
-        use crate::fem::{Material, RestElement};
-        use crate::mesh::Vec3;
-        let p = [
-            Vec3::new(0.0, 0.0, 0.0),
-            Vec3::new(1.0, 0.0, 0.0),
-            Vec3::new(0.0, 1.0, 0.0),
-            Vec3::new(0.0, 0.0, 1.0),
-            Vec3::new(1.0, 1.0, 1.0),
-        ];
-        let tets = [[0, 1, 2, 3], [1, 2, 3, 4]];
-        let m = Material {
-            youngs_mpa: 1.0,
-            poisson: 0.3,
-            density_t_mm3: 1e-9,
-        };
-        let rest: Vec<RestElement> = tets
-            .iter()
-            .map(|t| RestElement::new(t.map(|v| p[v]), &m))
-            .collect();
+        let (tets, rest) = crate::fem::assembly::tests::two_tets();
         let mut asm = Assembly::new(5, &tets);
         asm.assemble_stiffness(|t, a, b| rest[t].k0[a][b]);
         let normal = Vector3::new(1.0, 1.0, 1.0).normalize();
