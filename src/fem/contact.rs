@@ -247,9 +247,12 @@ pub struct ContactState {
     /// Slip is measured from it and a sticking node is held at its
     /// projection.
     reference: std::collections::BTreeMap<usize, Vec3>,
-    /// Per active node its position at the end of the previous solve (the
-    /// next solve may start from a predicted state).
-    solved: std::collections::BTreeMap<usize, Vec3>,
+    /// Every node's position at the end of the previous solve (before the
+    /// first, at its start): slip references are carried from here, and the
+    /// candidates start each solve here even when the caller predicted
+    /// another start (a predicted surface node would touch where it never
+    /// was).
+    solved: Vec<Vec3>,
     /// Per sliding node the constraint plane in use (point, normal): kept
     /// while the node lies within the solver's position tolerance of the
     /// probe, re-projected otherwise (a sphere on a free block is a neutral
@@ -328,14 +331,22 @@ impl ContactState {
         }
     }
 
-    /// The nodes that may touch the probe.
-    pub fn candidates(&self) -> &[usize] {
-        &self.candidates
-    }
-
     /// Allowed penetration at node `v` (mm).
     pub fn tolerance(&self, v: usize) -> f64 {
         self.tolerance[v]
+    }
+
+    /// The Coulomb slip load of sliding node `v` (normal `n`, current
+    /// friction force `friction`).
+    fn slip_load(&self, v: usize, n: Vec3, friction: Vec3, mu: f64) -> super::integrate::SlipLoad {
+        super::integrate::SlipLoad {
+            node: v,
+            reference: self.reference[&v],
+            normal: n,
+            magnitude: friction.norm(),
+            mu,
+            min_slip: MIN_SLIP * self.tolerance[v],
+        }
     }
 }
 
@@ -363,8 +374,6 @@ struct Frame<'a> {
     mode: ContactMode,
     /// The probe at the end of the last solve.
     previous: ProbePose,
-    /// Positions at the start of the solve.
-    start: Vec<Vec3>,
 }
 
 /// Solves static equilibrium with the probe at `pose`, on top of the base
@@ -397,13 +406,19 @@ pub fn solve_with_contact(
         state.stiffness = sim.rest_node_stiffness();
     }
     let previous = state.last_pose.unwrap_or(*pose);
+    if state.solved.len() != sim.num_nodes() {
+        state.solved = sim.x.clone();
+    }
+    for &v in &state.candidates {
+        sim.x[v] = state.solved[v];
+    }
     // A new solve: every active node's slip reference rides along with the
     // probe from where the node is; sticking nodes are held there, sliding
     // ones keep last solve's friction as their first guess.
     state.reference = state
         .active
         .keys()
-        .map(|&v| (v, previous.carry(pose, &state.solved[&v])))
+        .map(|&v| (v, previous.carry(pose, &state.solved[v])))
         .collect();
     for (&v, c) in state.active.iter_mut() {
         *c = match (mode, *c) {
@@ -424,7 +439,6 @@ pub fn solve_with_contact(
         pose,
         mode,
         previous,
-        start: sim.x.clone(),
     };
     let mut warned = false;
     let stats = sim.solve_with(context, |sim, it| {
@@ -443,7 +457,7 @@ pub fn solve_with_contact(
         changed
     })?;
     state.last_pose = Some(*pose);
-    state.solved = state.active.keys().map(|&v| (v, sim.x[v])).collect();
+    state.solved.clone_from(&sim.x);
     let mut report = ContactReport {
         newton_iterations: stats.iterations,
         cg_iterations: stats.cg_iterations,
@@ -509,52 +523,47 @@ fn update_active_set(
             continue;
         };
         let limit = mu * normal.max(0.0);
-        let entry = state.active.get_mut(&v).expect("active node");
         let reference = state.reference[&v];
-        match *entry {
+        let next = match state.active[&v] {
             NodeContact::Stick { anchor } => {
                 let xi = tangential(&(c * (sim.x[v] - anchor) - f), &n);
                 if xi.norm() > limit * (1.0 + 1e-9) + 1e-12 * largest {
-                    *entry = NodeContact::Slide {
-                        friction: -xi.normalize() * limit,
-                    };
                     changed = true;
                     counts[1] += 1;
+                    NodeContact::Slide {
+                        friction: -xi.normalize() * limit,
+                    }
+                } else {
+                    continue;
                 }
             }
             NodeContact::Slide { friction } => {
-                let load = super::integrate::SlipLoad {
-                    node: v,
-                    reference,
-                    normal: n,
-                    magnitude: friction.norm(),
-                    mu,
-                    min_slip: MIN_SLIP * state.tolerance[v],
-                };
                 // Against the friction of the last step: a node that now
                 // moves along its friction force (or not at all) sticks.
                 let xi = tangential(&(c * (sim.x[v] - reference) - friction), &n);
-                let dir = -load
-                    .force(&sim.x[v])
-                    .try_normalize(1e-300)
-                    .unwrap_or_else(Vec3::zeros);
                 if xi.norm() <= limit {
-                    *entry = NodeContact::Stick {
-                        anchor: frame.pose.project(&reference).0,
-                    };
                     changed = true;
                     counts[2] += 1;
+                    NodeContact::Stick {
+                        anchor: frame.pose.project(&reference).0,
+                    }
                 } else {
                     // The solver recomputes the magnitude from the normal
                     // reaction at every residual (and its dependence on the
                     // positions is in the Newton matrix); this is the
                     // current value, for the stick test above.
-                    *entry = NodeContact::Slide {
+                    let dir = -state
+                        .slip_load(v, n, friction, mu)
+                        .force(&sim.x[v])
+                        .try_normalize(1e-300)
+                        .unwrap_or_else(Vec3::zeros);
+                    NodeContact::Slide {
                         friction: -dir * limit,
-                    };
+                    }
                 }
             }
-        }
+        };
+        state.active.insert(v, next);
     }
     let activate_below = if settled { 1.0 } else { 0.1 };
     for &v in &state.candidates {
@@ -581,7 +590,7 @@ fn update_active_set(
                     NodeContact::Slide {
                         friction: Vec3::zeros(),
                     },
-                    frame.previous.carry(frame.pose, &frame.start[v]),
+                    frame.previous.carry(frame.pose, &state.solved[v]),
                 ),
             };
             state.active.insert(v, c);
@@ -633,14 +642,7 @@ fn apply_contact(sim: &mut super::integrate::Simulation, frame: &Frame, state: &
                 sim.filters[v] = sim.filters[v].constrain(&n);
                 sim.targets[v] = q;
                 if let ContactMode::Coulomb(mu) = frame.mode {
-                    sim.slip_loads.push(super::integrate::SlipLoad {
-                        node: v,
-                        reference: state.reference[&v],
-                        normal: n,
-                        magnitude: friction.norm(),
-                        mu,
-                        min_slip: MIN_SLIP * state.tolerance[v],
-                    });
+                    sim.slip_loads.push(state.slip_load(v, n, friction, mu));
                 }
             }
         }

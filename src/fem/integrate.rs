@@ -93,8 +93,6 @@ pub struct Timings {
     pub linear_s: f64,
     /// Of which Cholesky factorisations.
     pub factor_s: f64,
-    /// Number of factorisations.
-    pub factorizations: usize,
 }
 
 /// Backward-Euler step size and Rayleigh damping.
@@ -681,7 +679,6 @@ impl Simulation {
                 let start = std::time::Instant::now();
                 let factored = self.factor.factorize(&self.assembly, &self.filters);
                 self.timings.factor_s += start.elapsed().as_secs_f64();
-                self.timings.factorizations += 1;
                 if !factored {
                     return None;
                 }

@@ -536,11 +536,6 @@ impl Factor {
         !self.l_values.is_empty()
     }
 
-    /// Drops the factorisation (the analysis is kept).
-    pub fn clear(&mut self) {
-        self.l_values.clear();
-    }
-
     /// Factorises the filtered matrix of `asm`. Returns `false`, holding no
     /// factor, if the matrix is not positive definite.
     pub fn factorize(&mut self, asm: &Assembly, filters: &[Filter]) -> bool {

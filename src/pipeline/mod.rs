@@ -336,23 +336,18 @@ fn simulate(
                 sim.begin_step();
             }
             // Start from the last state moved on by the last increment
-            // (constant velocity), scaled to this step's length; with a
-            // probe, its contact candidates start where they were solved.
-            let solved = sim.x.clone();
-            let t_solved = t_prev + (t - t_prev) * (k - 1) as f64 / substeps as f64;
+            // (constant velocity), scaled to this step's length (the contact
+            // solve starts its candidates where they were solved).
             if s.predict {
+                let solved = sim.x.clone();
+                let t_solved = t_prev + (t - t_prev) * (k - 1) as f64 / substeps as f64;
                 if let Some((before, t_before)) = &last_solved {
                     if t_solved > *t_before {
                         sim.predict(before, (ts - t_solved) / (t_solved - t_before));
-                        if s.probe.is_some() {
-                            for &v in contact.candidates() {
-                                sim.x[v] = solved[v];
-                            }
-                        }
                     }
                 }
+                last_solved = Some((solved, t_solved));
             }
-            last_solved = Some((solved, t_solved));
             match &s.probe {
                 Some(probe) => {
                     let r = solve_with_contact(
