@@ -31,7 +31,7 @@
 use nalgebra::Matrix3;
 use rayon::prelude::*;
 
-use super::assembly::{multiply, Assembly};
+use super::assembly::Assembly;
 use super::corotation::{Corotation, RestElement, Tangent, TangentKind};
 use super::material::Material;
 use super::solve::{self, CgSettings, CgWorkspace, Coupling, Factor, Filter, Preconditioner};
@@ -586,7 +586,7 @@ impl Simulation {
         if self.prescribed.iter().all(|&d| d == 0.0) {
             return;
         }
-        multiply(&self.assembly.matrix, &self.prescribed, &mut self.kd);
+        self.assembly.multiply(&self.prescribed, &mut self.kd);
         let kd = |k: &[f64], i: usize| Vec3::new(k[3 * i], k[3 * i + 1], k[3 * i + 2]);
         for (i, f) in self.filters.iter().enumerate() {
             let s = f.apply(&kd(&self.kd, i));

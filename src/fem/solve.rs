@@ -16,7 +16,7 @@
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
-use super::assembly::{multiply, Assembly};
+use super::assembly::Assembly;
 
 /// Per-node projector onto the free directions.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -160,7 +160,7 @@ fn apply_operator(op: Operator, x: &[f64], sx: &mut [f64], y: &mut [f64]) {
     } = op;
     sx.copy_from_slice(x);
     filter_in_place(filters, sx);
-    multiply(&asm.matrix, sx, y);
+    asm.multiply(sx, y);
     let reactions: Vec<f64> = couplings
         .iter()
         .map(|c| {
