@@ -276,20 +276,20 @@ pub(crate) mod tests {
     use super::*;
     use crate::fem::{Material, RestElement};
 
-/// `y = K x` for a general CSR matrix, parallel over rows (each row serial):
-/// the reference for [`Assembly::multiply`].
-fn multiply_csr(matrix: &CsrMatrix<f64>, x: &[f64], y: &mut [f64]) {
-    let offsets = matrix.row_offsets();
-    let cols = matrix.col_indices();
-    let values = matrix.values();
-    y.par_iter_mut().enumerate().for_each(|(row, out)| {
-        let mut s = 0.0;
-        for k in offsets[row]..offsets[row + 1] {
-            s += values[k] * x[cols[k]];
-        }
-        *out = s;
-    });
-}
+    /// `y = K x` for a general CSR matrix, parallel over rows (each row serial):
+    /// the reference for [`Assembly::multiply`].
+    fn multiply_csr(matrix: &CsrMatrix<f64>, x: &[f64], y: &mut [f64]) {
+        let offsets = matrix.row_offsets();
+        let cols = matrix.col_indices();
+        let values = matrix.values();
+        y.par_iter_mut().enumerate().for_each(|(row, out)| {
+            let mut s = 0.0;
+            for k in offsets[row]..offsets[row + 1] {
+                s += values[k] * x[cols[k]];
+            }
+            *out = s;
+        });
+    }
 
     /// Two positively oriented tets sharing a face, with their rest data
     /// (E = 1 MPa, ν = 0.3).
