@@ -118,7 +118,9 @@ pub struct Coupling {
     pub n: Vector3<f64>,
 }
 
-const CHUNK: usize = 4096;
+/// Entries per chunk of the deterministic reductions (a multiple of 3, so
+/// chunks hold whole nodes).
+const CHUNK: usize = 3 * 1024;
 
 /// Deterministic dot product: fixed chunks, partial sums added in order.
 pub fn dot(a: &[f64], b: &[f64]) -> f64 {
@@ -130,6 +132,13 @@ pub fn dot(a: &[f64], b: &[f64]) -> f64 {
     partial.iter().sum()
 }
 
+/// The nodes whose filter is not [`Filter::Free`], ascending.
+fn constrained_nodes(filters: &[Filter]) -> Vec<usize> {
+    (0..filters.len())
+        .filter(|&i| filters[i] != Filter::Free)
+        .collect()
+}
+
 fn filter_in_place(filters: &[Filter], v: &mut [f64]) {
     v.par_chunks_mut(3).zip(filters).for_each(|(c, f)| {
         if *f != Filter::Free {
@@ -137,6 +146,15 @@ fn filter_in_place(filters: &[Filter], v: &mut [f64]) {
             c.copy_from_slice(w.as_slice());
         }
     });
+}
+
+/// `v ← S v` on the listed (constrained) nodes only.
+fn filter_nodes(filters: &[Filter], nodes: &[usize], v: &mut [f64]) {
+    for &i in nodes {
+        let c = &mut v[3 * i..3 * i + 3];
+        let w = filters[i].apply(&Vector3::new(c[0], c[1], c[2]));
+        c.copy_from_slice(w.as_slice());
+    }
 }
 
 /// The linear system of a Newton step: the assembled matrix `K`, the
@@ -151,15 +169,16 @@ pub struct Operator<'a> {
     pub couplings: &'a [Coupling],
 }
 
-/// `y = (S K S + I − S) x`, minus the couplings' `g nᵀ (K S x)_i`.
-fn apply_operator(op: Operator, x: &[f64], sx: &mut [f64], y: &mut [f64]) {
+/// `y = (S K S + I − S) x`, minus the couplings' `g nᵀ (K S x)_i`;
+/// `constrained` lists the nodes whose filter is not free.
+fn apply_operator(op: Operator, constrained: &[usize], x: &[f64], sx: &mut [f64], y: &mut [f64]) {
     let Operator {
         asm,
         filters,
         couplings,
     } = op;
     sx.copy_from_slice(x);
-    filter_in_place(filters, sx);
+    filter_nodes(filters, constrained, sx);
     asm.multiply(sx, y);
     let reactions: Vec<f64> = couplings
         .iter()
@@ -168,16 +187,13 @@ fn apply_operator(op: Operator, x: &[f64], sx: &mut [f64], y: &mut [f64]) {
             c.n.dot(&Vector3::new(y[k], y[k + 1], y[k + 2]))
         })
         .collect();
-    y.par_chunks_mut(3)
-        .zip(x.par_chunks(3))
-        .zip(filters)
-        .for_each(|((yc, xc), f)| {
-            if *f != Filter::Free {
-                let xv = Vector3::new(xc[0], xc[1], xc[2]);
-                let w = f.apply(&Vector3::new(yc[0], yc[1], yc[2])) + (xv - f.apply(&xv));
-                yc.copy_from_slice(w.as_slice());
-            }
-        });
+    for &i in constrained {
+        let f = &filters[i];
+        let k = 3 * i;
+        let xv = Vector3::new(x[k], x[k + 1], x[k + 2]);
+        let w = f.apply(&Vector3::new(y[k], y[k + 1], y[k + 2])) + (xv - f.apply(&xv));
+        y[k..k + 3].copy_from_slice(w.as_slice());
+    }
     for (c, reaction) in couplings.iter().zip(reactions) {
         let k = 3 * c.node;
         for (yk, gk) in y[k..k + 3].iter_mut().zip(c.g.iter()) {
@@ -234,18 +250,21 @@ pub fn solve(
             })
             .collect();
     }
+    // z = M⁻¹ r; returns r·z.
     let mut precondition = |r: &[f64], z: &mut [f64]| match &mut preconditioner {
         Preconditioner::BlockJacobi => precondition_blocks(&blocks, r, z),
         Preconditioner::Factor(factor) => {
             z.copy_from_slice(r);
             factor.solve_in_place(z);
             filter_in_place(filters, z);
+            dot(r, z)
         }
     };
-    filter_in_place(filters, x);
+    let constrained = constrained_nodes(filters);
+    filter_nodes(filters, &constrained, x);
     // r = S b − A x
     ws.r.copy_from_slice(b);
-    filter_in_place(filters, &mut ws.r);
+    filter_nodes(filters, &constrained, &mut ws.r);
     let b_norm = dot(&ws.r, &ws.r).sqrt();
     if b_norm == 0.0 {
         x.fill(0.0);
@@ -255,16 +274,15 @@ pub fn solve(
             converged: true,
         };
     }
-    apply_operator(op, x, &mut ws.z, &mut ws.q);
+    apply_operator(op, &constrained, x, &mut ws.z, &mut ws.q);
     ws.r.par_iter_mut().zip(&ws.q).for_each(|(r, q)| *r -= q);
     if !couplings.is_empty() {
-        return bicgstab(op, x, b_norm, settings, ws, precondition);
+        return bicgstab(op, &constrained, x, b_norm, settings, ws, precondition);
     }
-    precondition(&ws.r, &mut ws.z);
+    let mut rz = precondition(&ws.r, &mut ws.z);
     ws.p.copy_from_slice(&ws.z);
-    let mut rz = dot(&ws.r, &ws.z);
+    let mut r_norm = dot(&ws.r, &ws.r).sqrt();
     for k in 0..settings.max_iterations {
-        let r_norm = dot(&ws.r, &ws.r).sqrt();
         let stats = CgStats {
             iterations: k,
             rel_residual: r_norm / b_norm,
@@ -275,7 +293,7 @@ pub fn solve(
         }
         let (p, q) = (&ws.p, &mut ws.q);
         let mut sp = std::mem::take(&mut ws.z);
-        apply_operator(op, p, &mut sp, q);
+        apply_operator(op, &constrained, p, &mut sp, q);
         ws.z = sp;
         let pq = dot(&ws.p, &ws.q);
         if pq <= 0.0 {
@@ -283,26 +301,39 @@ pub fn solve(
             return stats;
         }
         let alpha = rz / pq;
-        x.par_iter_mut()
-            .zip(&ws.p)
-            .for_each(|(x, p)| *x += alpha * p);
-        ws.r.par_iter_mut()
-            .zip(&ws.q)
-            .for_each(|(r, q)| *r -= alpha * q);
-        precondition(&ws.r, &mut ws.z);
-        let rz_new = dot(&ws.r, &ws.z);
+        r_norm = cg_update(x, &mut ws.r, &ws.p, &ws.q, alpha).sqrt();
+        let rz_new = precondition(&ws.r, &mut ws.z);
         let beta = rz_new / rz;
         rz = rz_new;
         ws.p.par_iter_mut()
             .zip(&ws.z)
             .for_each(|(p, z)| *p = z + beta * *p);
     }
-    let r_norm = dot(&ws.r, &ws.r).sqrt();
     CgStats {
         iterations: settings.max_iterations,
         rel_residual: r_norm / b_norm,
         converged: r_norm <= settings.rel_tol * b_norm,
     }
+}
+
+/// The conjugate-gradient update `x ← x + α p`, `r ← r − α q` in one pass;
+/// returns the new `r·r` (fixed chunks, partial sums added in order).
+fn cg_update(x: &mut [f64], r: &mut [f64], p: &[f64], q: &[f64], alpha: f64) -> f64 {
+    let partial: Vec<f64> = x
+        .par_chunks_mut(CHUNK)
+        .zip(r.par_chunks_mut(CHUNK))
+        .zip(p.par_chunks(CHUNK).zip(q.par_chunks(CHUNK)))
+        .map(|((x, r), (p, q))| {
+            let mut rr = 0.0;
+            for k in 0..x.len() {
+                x[k] += alpha * p[k];
+                r[k] -= alpha * q[k];
+                rr += r[k] * r[k];
+            }
+            rr
+        })
+        .collect();
+    partial.iter().sum()
 }
 
 /// `a ← a + α b`.
@@ -313,11 +344,12 @@ fn axpy(a: &mut [f64], alpha: f64, b: &[f64]) {
 /// Right-preconditioned BiCGStab from the residual in `ws.r` of `x`.
 fn bicgstab(
     op: Operator,
+    constrained: &[usize],
     x: &mut [f64],
     b_norm: f64,
     settings: &CgSettings,
     ws: &mut CgWorkspace,
-    mut precondition: impl FnMut(&[f64], &mut [f64]),
+    mut precondition: impl FnMut(&[f64], &mut [f64]) -> f64,
 ) -> CgStats {
     let mut sx = vec![0.0; x.len()];
     ws.r0.copy_from_slice(&ws.r);
@@ -345,8 +377,8 @@ fn bicgstab(
             .zip(&ws.r)
             .zip(&ws.q)
             .for_each(|((p, r), v)| *p = r + beta * (*p - omega * v));
-        precondition(&ws.p, &mut ws.z); // z = M⁻¹ p
-        apply_operator(op, &ws.z, &mut sx, &mut ws.q); // v = A z
+        precondition(&ws.p, &mut ws.z); // z = M⁻¹ p (r·z unused)
+        apply_operator(op, constrained, &ws.z, &mut sx, &mut ws.q); // v = A z
         let r0v = dot(&ws.r0, &ws.q);
         if r0v == 0.0 || !r0v.is_finite() {
             return st;
@@ -361,7 +393,7 @@ fn bicgstab(
             return stats(k + 1, s_norm);
         }
         precondition(&ws.s, &mut ws.y); // y = M⁻¹ s
-        apply_operator(op, &ws.y, &mut sx, &mut ws.t); // t = A y
+        apply_operator(op, constrained, &ws.y, &mut sx, &mut ws.t); // t = A y
         let tt = dot(&ws.t, &ws.t);
         omega = if tt > 0.0 {
             dot(&ws.t, &ws.s) / tt
@@ -376,14 +408,25 @@ fn bicgstab(
     stats(settings.max_iterations, r_norm)
 }
 
-fn precondition_blocks(blocks: &[Matrix3<f64>], r: &[f64], z: &mut [f64]) {
-    z.par_chunks_mut(3)
-        .zip(r.par_chunks(3))
-        .zip(blocks)
-        .for_each(|((zc, rc), m)| {
-            let w = m * Vector3::new(rc[0], rc[1], rc[2]);
-            zc.copy_from_slice(w.as_slice());
-        });
+/// `z = M⁻¹ r` with the inverted diagonal blocks; returns `r·z` (fixed
+/// chunks, partial sums added in order).
+fn precondition_blocks(blocks: &[Matrix3<f64>], r: &[f64], z: &mut [f64]) -> f64 {
+    let partial: Vec<f64> = z
+        .par_chunks_mut(CHUNK)
+        .zip(r.par_chunks(CHUNK))
+        .zip(blocks.par_chunks(CHUNK / 3))
+        .map(|((z, r), blocks)| {
+            let mut rz = 0.0;
+            for ((zc, rc), m) in z.chunks_exact_mut(3).zip(r.chunks_exact(3)).zip(blocks) {
+                let rv = Vector3::new(rc[0], rc[1], rc[2]);
+                let w = m * rv;
+                zc.copy_from_slice(w.as_slice());
+                rz += rv.dot(&w);
+            }
+            rz
+        })
+        .collect();
+    partial.iter().sum()
 }
 
 #[cfg(test)]
