@@ -219,43 +219,55 @@ pub struct Corotation {
 impl Corotation {
     /// Computes the rotation of `f`. A non-finite `f` (which the solver
     /// guards against) yields the identity.
+    ///
+    /// `V` and `σ̂²` are the eigenvectors and eigenvalues of `FᵀF` by cyclic
+    /// Jacobi rotations (which, unlike a tridiagonal QR, need no special
+    /// case for the repeated values of an undeformed tet and stay in
+    /// registers); sorted descending, `V` made a rotation. The columns of
+    /// `B = F V` are then orthogonal with lengths `σ̂`, and Gram–Schmidt gives
+    /// `U`: `u₁ = b₁/|b₁|`, `u₂` from `b₂` without its `u₁` part,
+    /// `u₃ = u₁ × u₂`, so `U` is a rotation and `σ̂₃ = u₃·b₃` carries the
+    /// sign of `det F` (McAdams et al. 2011 take the same route with QR).
     pub fn of(f: &Matrix3<f64>) -> Corotation {
-        let fallback = Corotation {
-            r: Matrix3::identity(),
-            u: Matrix3::identity(),
-            v: Matrix3::identity(),
-            sigma: Vector3::from_fn(|i, _| f[(i, i)]),
-        };
         if !f.iter().all(|c| c.is_finite()) {
-            return fallback;
+            return Corotation {
+                r: Matrix3::identity(),
+                u: Matrix3::identity(),
+                v: Matrix3::identity(),
+                sigma: Vector3::from_fn(|i, _| f[(i, i)]),
+            };
         }
-        let Some(svd) = f.try_svd(true, true, 1e-15, 200) else {
-            return fallback;
-        };
-        let (Some(mut u), Some(v_t)) = (svd.u, svd.v_t) else {
-            return fallback;
-        };
-        let mut v = v_t.transpose();
-        let mut sigma = svd.singular_values;
-        // Order descending so the smallest singular value is last.
+        let (eigenvalues, mut v) = symmetric_eigen_jacobi(&(f.transpose() * f));
+        // Sort descending.
         let mut order = [0usize, 1, 2];
-        order.sort_by(|&i, &j| sigma[j].total_cmp(&sigma[i]));
+        order.sort_by(|&i, &j| eigenvalues[j].total_cmp(&eigenvalues[i]));
         if order != [0, 1, 2] {
-            let (u0, v0, s0) = (u, v, sigma);
+            let v0 = v;
             for (k, &i) in order.iter().enumerate() {
-                u.set_column(k, &u0.column(i));
                 v.set_column(k, &v0.column(i));
-                sigma[k] = s0[i];
             }
-        }
-        if u.determinant() < 0.0 {
-            u.column_mut(2).neg_mut();
-            sigma[2] = -sigma[2];
         }
         if v.determinant() < 0.0 {
             v.column_mut(2).neg_mut();
-            sigma[2] = -sigma[2];
         }
+        let b = f * v;
+        let scale = f.norm();
+        let (b1, b2, b3) = (b.column(0), b.column(1), b.column(2));
+        let s1 = b1.norm();
+        let u1 = if s1 > SVD_TINY * scale {
+            b1 / s1
+        } else {
+            Vector3::x()
+        };
+        let b2_perp = b2 - u1 * u1.dot(&b2);
+        let u2 = if b2_perp.norm() > SVD_TINY * scale {
+            b2_perp.normalize()
+        } else {
+            any_orthogonal(&u1)
+        };
+        let u3 = u1.cross(&u2);
+        let u = Matrix3::from_columns(&[u1, u2, u3]);
+        let sigma = Vector3::new(s1, u2.dot(&b2), u3.dot(&b3));
         Corotation {
             r: u * v.transpose(),
             u,
@@ -263,6 +275,79 @@ impl Corotation {
             sigma,
         }
     }
+}
+
+/// Below this fraction of `|F|` a column of `F V` counts as zero (its
+/// direction is then any one orthogonal to the columns before it).
+const SVD_TINY: f64 = 1e-14;
+
+/// Jacobi sweeps after which the eigen-decomposition stops even if the
+/// off-diagonal part is not yet at round-off (it converges quadratically;
+/// 3×3 matrices take 3–5 sweeps).
+const MAX_JACOBI_SWEEPS: usize = 12;
+
+/// Eigenvalues and eigenvectors (columns) of the symmetric `a`, by cyclic
+/// Jacobi rotations until the off-diagonal part is at round-off.
+fn symmetric_eigen_jacobi(a: &Matrix3<f64>) -> (Vector3<f64>, Matrix3<f64>) {
+    let mut a = *a;
+    let mut v = Matrix3::identity();
+    for _ in 0..MAX_JACOBI_SWEEPS {
+        let off = a[(0, 1)].powi(2) + a[(0, 2)].powi(2) + a[(1, 2)].powi(2);
+        let diag = a[(0, 0)].powi(2) + a[(1, 1)].powi(2) + a[(2, 2)].powi(2);
+        if off <= 1e-32 * diag || off == 0.0 {
+            break;
+        }
+        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
+            jacobi_rotate(&mut a, &mut v, p, q);
+        }
+    }
+    (Vector3::new(a[(0, 0)], a[(1, 1)], a[(2, 2)]), v)
+}
+
+/// One Jacobi rotation in the (p, q) plane that zeroes `a[(p, q)]`:
+/// `a ← Jᵀ a J`, `v ← v J`.
+fn jacobi_rotate(a: &mut Matrix3<f64>, v: &mut Matrix3<f64>, p: usize, q: usize) {
+    let apq = a[(p, q)];
+    if apq == 0.0 {
+        return;
+    }
+    let theta = (a[(q, q)] - a[(p, p)]) / (2.0 * apq);
+    // The smaller rotation angle, t = tan φ; written to avoid overflow of θ².
+    let t = if theta.abs() > 1e150 {
+        0.5 / theta
+    } else {
+        theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt())
+    };
+    let c = 1.0 / (t * t + 1.0).sqrt();
+    let s = t * c;
+    a[(p, p)] -= t * apq;
+    a[(q, q)] += t * apq;
+    a[(p, q)] = 0.0;
+    a[(q, p)] = 0.0;
+    let r = 3 - p - q;
+    let (arp, arq) = (a[(r, p)], a[(r, q)]);
+    a[(r, p)] = c * arp - s * arq;
+    a[(p, r)] = a[(r, p)];
+    a[(r, q)] = s * arp + c * arq;
+    a[(q, r)] = a[(r, q)];
+    for k in 0..3 {
+        let (vkp, vkq) = (v[(k, p)], v[(k, q)]);
+        v[(k, p)] = c * vkp - s * vkq;
+        v[(k, q)] = s * vkp + c * vkq;
+    }
+}
+
+/// A unit vector orthogonal to the unit `u`.
+fn any_orthogonal(u: &Vector3<f64>) -> Vector3<f64> {
+    // Cross with the axis least aligned with u.
+    let axis = if u.x.abs() <= u.y.abs() && u.x.abs() <= u.z.abs() {
+        Vector3::x()
+    } else if u.y.abs() <= u.z.abs() {
+        Vector3::y()
+    } else {
+        Vector3::z()
+    };
+    u.cross(&axis).normalize()
 }
 
 #[cfg(test)]
@@ -457,5 +542,63 @@ mod tests {
         assert!((s[0] + 0.5).abs() < 1e-12 && (s[1] - 1.0).abs() < 1e-12);
         let back = c.u * nalgebra::Matrix3::from_diagonal(&c.sigma) * c.v.transpose();
         assert!((back - f).norm() < 1e-12);
+    }
+
+    /// The Jacobi SVD against nalgebra's on matrices that stress it: random,
+    /// rotations, repeated and zero singular values, near-singular,
+    /// inverted, rank one: `U`, `V` rotations, `U Σ̂ Vᵀ = F`, the same
+    /// singular values, `σ̂₁ ≥ σ̂₂ ≥ |σ̂₃|` with `σ̂₃` of the sign of `det F`,
+    /// and for an invertible `F` the polar rotation of `F`.
+    #[test]
+    fn jacobi_svd_matches_a_reference_svd() {
+        let mut seed = 0x2545_f491_4f6c_dd1d_u64;
+        let mut random = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let rot = Rotation3::from_euler_angles(0.4, -1.1, 2.3).into_inner();
+        let mut cases = vec![
+            Matrix3::identity(),
+            Matrix3::zeros(),
+            rot,
+            rot * Matrix3::from_diagonal(&Vector3::new(1.2, 1.2, 0.7)) * rot.transpose(),
+            Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -0.5)),
+            rot * Matrix3::from_diagonal(&Vector3::new(2.0, 1e-9, 1e-12)),
+            Vector3::new(1.0, 2.0, -0.5) * Vector3::new(0.3, -0.1, 0.9).transpose(),
+            Matrix3::new(1.0, 0.1, 0.0, 0.0, 1.0, 0.2, 0.1, 0.0, -0.4),
+            Matrix3::identity() + Matrix3::from_fn(|i, j| 1e-9 * (i as f64 - j as f64 * 0.7)),
+        ];
+        for _ in 0..500 {
+            cases.push(Matrix3::from_fn(|_, _| random()));
+        }
+        for f in cases {
+            let c = Corotation::of(&f);
+            let scale = f.norm().max(1e-300);
+            let ortho = |m: &Matrix3<f64>| (m.transpose() * m - Matrix3::identity()).norm();
+            assert!(ortho(&c.u) < 1e-12 && ortho(&c.v) < 1e-12, "{f}");
+            assert!((c.u.determinant() - 1.0).abs() < 1e-12, "{f}");
+            assert!((c.v.determinant() - 1.0).abs() < 1e-12, "{f}");
+            let back = c.u * Matrix3::from_diagonal(&c.sigma) * c.v.transpose();
+            assert!((back - f).norm() <= 1e-13 * scale, "{f}: {}", (back - f).norm());
+            let s = c.sigma;
+            assert!(s[0] >= s[1] - 1e-13 * scale && s[1] >= s[2].abs() - 1e-13 * scale, "{s}");
+            let mut reference: Vec<f64> = f.singular_values().iter().copied().collect();
+            reference.sort_by(|a, b| b.total_cmp(a));
+            for k in 0..3 {
+                assert!((s[k].abs() - reference[k]).abs() <= 1e-12 * scale, "{s} vs {reference:?}");
+            }
+            let det = f.determinant();
+            if det.abs() > 1e-6 * scale.powi(3) {
+                assert_eq!(s[2] < 0.0, det < 0.0, "{f}");
+                if det > 0.0 {
+                    // Polar rotation: F = R S with S symmetric positive definite.
+                    let stretch = c.r.transpose() * f;
+                    assert!((stretch - stretch.transpose()).norm() < 1e-12 * scale, "{f}");
+                    assert!(stretch.symmetric_eigenvalues().min() > 0.0, "{f}");
+                }
+            }
+        }
     }
 }
