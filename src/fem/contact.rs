@@ -444,13 +444,15 @@ pub fn solve_with_contact(
     let stats = sim.solve_with(context, |sim, it| {
         let changed = if it < FREEZE_AFTER {
             update_active_set(sim, &frame, state, it)
+        } else if !warned {
+            log::warn!(
+                "{context}: contact set still changing after {FREEZE_AFTER} Newton iterations; frozen"
+            );
+            warned = true;
+            // The frozen set is a new problem: Newton restarts on it with
+            // the exact tangent.
+            true
         } else {
-            if !warned {
-                log::warn!(
-                    "{context}: contact set still changing after {FREEZE_AFTER} Newton iterations; frozen"
-                );
-                warned = true;
-            }
             false
         };
         apply_contact(sim, &frame, state);
@@ -512,7 +514,17 @@ fn update_active_set(
         let (gap, n) = frame.pose.distance(&sim.x[v]);
         let normal = f.dot(&n);
         let c = state.stiffness[v];
-        if frame.mode != ContactMode::Bonded && normal - c * gap < release_below {
+        // A sliding Coulomb node whose normal reaction vanishes is released
+        // without hysteresis: at F_n = 0 its friction μ·max(F_n, 0) has a
+        // kink that, with the node held, stalls Newton.
+        let sliding = matches!(frame.mode, ContactMode::Coulomb(_))
+            && matches!(state.active[&v], NodeContact::Slide { .. });
+        let below = if sliding {
+            release_below.max(-1e-9 * largest)
+        } else {
+            release_below
+        };
+        if frame.mode != ContactMode::Bonded && normal - c * gap < below {
             state.active.remove(&v);
             state.reference.remove(&v);
             changed = true;

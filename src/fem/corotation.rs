@@ -581,13 +581,23 @@ mod tests {
             assert!((c.u.determinant() - 1.0).abs() < 1e-12, "{f}");
             assert!((c.v.determinant() - 1.0).abs() < 1e-12, "{f}");
             let back = c.u * Matrix3::from_diagonal(&c.sigma) * c.v.transpose();
-            assert!((back - f).norm() <= 1e-13 * scale, "{f}: {}", (back - f).norm());
+            assert!(
+                (back - f).norm() <= 1e-13 * scale,
+                "{f}: {}",
+                (back - f).norm()
+            );
             let s = c.sigma;
-            assert!(s[0] >= s[1] - 1e-13 * scale && s[1] >= s[2].abs() - 1e-13 * scale, "{s}");
+            assert!(
+                s[0] >= s[1] - 1e-13 * scale && s[1] >= s[2].abs() - 1e-13 * scale,
+                "{s}"
+            );
             let mut reference: Vec<f64> = f.singular_values().iter().copied().collect();
             reference.sort_by(|a, b| b.total_cmp(a));
             for k in 0..3 {
-                assert!((s[k].abs() - reference[k]).abs() <= 1e-12 * scale, "{s} vs {reference:?}");
+                assert!(
+                    (s[k].abs() - reference[k]).abs() <= 1e-12 * scale,
+                    "{s} vs {reference:?}"
+                );
             }
             let det = f.determinant();
             if det.abs() > 1e-6 * scale.powi(3) {
@@ -595,7 +605,10 @@ mod tests {
                 if det > 0.0 {
                     // Polar rotation: F = R S with S symmetric positive definite.
                     let stretch = c.r.transpose() * f;
-                    assert!((stretch - stretch.transpose()).norm() < 1e-12 * scale, "{f}");
+                    assert!(
+                        (stretch - stretch.transpose()).norm() < 1e-12 * scale,
+                        "{f}"
+                    );
                     assert!(stretch.symmetric_eigenvalues().min() > 0.0, "{f}");
                 }
             }
