@@ -258,7 +258,7 @@ fn bench(stage: &str, path: &Path, frames: usize) -> anyhow::Result<()> {
     let mut setup = Setup::load(path).with_context(|| format!("scenario {}", path.display()))?;
     let mut report = format!(
         "bench fem: {} ({} tets), first {} frames\n\
-         {:<8} {:>9} {:>9} {:>8} {:>10} {:>9} {:>9} {:>9} {:>9} {:>9}\n",
+         {:<9} {:>9} {:>9} {:>8} {:>10} {:>9} {:>9} {:>9} {:>9} {:>9}\n",
         path.display(),
         setup.mesh.num_tets(),
         frames,
@@ -278,13 +278,14 @@ fn bench(stage: &str, path: &Path, frames: usize) -> anyhow::Result<()> {
         ("cg", LinearSolver::Cg),
         ("factored", LinearSolver::FactoredCg),
         ("direct", LinearSolver::Direct),
+        ("two-level", LinearSolver::TwoLevel),
     ] {
         setup.simulation.newton.linear = solver;
         let f = skinpatch::pipeline::bench_fem(&setup, frames)?;
         let t = f.timings;
         let other = f.wall_s - t.forces_s - t.assembly_s - t.linear_s;
         report += &format!(
-            "{name:<8} {:>9.3} {:>9.2} {:>8} {:>10} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2}\n",
+            "{name:<9} {:>9.3} {:>9.2} {:>8} {:>10} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2}\n",
             f.frames as f64 / f.wall_s,
             f.wall_s,
             f.newton_iterations,
@@ -298,9 +299,10 @@ fn bench(stage: &str, path: &Path, frames: usize) -> anyhow::Result<()> {
         walls.push(f.wall_s);
     }
     report += &format!(
-        "wall-time ratios: cg / factored {:.2}, direct / factored {:.2}\n",
+        "wall-time ratios: cg / factored {:.2}, direct / factored {:.2}, cg / two-level {:.2}\n",
         walls[0] / walls[1],
-        walls[2] / walls[1]
+        walls[2] / walls[1],
+        walls[0] / walls[3]
     );
     print_stdout(&report)
 }

@@ -321,16 +321,16 @@ fn bench_fem_compares_solvers() {
     let rows: Vec<&str> = out
         .lines()
         .filter(|l| {
-            ["cg ", "factored ", "direct "]
+            ["cg ", "factored ", "direct ", "two-level "]
                 .iter()
                 .any(|p| l.starts_with(p))
         })
         .collect();
-    assert_eq!(rows.len(), 3, "{out}");
+    assert_eq!(rows.len(), 4, "{out}");
     // Columns: solver, frames/s, wall s, Newton, linear iterations, ….
     let column =
         |row: &str, k: usize| -> usize { row.split_whitespace().nth(k).unwrap().parse().unwrap() };
-    let (cg, factored, direct) = (rows[0], rows[1], rows[2]);
+    let (cg, factored, direct, two_level) = (rows[0], rows[1], rows[2], rows[3]);
     assert!(column(cg, 3) > 0 && column(cg, 4) > column(cg, 3), "{out}");
     // The reused factor preconditions far better than block Jacobi.
     assert!(
@@ -345,7 +345,13 @@ fn bench_fem_compares_solvers() {
         newton > 0 && linear >= newton && linear <= 3 * newton,
         "{out}"
     );
+    // The coarse correction cuts the conjugate-gradient iterations.
+    assert!(
+        column(two_level, 3) > 0 && column(two_level, 4) < column(cg, 4),
+        "{out}"
+    );
     assert!(out.contains("wall-time ratios: cg / factored"), "{out}");
+    assert!(out.contains("cg / two-level"), "{out}");
 }
 
 /// `strain_images = true` writes three PNG maps per frame; the metrics carry

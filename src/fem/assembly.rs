@@ -192,8 +192,8 @@ impl Assembly {
         self.block(i, self.diagonal_slot[i])
     }
 
-    /// Block `(i, neighbours[slot])` of the current matrix.
-    fn block(&self, i: usize, slot: usize) -> Matrix3<f64> {
+    /// Block `(i, neighbours(i)[slot])` of the current matrix.
+    pub fn block(&self, i: usize, slot: usize) -> Matrix3<f64> {
         let n = self.neighbour_start[i + 1] - self.neighbour_start[i];
         let base = 9 * self.neighbour_start[i];
         let v = &self.matrix.values()[base..base + 9 * n];
@@ -312,6 +312,49 @@ pub(crate) mod tests {
             .map(|t: &[usize; 4]| RestElement::new(t.map(|v| p[v]), &m))
             .collect();
         (tets, rest)
+    }
+
+    /// A cube of `n³` unit cells (`(n+1)³` nodes, z = 0 at the bottom),
+    /// each cut into six positively oriented tets (E = 1 MPa, ν = 0.3):
+    /// tets, rest data and node positions.
+    pub(crate) fn cube_mesh(n: usize) -> (Vec<[usize; 4]>, Vec<RestElement>, Vec<Vec3>) {
+        let id = |i: usize, j: usize, k: usize| (k * (n + 1) + j) * (n + 1) + i;
+        let mut positions = Vec::new();
+        for k in 0..=n {
+            for j in 0..=n {
+                for i in 0..=n {
+                    positions.push(Vec3::new(i as f64, j as f64, k as f64));
+                }
+            }
+        }
+        let mut tets = Vec::new();
+        for k in 0..n {
+            for j in 0..n {
+                for i in 0..n {
+                    let c = |d: usize| id(i + (d & 1), j + ((d >> 1) & 1), k + (d >> 2));
+                    // Kuhn split along the diagonal 0–7.
+                    for path in [[1, 3], [1, 5], [2, 3], [2, 6], [4, 5], [4, 6]] {
+                        let mut t = [c(0), c(path[0]), c(path[1]), c(7)];
+                        let p = t.map(|v| positions[v]);
+                        let vol = (p[1] - p[0]).cross(&(p[2] - p[0])).dot(&(p[3] - p[0]));
+                        if vol < 0.0 {
+                            t.swap(1, 2);
+                        }
+                        tets.push(t);
+                    }
+                }
+            }
+        }
+        let m = Material {
+            youngs_mpa: 1.0,
+            poisson: 0.3,
+            density_t_mm3: 1e-9,
+        };
+        let rest = tets
+            .iter()
+            .map(|t| RestElement::new(t.map(|v| positions[v]), &m))
+            .collect();
+        (tets, rest, positions)
     }
 
     #[test]

@@ -32,6 +32,7 @@ use nalgebra::Matrix3;
 use rayon::prelude::*;
 
 use super::assembly::Assembly;
+use super::coarse::Coarse;
 use super::corotation::{Corotation, RestElement, Tangent, TangentKind};
 use super::material::Material;
 use super::solve::{self, CgSettings, CgWorkspace, Coupling, Factor, Filter, Preconditioner};
@@ -49,6 +50,11 @@ pub enum LinearSolver {
     /// Newton matrix, reused across iterations and frames and refactorised
     /// when a solve needs more than [`REFACTOR_AFTER`] iterations.
     FactoredCg,
+    /// Conjugate gradients preconditioned by block Jacobi plus a coarse
+    /// correction on the rigid modes of node aggregates
+    /// ([`super::coarse::Coarse`]), whose coarse matrix is rebuilt at the
+    /// first Newton step of every solve.
+    TwoLevel,
 }
 
 /// A factored-CG solve that needs more iterations than this refactorises
@@ -213,6 +219,9 @@ pub struct Simulation {
     tet_forces: Vec<[Vec3; 4]>,
     f_int: Vec<Vec3>,
     cg: CgWorkspace,
+    coarse: Coarse,
+    /// Whether the coarse matrix must be rebuilt before the next solve.
+    coarse_stale: bool,
     factor: Factor,
     /// The friction couplings of the current Newton matrix.
     couplings: Vec<Coupling>,
@@ -263,6 +272,8 @@ impl Simulation {
             f_elastic_n: vec![Vec3::zeros(); n],
             f_int: vec![Vec3::zeros(); n],
             cg: CgWorkspace::default(),
+            coarse: Coarse::default(),
+            coarse_stale: true,
             factor: Factor::default(),
             couplings: Vec::new(),
             dx: vec![0.0; 3 * n],
@@ -513,6 +524,7 @@ impl Simulation {
         self.evaluate_forces();
         let mut stats = NewtonStats::default();
         self.tangent_kind = TangentKind::Exact;
+        self.coarse_stale = true;
         for it in 0..=self.settings.max_iterations {
             let changed = update(self, it);
             if changed {
@@ -639,6 +651,15 @@ impl Simulation {
                 return outcome;
             }
         }
+        if self.settings.linear == LinearSolver::TwoLevel && self.coarse_stale {
+            let start = std::time::Instant::now();
+            if self.coarse.num_aggregates() == 0 {
+                self.coarse = Coarse::new(&self.x);
+            }
+            self.coarse.refresh(&self.assembly, &self.filters, &self.x);
+            self.coarse_stale = false;
+            self.timings.factor_s += start.elapsed().as_secs_f64();
+        }
         let cg = self.pcg(forcing, self.settings.cg.max_iterations, false);
         (cg.iterations, cg.converged)
     }
@@ -649,6 +670,8 @@ impl Simulation {
         self.dx.fill(0.0);
         let preconditioner = if factored {
             Preconditioner::Factor(&mut self.factor)
+        } else if self.settings.linear == LinearSolver::TwoLevel && self.coarse.is_ready() {
+            Preconditioner::TwoLevel(&self.coarse)
         } else {
             Preconditioner::BlockJacobi
         };

@@ -5,6 +5,7 @@
 
 pub mod assembly;
 pub mod boundary;
+pub mod coarse;
 pub mod contact;
 pub mod corotation;
 pub mod integrate;

@@ -17,6 +17,7 @@ use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
 use super::assembly::Assembly;
+use super::coarse::Coarse;
 
 /// Per-node projector onto the free directions.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -210,6 +211,8 @@ pub enum Preconditioner<'a> {
     /// (possibly with other filters), followed by the current filter: exact
     /// when neither the matrix nor the filters have changed since.
     Factor(&'a mut Factor),
+    /// Block Jacobi plus the coarse correction of [`Coarse`] (additive).
+    TwoLevel(&'a Coarse),
 }
 
 /// Solves `(S K S + I − S) x = S b` by preconditioned conjugate gradients,
@@ -240,7 +243,7 @@ pub fn solve(
         }
     }
     let mut blocks = Vec::new();
-    if let Preconditioner::BlockJacobi = preconditioner {
+    if let Preconditioner::BlockJacobi | Preconditioner::TwoLevel(_) = preconditioner {
         blocks = (0..asm.num_nodes())
             .into_par_iter()
             .map(|i| {
@@ -253,6 +256,11 @@ pub fn solve(
     // z = M⁻¹ r; returns r·z.
     let mut precondition = |r: &[f64], z: &mut [f64]| match &mut preconditioner {
         Preconditioner::BlockJacobi => precondition_blocks(&blocks, r, z),
+        Preconditioner::TwoLevel(coarse) => {
+            precondition_blocks(&blocks, r, z);
+            coarse.correct(r, z);
+            dot(r, z)
+        }
         Preconditioner::Factor(factor) => {
             z.copy_from_slice(r);
             factor.solve_in_place(z);
@@ -522,6 +530,80 @@ mod tests {
         let mut x = vec![0.0; 15];
         assert!(factor.solve(&asm, &filters, &b, &mut x));
         assert!((nalgebra::DVector::from_vec(x) - &symmetric).norm() < 1e-12);
+    }
+
+    /// On an elastic cube fixed at its bottom (8³ cells), conjugate
+    /// gradients with the two-level preconditioner reach the block-Jacobi
+    /// solution, also with partial filters, in under half the iterations.
+    #[test]
+    fn two_level_solves_match_block_jacobi_in_fewer_iterations() {
+        let (tets, rest, positions) = crate::fem::assembly::tests::cube_mesh(8);
+        let mut asm = Assembly::new(positions.len(), &tets);
+        asm.assemble_stiffness(|t, a, b| rest[t].k0[a][b]);
+        let filters: Vec<Filter> = positions
+            .iter()
+            .map(|p| {
+                if p.z < 1e-9 {
+                    Filter::Fixed
+                } else if p.x < 1e-9 {
+                    Filter::Free.constrain(&Vector3::x())
+                } else {
+                    Filter::Free
+                }
+            })
+            .collect();
+        let b: Vec<f64> = (0..3 * positions.len())
+            .map(|k| ((k * 13 + 5) as f64 * 0.37).sin())
+            .collect();
+        let mut coarse = Coarse::new(&positions);
+        assert!(coarse.num_aggregates() > 1);
+        assert!(coarse.refresh(&asm, &filters, &positions));
+        let settings = CgSettings {
+            rel_tol: 1e-10,
+            max_iterations: 2000,
+        };
+        let op = Operator {
+            asm: &asm,
+            filters: &filters,
+            couplings: &[],
+        };
+        let mut ws = CgWorkspace::default();
+        let mut x_jacobi = vec![0.0; b.len()];
+        let jacobi = solve(
+            op,
+            &b,
+            &mut x_jacobi,
+            &settings,
+            &mut ws,
+            Preconditioner::BlockJacobi,
+        );
+        let mut x_two = vec![0.0; b.len()];
+        let two = solve(
+            op,
+            &b,
+            &mut x_two,
+            &settings,
+            &mut ws,
+            Preconditioner::TwoLevel(&coarse),
+        );
+        assert!(jacobi.converged && two.converged, "{jacobi:?} {two:?}");
+        assert!(
+            2 * two.iterations < jacobi.iterations,
+            "{two:?} vs {jacobi:?}"
+        );
+        let diff: f64 = x_two
+            .iter()
+            .zip(&x_jacobi)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let norm: f64 = x_jacobi.iter().map(|v| v * v).sum::<f64>().sqrt();
+        assert!(diff < 1e-7 * norm, "difference {diff} of {norm}");
+        // The constrained directions stay untouched.
+        for (i, f) in filters.iter().enumerate() {
+            let xi = Vector3::new(x_two[3 * i], x_two[3 * i + 1], x_two[3 * i + 2]);
+            assert!((xi - f.apply(&xi)).norm() < 1e-14);
+        }
     }
 
     #[test]

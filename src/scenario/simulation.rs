@@ -104,7 +104,9 @@ pub struct ProbeSection {
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct SolverSection {
-    /// Linear solver for Newton steps: `cg` (block-Jacobi PCG, default) or
+    /// Linear solver for Newton steps: `cg` (block-Jacobi PCG, default),
+    /// `two-level` (PCG with block Jacobi plus a coarse rigid-mode
+    /// correction), `factored-cg` (PCG with a reused Cholesky factor) or
     /// `direct` (sparse Cholesky).
     pub linear: String,
     /// Relative residual at which a frame is in equilibrium. Default 1e-6.
@@ -453,12 +455,13 @@ impl SolverSection {
             "direct" => LinearSolver::Direct,
             "cg" => LinearSolver::Cg,
             "factored-cg" => LinearSolver::FactoredCg,
-            other => {
-                return Err(Error::parameter(
-                    "solver.linear",
-                    format!("must be \"cg\", \"factored-cg\" or \"direct\", got \"{other}\""),
-                ))
-            }
+            "two-level" => LinearSolver::TwoLevel,
+            other => return Err(Error::parameter(
+                "solver.linear",
+                format!(
+                    "must be \"cg\", \"two-level\", \"factored-cg\" or \"direct\", got \"{other}\""
+                ),
+            )),
         };
         Ok(NewtonSettings {
             linear,
