@@ -272,7 +272,7 @@ impl Simulation {
             f_elastic_n: vec![Vec3::zeros(); n],
             f_int: vec![Vec3::zeros(); n],
             cg: CgWorkspace::default(),
-            coarse: Coarse::default(),
+            coarse: Coarse::new(&mesh.positions),
             coarse_stale: true,
             factor: Factor::default(),
             couplings: Vec::new(),
@@ -653,9 +653,6 @@ impl Simulation {
         }
         if self.settings.linear == LinearSolver::TwoLevel && self.coarse_stale {
             let start = std::time::Instant::now();
-            if self.coarse.num_aggregates() == 0 {
-                self.coarse = Coarse::new(&self.x);
-            }
             self.coarse.refresh(&self.assembly, &self.filters, &self.x);
             self.coarse_stale = false;
             self.timings.factor_s += start.elapsed().as_secs_f64();
