@@ -253,12 +253,16 @@ pub fn solve(
             })
             .collect();
     }
+    let constrained = constrained_nodes(filters);
     // z = M⁻¹ r; returns r·z.
     let mut precondition = |r: &[f64], z: &mut [f64]| match &mut preconditioner {
         Preconditioner::BlockJacobi => precondition_blocks(&blocks, r, z),
         Preconditioner::TwoLevel(coarse) => {
             precondition_blocks(&blocks, r, z);
             coarse.correct(r, z);
+            // The coarse modes were filtered when the coarse matrix was
+            // built; the filters may have changed since.
+            filter_nodes(filters, &constrained, z);
             dot(r, z)
         }
         Preconditioner::Factor(factor) => {
@@ -268,7 +272,6 @@ pub fn solve(
             dot(r, z)
         }
     };
-    let constrained = constrained_nodes(filters);
     filter_nodes(filters, &constrained, x);
     // r = S b − A x
     ws.r.copy_from_slice(b);

@@ -456,12 +456,14 @@ impl SolverSection {
             "cg" => LinearSolver::Cg,
             "factored-cg" => LinearSolver::FactoredCg,
             "two-level" => LinearSolver::TwoLevel,
-            other => return Err(Error::parameter(
-                "solver.linear",
-                format!(
+            other => {
+                return Err(Error::parameter(
+                    "solver.linear",
+                    format!(
                     "must be \"cg\", \"two-level\", \"factored-cg\" or \"direct\", got \"{other}\""
                 ),
-            )),
+                ))
+            }
         };
         Ok(NewtonSettings {
             linear,
