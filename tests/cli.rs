@@ -231,6 +231,19 @@ fn bad_scenarios_fail_cleanly() {
         ),
         ("[mesh]\nfile = \"missing.msh\"\n", "missing.msh"),
         ("[mesh\n", "line 1"),
+        // Arrays of the wrong length are refused, not truncated.
+        (
+            "[render.camera]\neye_mm = [0.0, -13.0, 8.0, 5.0]\n",
+            "line 2: render.camera.eye_mm: invalid length 4, expected an array of 3 numbers",
+        ),
+        (
+            "[probe]\npath_mm = [[0.0, 0.0, 0.0, 1.0, 9.0]]\n",
+            "probe.path_mm[0]: invalid length 5, expected an array of 4 numbers",
+        ),
+        (
+            "[mesh.refine]\ncenter_mm = [1.0]\n",
+            "mesh.refine.center_mm: invalid length 1, expected an array of 2 numbers",
+        ),
     ] {
         let scenario = dir.path().join("bad.toml");
         std::fs::write(

@@ -65,10 +65,12 @@ pub struct RefineSection {
     pub shape: ZoneKind,
     /// Centre (x, y) on the top surface (mm). Default [0, 0].
     #[serde(default)]
+    #[serde(deserialize_with = "super::arrays::exact")]
     pub center_mm: [f64; 2],
     /// Sphere radius (mm); required for `sphere`.
     pub radius_mm: Option<f64>,
     /// Box extent [x, y, depth] (mm); required for `box`.
+    #[serde(default, deserialize_with = "super::arrays::exact_opt")]
     pub size_mm: Option<[f64; 3]>,
     /// Largest tet volume inside the zone (mm³).
     pub max_volume_mm3: f64,

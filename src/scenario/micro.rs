@@ -95,10 +95,13 @@ pub struct ProceduralSection {
 #[serde(deny_unknown_fields)]
 pub struct KernelSection {
     /// α(r), through (1, 0), values in [−2, 1].
+    #[serde(deserialize_with = "super::arrays::exact_rows")]
     pub alpha: Vec<[f64; 2]>,
     /// σ(r) in µm for r < 1.
+    #[serde(deserialize_with = "super::arrays::exact_rows")]
     pub sigma_compression_um: Vec<[f64; 2]>,
     /// σ(r) in µm for r ≥ 1.
+    #[serde(deserialize_with = "super::arrays::exact_rows")]
     pub sigma_stretch_um: Vec<[f64; 2]>,
 }
 

@@ -21,6 +21,7 @@ use crate::error::{Error, Result};
 use crate::mesh::generate::PatchSpec;
 use crate::mesh::{io, TetMesh};
 
+mod arrays;
 mod mesh;
 mod micro;
 mod render;

@@ -57,6 +57,7 @@ pub struct RenderSection {
     /// Subject of the measured lobes, 1 or 2. Default 1.
     pub subject: usize,
     /// Explicit two-lobe microscale fit `[m1, m2, w]` in place of the region's.
+    #[serde(default, deserialize_with = "super::arrays::exact_opt")]
     pub lobes: Option<[f64; 3]>,
     /// Specular intensity ρ_s multiplying the normalised BRDF, [0, 10]. Default 1.
     pub specular_intensity: f64,
@@ -109,10 +110,13 @@ pub struct CameraSection {
     /// `perspective` or `orthographic`. Default `perspective`.
     pub projection: String,
     /// Eye position (mm). Default `[0, -14, 12]`.
+    #[serde(deserialize_with = "super::arrays::exact")]
     pub eye_mm: [f64; 3],
     /// Point looked at (mm). Default `[0, 0, -0.5]`.
+    #[serde(deserialize_with = "super::arrays::exact")]
     pub target_mm: [f64; 3],
     /// Up direction. Default `[0, 0, 1]`.
+    #[serde(deserialize_with = "super::arrays::exact")]
     pub up: [f64; 3],
     /// Vertical field of view (degrees, perspective), in (0, 170). Default 35.
     pub fov_deg: f64,
@@ -140,11 +144,14 @@ pub struct LightSection {
     /// `directional` or `point`.
     pub kind: String,
     /// Direction the light travels (directional).
+    #[serde(default, deserialize_with = "super::arrays::exact_opt")]
     pub direction: Option<[f64; 3]>,
     /// Position (mm, point).
+    #[serde(default, deserialize_with = "super::arrays::exact_opt")]
     pub position_mm: Option<[f64; 3]>,
     /// Linear RGB colour, each ≥ 0. Default `[1, 1, 1]`.
     #[serde(default = "white")]
+    #[serde(deserialize_with = "super::arrays::exact")]
     pub color: [f64; 3],
     /// Irradiance at normal incidence (at 100 mm for a point light), ≥ 0.
     pub intensity: f64,
@@ -163,6 +170,7 @@ pub struct EnvironmentSection {
     pub preset: String,
     /// Nine RGB SH radiance coefficients L00, L1−1, L10, L11, L2−2, L2−1,
     /// L20, L21, L22 (z up).
+    #[serde(default, deserialize_with = "super::arrays::exact_rows_opt")]
     pub coefficients: Option<Vec<[f64; 3]>>,
     /// Scale of the radiance, ≥ 0. Default 0.4.
     pub intensity: f64,

@@ -66,6 +66,7 @@ pub struct CaliperSection {
     /// `x` or `y`.
     pub axis: String,
     /// Rows `[time_s, stretch_ratio]`.
+    #[serde(deserialize_with = "super::arrays::exact_rows")]
     pub stretch: Vec<[f64; 2]>,
 }
 
@@ -76,6 +77,7 @@ pub struct PrescribedSection {
     /// `top`, `bottom`, `x_min`, `x_max`, `y_min` or `y_max`.
     pub set: String,
     /// Rows `[time_s, dx_mm, dy_mm, dz_mm]`.
+    #[serde(deserialize_with = "super::arrays::exact_rows")]
     pub displacement_mm: Vec<[f64; 4]>,
 }
 
@@ -91,8 +93,10 @@ pub struct ProbeSection {
     pub length_mm: Option<f64>,
     /// Rows `[time_s, x_mm, y_mm, z_mm]`: centre of the sphere or capsule,
     /// centre of the punch face.
+    #[serde(deserialize_with = "super::arrays::exact_rows")]
     pub path_mm: Vec<[f64; 4]>,
     /// Capsule axis rows `[time_s, ax, ay, az]`. Default: x.
+    #[serde(default, deserialize_with = "super::arrays::exact_rows_opt")]
     pub axis: Option<Vec<[f64; 4]>>,
     /// `frictionless` (default), `coulomb` or `bonded`.
     pub contact: Option<String>,
