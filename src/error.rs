@@ -10,7 +10,7 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     /// An operating-system I/O failure on a named file.
-    #[error("{path}: {cause}")]
+    #[error("{path}: {}", clip(&.cause.to_string()))]
     Io {
         /// The file or folder being read or written.
         path: PathBuf,
@@ -19,7 +19,7 @@ pub enum Error {
     },
 
     /// A malformed input file, with the 1-based line where the problem was found.
-    #[error("{path}:{line}: {message}")]
+    #[error("{path}:{line}: {}", clip(.message))]
     Parse {
         /// The file being parsed.
         path: PathBuf,
@@ -30,7 +30,7 @@ pub enum Error {
     },
 
     /// A scenario file that is not valid TOML or does not match the schema.
-    #[error("{path}: {message}")]
+    #[error("{path}: {}", clip(.message))]
     Scenario {
         /// The scenario file.
         path: PathBuf,
@@ -39,7 +39,7 @@ pub enum Error {
     },
 
     /// A parameter outside its valid range, named by its scenario key or flag.
-    #[error("{key} {reason}")]
+    #[error("{} {}", clip(.key), clip(.reason))]
     Parameter {
         /// Dotted scenario key, e.g. `mesh.top_layer_mm`.
         key: String,
@@ -49,7 +49,7 @@ pub enum Error {
 
     /// A mesh that is structurally unusable (bad indices, degenerate or inverted
     /// tetrahedra, non-manifold surface, empty regions).
-    #[error("{origin}: {message}")]
+    #[error("{}: {}", clip(.origin), clip(.message))]
     InvalidMesh {
         /// Where the mesh came from (a file path or `generated mesh`).
         origin: String,
@@ -58,25 +58,41 @@ pub enum Error {
     },
 
     /// TetGen failed or produced a mesh that misses the requested quality.
-    #[error("mesh generation failed: {0}")]
+    #[error("mesh generation failed: {}", clip(.0))]
     MeshGeneration(String),
 
     /// The simulation could not reach equilibrium (names the frame and residual).
-    #[error("solver failed: {0}")]
+    #[error("solver failed: {}", clip(.0))]
     Solver(String),
 
     /// A feature needed for the request was disabled at build time.
-    #[error("{0}")]
+    #[error("{}", clip(.0))]
     FeatureDisabled(String),
 
     /// An external program the request needs is not installed.
-    #[error("{0}")]
+    #[error("{}", clip(.0))]
     MissingTool(String),
 
     /// No usable GPU adapter, a limit a stage needs, or a failed GPU
     /// operation (what failed and on which adapter).
-    #[error("GPU: {0}")]
+    #[error("GPU: {}", clip(.0))]
     Gpu(String),
+}
+
+/// Longest message part shown in full; a longer one (e.g. a bad value of a
+/// megabyte echoed in its error) keeps its start and end.
+const MAX_SHOWN: usize = 400;
+
+/// `text`, or for a longer one its first 300 and last 80 characters around
+/// a note of how many were left out. The error keeps the full text.
+fn clip(text: &str) -> std::borrow::Cow<'_, str> {
+    let count = text.chars().count();
+    if count <= MAX_SHOWN {
+        return text.into();
+    }
+    let head: String = text.chars().take(300).collect();
+    let tail: String = text.chars().skip(count - 80).collect();
+    format!("{head} … [{} characters left out] … {tail}", count - 380).into()
 }
 
 /// Shorthand for results with the library error type.
@@ -115,5 +131,31 @@ impl Error {
             key: key.into(),
             reason: reason.into(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A megabyte value echoed in an error is shown by its ends only; short
+    /// messages are untouched.
+    #[test]
+    fn long_messages_are_clipped_when_shown() {
+        let value = "x".repeat(1 << 20);
+        let e = Error::parameter("solver.linear", format!("must be \"cg\", got \"{value}\""));
+        let shown = e.to_string();
+        assert!(shown.len() < 600, "{} bytes", shown.len());
+        assert!(
+            shown.starts_with("solver.linear must be \"cg\", got \"xxx"),
+            "{shown}"
+        );
+        assert!(shown.contains("characters left out"));
+        assert!(shown.ends_with("xxx\""));
+        let short = Error::parameter("mesh.top_layer_mm", "must be > 0, got -1");
+        assert_eq!(short.to_string(), "mesh.top_layer_mm must be > 0, got -1");
+        // Multi-byte characters are cut on character boundaries.
+        let e = Error::Solver("é".repeat(1000));
+        assert!(e.to_string().contains("characters left out"));
     }
 }

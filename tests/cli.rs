@@ -266,6 +266,15 @@ fn bad_scenarios_fail_cleanly() {
     }
     let o = skinpatch(&["run", "no/such/scenario.toml"]);
     assert!(text(&o.stderr).contains("no/such/scenario.toml"));
+    // A huge bad value is named by its ends, not echoed in full.
+    let scenario = dir.path().join("huge.toml");
+    let value = "y".repeat(1 << 20);
+    std::fs::write(&scenario, format!("[solver]\nlinear = \"{value}\"\n")).unwrap();
+    let o = skinpatch(&["run", scenario.to_str().unwrap()]);
+    let stderr = text(&o.stderr);
+    assert!(!o.status.success());
+    assert!(stderr.contains("solver.linear must be") && stderr.contains("characters left out"));
+    assert!(stderr.len() < 2000, "{} bytes of stderr", stderr.len());
 }
 
 /// Writes tests/fixtures/press_small.toml with `extra` appended (mesh path
