@@ -6,7 +6,6 @@
 //! finished frame.
 
 use std::fmt::Write as _;
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
@@ -52,29 +51,56 @@ const HEADER: &str = "frame,time_s,probe_force_x_n,probe_force_y_n,probe_force_z
 contact_nodes,contact_area_mm2,max_penetration_mm,newton_iterations,linear_iterations,rel_residual,\
 rs_min,rs_max,rt_min,rt_max,folded_vertices,step_wall_s";
 
-/// `metrics.csv`, appended and flushed per frame.
-pub struct MetricsWriter {
+/// `metrics.csv`, appended and flushed per frame. Each row is formatted
+/// first and written with one call; a write that fails (a full disk)
+/// truncates the file back to its last whole row, so the file never ends
+/// in half a row.
+pub struct MetricsWriter<W: Truncate = std::fs::File> {
     path: PathBuf,
-    file: std::fs::File,
+    file: W,
+    /// Length of the file up to its last whole row (bytes).
+    whole: u64,
+}
+
+/// A sink that can be cut back to a length (and continue writing there).
+pub trait Truncate: std::io::Write {
+    /// Cuts the data to `len` bytes; the next write continues at `len`.
+    fn truncate_to(&mut self, len: u64) -> std::io::Result<()>;
+}
+
+impl Truncate for std::fs::File {
+    fn truncate_to(&mut self, len: u64) -> std::io::Result<()> {
+        use std::io::Seek;
+        self.set_len(len)?;
+        self.seek(std::io::SeekFrom::Start(len)).map(|_| ())
+    }
 }
 
 impl MetricsWriter {
     /// Creates (truncates) the file and writes the header.
     pub fn create(path: &Path) -> Result<MetricsWriter> {
-        let mut file = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
-        writeln!(file, "{HEADER}").map_err(|e| Error::io(path, e))?;
-        Ok(MetricsWriter {
+        let file = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
+        MetricsWriter::new(path, file)
+    }
+}
+
+impl<W: Truncate> MetricsWriter<W> {
+    /// Writes the header to `file` (reported as `path` in errors).
+    pub fn new(path: &Path, file: W) -> Result<MetricsWriter<W>> {
+        let mut writer = MetricsWriter {
             path: path.to_path_buf(),
             file,
-        })
+            whole: 0,
+        };
+        writer.write_line(&format!("{HEADER}\n"))?;
+        Ok(writer)
     }
 
     /// Appends one row.
     pub fn push(&mut self, m: &FrameMetrics) -> Result<()> {
         let [fx, fy, fz] = m.probe_force_n;
-        writeln!(
-            self.file,
-            "{},{},{fx:e},{fy:e},{fz:e},{},{:e},{:e},{},{},{:e},{:e},{:e},{:e},{:e},{},{:.6}",
+        let row = format!(
+            "{},{},{fx:e},{fy:e},{fz:e},{},{:e},{:e},{},{},{:e},{:e},{:e},{:e},{:e},{},{:.6}\n",
             m.frame,
             m.time_s,
             m.contact_nodes,
@@ -89,9 +115,28 @@ impl MetricsWriter {
             m.rt_range[1],
             m.folded_vertices,
             m.step_wall_s
-        )
-        .and_then(|()| self.file.flush())
-        .map_err(|e| Error::io(&self.path, e))
+        );
+        self.write_line(&row)
+    }
+
+    /// Writes `line` whole, or on failure cuts the file back to its last
+    /// whole line and reports the error.
+    fn write_line(&mut self, line: &str) -> Result<()> {
+        match self
+            .file
+            .write_all(line.as_bytes())
+            .and_then(|()| self.file.flush())
+        {
+            Ok(()) => {
+                self.whole += line.len() as u64;
+                Ok(())
+            }
+            Err(e) => {
+                // Best effort: the write error is what gets reported.
+                let _ = self.file.truncate_to(self.whole);
+                Err(Error::io(&self.path, e))
+            }
+        }
     }
 }
 
@@ -192,4 +237,74 @@ pub fn write_collection(dir: &Path, frames: &[(f64, PathBuf)]) -> Result<PathBuf
     let path = dir.join("frames.pvd");
     io::write_atomically(&path, s.as_bytes())?;
     Ok(path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A sink that takes `room` bytes, then fails like a full disk (after a
+    /// partial write).
+    struct Full {
+        data: Vec<u8>,
+        room: usize,
+    }
+
+    impl std::io::Write for Full {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            let n = buf.len().min(self.room - self.data.len());
+            if n == 0 && !buf.is_empty() {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::StorageFull,
+                    "disk full",
+                ));
+            }
+            self.data.extend_from_slice(&buf[..n]);
+            Ok(n)
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    impl Truncate for Full {
+        fn truncate_to(&mut self, len: u64) -> std::io::Result<()> {
+            self.data.truncate(len as usize);
+            Ok(())
+        }
+    }
+
+    /// A row that does not fit is not left half written: the file ends
+    /// with the last whole row, and the error names the file.
+    #[test]
+    fn a_full_disk_leaves_only_whole_rows() {
+        let row = FrameMetrics::default();
+        let path = Path::new("out/metrics.csv");
+        for room in [HEADER.len() + 1 + 10, HEADER.len() + 1 + 150, 2000] {
+            let mut w = MetricsWriter::new(
+                path,
+                Full {
+                    data: Vec::new(),
+                    room,
+                },
+            )
+            .unwrap();
+            let mut written = 0;
+            let err = loop {
+                match w.push(&row) {
+                    Ok(()) => written += 1,
+                    Err(e) => break e,
+                }
+                assert!(written < 100, "the sink never filled");
+            };
+            assert!(err.to_string().contains("out/metrics.csv"), "{err}");
+            let text = String::from_utf8(w.file.data.clone()).unwrap();
+            assert!(text.ends_with('\n'), "{text:?}");
+            assert_eq!(text.lines().count(), 1 + written);
+            assert!(
+                text.lines().skip(1).all(|l| l.split(',').count() == 17),
+                "{text}"
+            );
+        }
+    }
 }
