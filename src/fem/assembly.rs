@@ -302,16 +302,20 @@ pub(crate) mod tests {
             Vec3::new(1.0, 1.0, 1.0),
         ];
         let tets = vec![[0, 1, 2, 3], [1, 2, 3, 4]];
+        let rest = rest_elements(&tets, &p);
+        (tets, rest)
+    }
+
+    /// Rest data of `tets` over `positions` with E = 1 MPa, ν = 0.3.
+    fn rest_elements(tets: &[[usize; 4]], positions: &[Vec3]) -> Vec<RestElement> {
         let m = Material {
             youngs_mpa: 1.0,
             poisson: 0.3,
             density_t_mm3: 1e-9,
         };
-        let rest = tets
-            .iter()
-            .map(|t: &[usize; 4]| RestElement::new(t.map(|v| p[v]), &m))
-            .collect();
-        (tets, rest)
+        tets.iter()
+            .map(|t| RestElement::new(t.map(|v| positions[v]), &m))
+            .collect()
     }
 
     /// A cube of `n³` unit cells (`(n+1)³` nodes, z = 0 at the bottom),
@@ -345,15 +349,7 @@ pub(crate) mod tests {
                 }
             }
         }
-        let m = Material {
-            youngs_mpa: 1.0,
-            poisson: 0.3,
-            density_t_mm3: 1e-9,
-        };
-        let rest = tets
-            .iter()
-            .map(|t| RestElement::new(t.map(|v| positions[v]), &m))
-            .collect();
+        let rest = rest_elements(&tets, &positions);
         (tets, rest, positions)
     }
 

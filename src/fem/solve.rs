@@ -268,7 +268,7 @@ pub fn solve(
         Preconditioner::Factor(factor) => {
             z.copy_from_slice(r);
             factor.solve_in_place(z);
-            filter_in_place(filters, z);
+            filter_nodes(filters, &constrained, z);
             dot(r, z)
         }
     };
