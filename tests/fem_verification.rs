@@ -161,7 +161,8 @@ fn caliper_stretch_is_homogeneous() {
 }
 
 /// One tet with three vertices fixed and the fourth pushed through the
-/// opposite face (inverted) returns to rest when released.
+/// opposite face (inverted, and counted as such) returns to rest when
+/// released.
 #[test]
 fn inverted_element_recovers() {
     let _ = env_logger::builder().is_test(true).try_init();
@@ -173,8 +174,14 @@ fn inverted_element_recovers() {
         sim.filters[v] = Filter::Fixed;
     }
     sim.x[3] = Vec3::new(0.2, 0.1, 0.6);
-    assert!(sim.deformation_gradient(0).determinant() < 0.0);
+    let j = sim.deformation_gradient(0).determinant();
+    assert!(j < 0.0);
+    let inversion = sim.inversion();
+    assert_eq!((inversion.inverted, inversion.min_volume_ratio), (1, j));
     sim.solve_static("release").unwrap();
+    let inversion = sim.inversion();
+    assert_eq!(inversion.inverted, 0);
+    assert!((inversion.min_volume_ratio - 1.0).abs() < 1e-9);
     assert!(
         (sim.x[3] - rest[3]).norm() < 1e-9,
         "vertex ended at {}",

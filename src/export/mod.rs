@@ -35,6 +35,10 @@ pub struct FrameMetrics {
     pub rt_range: [f64; 2],
     /// Top-surface vertices whose averaged T is folded (det T < 0).
     pub folded_vertices: usize,
+    /// Tets with det F ≤ 0 (inverted elements).
+    pub inverted_tets: usize,
+    /// Smallest volume ratio J = det F over all tets.
+    pub min_volume_ratio: f64,
     /// Largest penetration (mm).
     pub max_penetration_mm: f64,
     /// Newton iterations over the frame's substeps.
@@ -49,7 +53,7 @@ pub struct FrameMetrics {
 
 const HEADER: &str = "frame,time_s,probe_force_x_n,probe_force_y_n,probe_force_z_n,\
 contact_nodes,contact_area_mm2,max_penetration_mm,newton_iterations,linear_iterations,rel_residual,\
-rs_min,rs_max,rt_min,rt_max,folded_vertices,step_wall_s";
+rs_min,rs_max,rt_min,rt_max,folded_vertices,inverted_tets,min_volume_ratio,step_wall_s";
 
 /// `metrics.csv`, appended and flushed per frame. Each row is formatted
 /// first and written with one call; a write that fails (a full disk)
@@ -100,7 +104,7 @@ impl<W: Truncate> MetricsWriter<W> {
     pub fn push(&mut self, m: &FrameMetrics) -> Result<()> {
         let [fx, fy, fz] = m.probe_force_n;
         let row = format!(
-            "{},{},{fx:e},{fy:e},{fz:e},{},{:e},{:e},{},{},{:e},{:e},{:e},{:e},{:e},{},{:.6}\n",
+            "{},{},{fx:e},{fy:e},{fz:e},{},{:e},{:e},{},{},{:e},{:e},{:e},{:e},{:e},{},{},{:e},{:.6}\n",
             m.frame,
             m.time_s,
             m.contact_nodes,
@@ -114,6 +118,8 @@ impl<W: Truncate> MetricsWriter<W> {
             m.rt_range[0],
             m.rt_range[1],
             m.folded_vertices,
+            m.inverted_tets,
+            m.min_volume_ratio,
             m.step_wall_s
         );
         self.write_line(&row)

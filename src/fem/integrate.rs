@@ -112,6 +112,15 @@ pub struct Dynamics {
     pub beta: f64,
 }
 
+/// Inverted elements of a state (see [`Simulation::inversion`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Inversion {
+    /// Tets with det F ≤ 0 (or not finite).
+    pub inverted: usize,
+    /// Smallest det F over all tets.
+    pub min_volume_ratio: f64,
+}
+
 /// What one equilibrium solve did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct NewtonStats {
@@ -313,6 +322,32 @@ impl Simulation {
     pub fn deformation_gradient(&self, t: usize) -> Matrix3<f64> {
         let x = self.tets[t].map(|v| self.x[v]);
         self.elements[t].deformation_gradient(&x)
+    }
+
+    /// Inverted tets at the current positions (det F ≤ 0, or not finite)
+    /// and the smallest volume ratio J = det F over all tets (NaN when a
+    /// position is not finite). Exact for any thread count: the count is an
+    /// integer sum and the minimum does not depend on the order.
+    pub fn inversion(&self) -> Inversion {
+        let (x, tets, elements) = (&self.x, &self.tets, &self.elements);
+        let (inverted, worst) = (0..tets.len())
+            .into_par_iter()
+            .map(|t| {
+                let j = elements[t]
+                    .deformation_gradient(&tets[t].map(|v| x[v]))
+                    .determinant();
+                // NaN sorts below everything: a non-finite tet is the worst.
+                let key = if j.is_nan() { f64::NEG_INFINITY } else { j };
+                (usize::from(!(j > 0.0)), (key, j))
+            })
+            .reduce(
+                || (0, (f64::INFINITY, f64::INFINITY)),
+                |a, b| (a.0 + b.0, if b.1 .0 < a.1 .0 { b.1 } else { a.1 }),
+            );
+        Inversion {
+            inverted,
+            min_volume_ratio: worst.1,
+        }
     }
 
     /// Evaluates rotations and internal forces at the current positions.

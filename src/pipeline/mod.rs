@@ -319,6 +319,7 @@ fn simulate(
     // The last solved state and its time, for the predicted start of the
     // next solve.
     let mut last_solved: Option<(Vec<Vec3>, f64)> = None;
+    let mut inverted_before = 0;
     for frame in 0..=s.frames {
         let start = Instant::now();
         let t = frame as f64 * s.frame_dt;
@@ -378,6 +379,15 @@ fn simulate(
             sim.end_step();
         }
         t_prev = t;
+        let inversion = sim.inversion();
+        m.inverted_tets = inversion.inverted;
+        m.min_volume_ratio = inversion.min_volume_ratio;
+        check_inversion(
+            &m,
+            mesh.num_tets(),
+            s.max_inverted_fraction,
+            &mut inverted_before,
+        )?;
         m.step_wall_s = start.elapsed().as_secs_f64();
         log::info!(
             "frame {frame}: t = {t:.4} s, probe force {:?} N, {} contact nodes, {} Newton / {} CG iterations",
@@ -389,6 +399,43 @@ fn simulate(
         emit(&m, &sim)?;
     }
     Ok(sim.timings)
+}
+
+/// Applies the inversion rule to a solved frame: a warning when inverted
+/// tets appear (or their number changes from none), an error when more
+/// than `max_fraction` of the `tets` are inverted. The frame is not
+/// written then: its state has no physical meaning.
+fn check_inversion(
+    m: &FrameMetrics,
+    tets: usize,
+    max_fraction: f64,
+    inverted_before: &mut usize,
+) -> Result<()> {
+    let fraction = m.inverted_tets as f64 / tets.max(1) as f64;
+    if fraction > max_fraction || m.min_volume_ratio.is_nan() {
+        return Err(Error::Solver(format!(
+            "frame {} (t = {:.4} s): {} of {tets} tets ({:.2}%) are inverted, the smallest volume \
+             ratio is {:.3}; solver.max_inverted_fraction is {max_fraction}. The patch has turned \
+             inside out (a load beyond what the mesh and material can follow): reduce the load, \
+             add substeps, or raise the limit to keep going",
+            m.frame,
+            m.time_s,
+            m.inverted_tets,
+            100.0 * fraction,
+            m.min_volume_ratio
+        )));
+    }
+    if m.inverted_tets > 0 && *inverted_before == 0 {
+        log::warn!(
+            "frame {}: {} tets are inverted (smallest volume ratio {:.3}); their strains are not \
+             physical",
+            m.frame,
+            m.inverted_tets,
+            m.min_volume_ratio
+        );
+    }
+    *inverted_before = m.inverted_tets;
+    Ok(())
 }
 
 /// One row of a fit: a sample's stretch ratio and fitted parameters.

@@ -193,6 +193,7 @@ impl Scenario {
             substeps,
             predict: self.solver.predict,
             dynamics: self.time.dynamics(frame_dt, substeps)?,
+            max_inverted_fraction: self.solver.max_inverted_fraction()?,
         })
     }
 

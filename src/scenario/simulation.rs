@@ -125,6 +125,11 @@ pub struct SolverSection {
     /// Start each solve from the last state moved on by the last increment
     /// (constant velocity) instead of the last state itself. Default true.
     pub predict: bool,
+    /// Largest fraction of tets that may be inverted (det F ≤ 0) in a
+    /// solved frame; a frame with more stops the run with an error (the
+    /// patch has turned inside out and its outputs would be meaningless).
+    /// 0 refuses any inverted tet, 1 never stops. Default 0.01.
+    pub max_inverted_fraction: f64,
 }
 
 impl Default for SolverSection {
@@ -136,6 +141,7 @@ impl Default for SolverSection {
             linear_rel_tol: 1e-4,
             max_linear_iterations: 3000,
             predict: true,
+            max_inverted_fraction: 0.01,
         }
     }
 }
@@ -196,6 +202,8 @@ pub struct SimulationSetup {
     pub predict: bool,
     /// Backward-Euler dynamics (step = frame interval / substeps), or quasi-static.
     pub dynamics: Option<Dynamics>,
+    /// Largest fraction of inverted tets a frame may end with.
+    pub max_inverted_fraction: f64,
 }
 
 fn keyframes<const N: usize>(key: &str, rows: &[[f64; N]]) -> Result<Vec<(f64, [f64; N])>> {
@@ -439,6 +447,19 @@ impl ProbeSection {
 }
 
 impl SolverSection {
+    /// `max_inverted_fraction`, checked to lie in [0, 1].
+    pub fn max_inverted_fraction(&self) -> Result<f64> {
+        let f = self.max_inverted_fraction;
+        if (0.0..=1.0).contains(&f) {
+            Ok(f)
+        } else {
+            Err(Error::parameter(
+                "solver.max_inverted_fraction",
+                format!("must be in [0, 1] (1 never stops), got {f}"),
+            ))
+        }
+    }
+
     /// Validates into Newton settings.
     pub fn settings(&self) -> Result<NewtonSettings> {
         let check_tol = |key: &str, v: f64| {
