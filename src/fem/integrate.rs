@@ -338,7 +338,7 @@ impl Simulation {
                     .determinant();
                 // NaN sorts below everything: a non-finite tet is the worst.
                 let key = if j.is_nan() { f64::NEG_INFINITY } else { j };
-                (usize::from(!(j > 0.0)), (key, j))
+                (usize::from(j <= 0.0 || j.is_nan()), (key, j))
             })
             .reduce(
                 || (0, (f64::INFINITY, f64::INFINITY)),
