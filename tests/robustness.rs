@@ -119,3 +119,85 @@ fn max_inverted_fraction_is_validated() {
         );
     }
 }
+
+/// A sphere scenario on patch_3k: radius 1.5 mm, `path`, `rate` frames a
+/// second over 1 s, no frame VTUs.
+fn sphere_press(path: &str, rate: f64) -> String {
+    format!(
+        "[mesh]\nfile = {:?}\n[probe]\nshape = \"sphere\"\nradius_mm = 1.5\npath_mm = {path}\n\
+         [time]\nduration_s = 1.0\nframe_rate_hz = {rate}\n",
+        root().join("meshes/patch_3k.node").to_str().unwrap()
+    )
+}
+
+/// The last row's (probe_force_z_n, contact_nodes) of a finished run.
+fn final_press(o: &Output, out: &Path) -> (f64, f64) {
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let metrics = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    let f = column(&metrics, "probe_force_z_n");
+    let n = column(&metrics, "contact_nodes");
+    (f[f.len() - 1], n[n.len() - 1])
+}
+
+/// A sphere moved 3 mm down in one frame (twice its radius: in one load
+/// step it would jump over the surface nodes and touch none) is split into
+/// load steps of at most a quarter radius and ends where ten frames of
+/// 0.3 mm take it (the frictionless end state does not depend on the way
+/// down; measured 3e-5 relative).
+#[test]
+fn a_fast_probe_does_not_tunnel_through_the_skin() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = "[[0.0, 0.0, 0.0, 1.5], [1.0, 0.0, 0.0, -1.5]]";
+    let out = dir.path().join("one");
+    let o = run_scenario(dir.path(), &sphere_press(path, 1.0), &out);
+    assert!(
+        text(&o.stderr).contains("split into 8 load steps"),
+        "{}",
+        text(&o.stderr)
+    );
+    let (f_one, nodes_one) = final_press(&o, &out);
+    let out = dir.path().join("ten");
+    let (f_ten, nodes_ten) = final_press(
+        &run_scenario(dir.path(), &sphere_press(path, 10.0), &out),
+        &out,
+    );
+    assert!(f_ten > 0.5, "{f_ten}");
+    assert!((f_one / f_ten - 1.0).abs() < 1e-3, "{f_one} vs {f_ten}");
+    assert_eq!(nodes_one, nodes_ten);
+}
+
+/// A probe whose path starts 2.5 mm deep (its centre below the surface)
+/// would push the nodes inside it out of its far side in one step and pull
+/// the skin up (a negative force). It is pressed in from above during
+/// frame 0 with a warning, and ends as a press along that way does.
+#[test]
+fn a_probe_that_starts_inside_the_skin_is_pressed_in() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("embedded");
+    let o = run_scenario(
+        dir.path(),
+        &sphere_press("[[0.0, 0.0, 0.0, -1.0]]", 2.0),
+        &out,
+    );
+    assert!(
+        text(&o.stderr).contains("the probe starts inside the skin at t = 0"),
+        "{}",
+        text(&o.stderr)
+    );
+    let (f_embedded, nodes_embedded) = final_press(&o, &out);
+    let out = dir.path().join("pressed");
+    let (f_pressed, nodes_pressed) = final_press(
+        &run_scenario(
+            dir.path(),
+            &sphere_press("[[0.0, 0.0, 0.0, 1.5], [0.5, 0.0, 0.0, -1.0]]", 2.0),
+            &out,
+        ),
+        &out,
+    );
+    assert!(f_embedded > 0.4, "{f_embedded}");
+    assert!(
+        (f_embedded / f_pressed - 1.0).abs() < 1e-3,
+        "{f_embedded} vs {f_pressed}"
+    );
+    assert_eq!(nodes_embedded, nodes_pressed);
+}

@@ -111,6 +111,43 @@ impl Probe {
     }
 }
 
+impl Probe {
+    /// Radius of the probe's rounded or flat part (mm): the thinnest it is,
+    /// so a load step in which it moves less than this cannot carry it past
+    /// a node without the node ending inside it.
+    pub fn radius_mm(&self) -> f64 {
+        match self.shape {
+            ProbeShape::Sphere { radius_mm }
+            | ProbeShape::Capsule { radius_mm, .. }
+            | ProbeShape::Punch { radius_mm } => radius_mm,
+        }
+    }
+
+    /// How far the probe's points move between `t0` and `t1` at most (mm):
+    /// the length of the centre's path plus, for a capsule, its half length
+    /// times the angle its axis turns through (both piecewise between the
+    /// keyframes inside the interval).
+    pub fn travel(&self, t0: f64, t1: f64) -> f64 {
+        let mut times = vec![t0];
+        for k in [&self.path, &self.axis] {
+            times.extend(k.points.iter().map(|p| p.0).filter(|&t| t > t0 && t < t1));
+        }
+        times.push(t1);
+        times.sort_by(f64::total_cmp);
+        let half_length = match self.shape {
+            ProbeShape::Capsule { length_mm, .. } => length_mm / 2.0,
+            _ => 0.0,
+        };
+        times
+            .windows(2)
+            .map(|w| {
+                let (a, b) = (self.pose(w[0]), self.pose(w[1]));
+                (b.centre - a.centre).norm() + half_length * a.axis.angle(&b.axis)
+            })
+            .sum()
+    }
+}
+
 impl ProbePose {
     /// Signed distance of `p` to the probe surface (negative inside) and the
     /// outward unit normal of the closest surface point.
@@ -135,6 +172,26 @@ impl ProbePose {
                     (f64::INFINITY, -Vec3::z())
                 }
             }
+        }
+    }
+
+    /// Height of the probe's lowest point (mm).
+    pub fn lowest_z(&self) -> f64 {
+        match self.shape {
+            ProbeShape::Sphere { radius_mm } => self.centre.z - radius_mm,
+            ProbeShape::Capsule {
+                radius_mm,
+                length_mm,
+            } => self.centre.z - radius_mm - 0.5 * length_mm * self.axis.z.abs(),
+            ProbeShape::Punch { .. } => self.centre.z,
+        }
+    }
+
+    /// The pose moved up by `h` (mm).
+    pub fn lifted(&self, h: f64) -> ProbePose {
+        ProbePose {
+            centre: self.centre + Vec3::z() * h,
+            ..*self
         }
     }
 
@@ -189,6 +246,37 @@ mod tests {
             centre: Vec3::new(0.0, 0.0, 1.0),
             axis: Vec3::x(),
         }
+    }
+
+    /// Travel sums the path between keyframes (a chord would cut the
+    /// corner) and adds the capsule ends' arc when its axis turns.
+    #[test]
+    fn travel_follows_the_path_and_the_turn() {
+        let keys = |points: &[(f64, [f64; 3])]| Keyframes {
+            points: points.iter().map(|&(t, v)| (t, Vector3::from(v))).collect(),
+        };
+        let probe = Probe {
+            shape: ProbeShape::Capsule {
+                radius_mm: 1.0,
+                length_mm: 4.0,
+            },
+            path: keys(&[
+                (0.0, [0.0, 0.0, 1.0]),
+                (0.5, [3.0, 0.0, 1.0]),
+                (1.0, [3.0, 4.0, 1.0]),
+            ]),
+            axis: keys(&[(0.0, [1.0, 0.0, 0.0]), (1.0, [0.0, 1.0, 0.0])]),
+            mode: ContactMode::Frictionless,
+        };
+        let quarter = std::f64::consts::FRAC_PI_2;
+        assert!((probe.travel(0.0, 1.0) - (3.0 + 4.0 + 2.0 * quarter)).abs() < 1e-12);
+        // At t = 0.25 the axis is (0.75, 0.25, 0) normalised.
+        let turn = (1.0_f64 / 3.0).atan();
+        assert!((probe.travel(0.0, 0.25) - (1.5 + 2.0 * turn)).abs() < 1e-12);
+        assert_eq!(probe.radius_mm(), 1.0);
+        let pose = probe.pose(0.0);
+        assert_eq!(pose.lowest_z(), 0.0);
+        assert_eq!(pose.lifted(2.0).centre, Vec3::new(0.0, 0.0, 3.0));
     }
 
     #[test]

@@ -21,7 +21,7 @@ pub use render::{bench_render, RenderBench};
 use crate::error::{Error, Result};
 use crate::export::{self, FrameMetrics, MetricsWriter};
 use crate::fem::contact::{solve_with_contact, ContactState};
-use crate::fem::integrate::Simulation;
+use crate::fem::integrate::{Dynamics, Simulation};
 use crate::mesh::{io, QualityReport, Vec3};
 use crate::scenario::{MicroSetup, Setup};
 use crate::strain::{ElementStrains, StrainRaster, SurfaceField};
@@ -320,6 +320,7 @@ fn simulate(
     // next solve.
     let mut last_solved: Option<(Vec<Vec3>, f64)> = None;
     let mut inverted_before = 0;
+    let mut split_before = false;
     for frame in 0..=s.frames {
         let start = Instant::now();
         let t = frame as f64 * s.frame_dt;
@@ -328,7 +329,46 @@ fn simulate(
             time_s: t,
             ..Default::default()
         };
-        let substeps = if frame == 0 { 1 } else { s.substeps };
+        // A probe that starts inside the skin is pressed in from just above
+        // it during frame 0, in steps like any other motion.
+        let mut lift = 0.0;
+        let substeps = if frame == 0 {
+            match &s.probe {
+                Some(probe) => {
+                    lift = embedded_lift(mesh, &probe.pose(0.0), sim.position_tol());
+                    let n = (lift / (MAX_PROBE_STEP * probe.radius_mm())).ceil() as usize;
+                    if lift > 0.0 {
+                        log::warn!(
+                            "the probe starts inside the skin at t = 0; frame 0 presses it in \
+                             from {lift:.4} mm higher in {n} load steps (start its path above \
+                             the surface to choose how it gets there)"
+                        );
+                    }
+                    n.max(1)
+                }
+                None => 1,
+            }
+        } else {
+            let n = load_steps(s.probe.as_ref(), s.substeps, t_prev, t, frame)?;
+            if n > s.substeps {
+                if !split_before {
+                    log::warn!(
+                        "frame {frame}: the probe moves more than {MAX_PROBE_STEP} of its radius in \
+                         a load step; the frame is split into {n} load steps (and so is any later \
+                         frame that needs it) so that it cannot pass through the skin"
+                    );
+                    split_before = true;
+                }
+                log::info!("frame {frame}: {n} load steps for the probe's motion");
+            }
+            if let Some(d) = s.dynamics {
+                sim.dynamics = Some(Dynamics {
+                    dt: (t - t_prev) / n as f64,
+                    ..d
+                });
+            }
+            n
+        };
         for k in 1..=substeps {
             let ts = t_prev + (t - t_prev) * k as f64 / substeps as f64;
             let context = format!("frame {frame} (t = {ts:.4} s)");
@@ -344,7 +384,8 @@ fn simulate(
                 let t_solved = t_prev + (t - t_prev) * (k - 1) as f64 / substeps as f64;
                 if let Some((before, t_before)) = &last_solved {
                     if t_solved > *t_before {
-                        sim.predict(before, (ts - t_solved) / (t_solved - t_before));
+                        let ratio = (ts - t_solved) / (t_solved - t_before);
+                        sim.predict(before, ratio.min(MAX_PREDICTION_RATIO));
                     }
                 }
                 last_solved = Some((solved, t_solved));
@@ -354,7 +395,9 @@ fn simulate(
                     let r = solve_with_contact(
                         &mut sim,
                         (&filters, &targets, &no_loads),
-                        &probe.pose(ts),
+                        &probe
+                            .pose(ts)
+                            .lifted(lift * (1.0 - k as f64 / substeps as f64)),
                         probe.mode,
                         &mut contact,
                         &context,
@@ -399,6 +442,76 @@ fn simulate(
         emit(&m, &sim)?;
     }
     Ok(sim.timings)
+}
+
+/// How far (mm) `pose` must be lifted so that no node of `mesh` at rest is
+/// inside it by more than `tol`: 0 when none is, else the height that takes
+/// its lowest point to the top of the patch.
+fn embedded_lift(
+    mesh: &crate::mesh::TetMesh,
+    pose: &crate::fem::contact::ProbePose,
+    tol: f64,
+) -> f64 {
+    let inside = mesh.positions.iter().any(|p| pose.distance(p).0 < -tol);
+    if !inside {
+        return 0.0;
+    }
+    let (_, hi) = mesh.bounds();
+    (hi.z - pose.lowest_z()).max(0.0)
+}
+
+/// Largest distance the probe may move in one load step, as a fraction of
+/// its radius. A frame whose probe moves further is split into more load
+/// steps than `time.substeps` asks for, so no surface node can be passed
+/// over (a node passed in one step would end outside the probe and never
+/// touch it).
+pub const MAX_PROBE_STEP: f64 = 0.25;
+
+/// Longest prediction, in increments of the last step. A step much longer
+/// than the last (the first after a frame split for a fast probe) would
+/// carry the skin on at the old speed after the load has stopped, through
+/// and past the probe.
+const MAX_PREDICTION_RATIO: f64 = 1.5;
+
+/// Most load steps a frame may be split into (configured or automatic).
+pub const MAX_LOAD_STEPS: usize = 10_000;
+
+/// Load steps for the frame from `t0` to `t1`: `configured`, or the
+/// smallest multiple of it in which no step moves the probe more than
+/// [`MAX_PROBE_STEP`] of its radius. An error when that takes more than
+/// [`MAX_LOAD_STEPS`].
+fn load_steps(
+    probe: Option<&crate::fem::contact::Probe>,
+    configured: usize,
+    t0: f64,
+    t1: f64,
+    frame: usize,
+) -> Result<usize> {
+    let Some(probe) = probe else {
+        return Ok(configured);
+    };
+    let limit = MAX_PROBE_STEP * probe.radius_mm();
+    let mut n = configured;
+    loop {
+        let at = |k: usize| t0 + (t1 - t0) * k as f64 / n as f64;
+        let worst = (0..n)
+            .map(|k| probe.travel(at(k), at(k + 1)))
+            .fold(0.0, f64::max);
+        if worst <= limit {
+            return Ok(n);
+        }
+        let next = n.saturating_mul((worst / limit).ceil().max(2.0) as usize);
+        if next > MAX_LOAD_STEPS {
+            return Err(Error::Solver(format!(
+                "frame {frame} (t = {t1:.4} s): the probe moves {:.4} mm, {:.1} times its radius; \
+                 more than {MAX_LOAD_STEPS} load steps of {MAX_PROBE_STEP} radius would be needed \
+                 for contact to follow it. Slow the probe path or raise time.frame_rate_hz",
+                probe.travel(t0, t1),
+                probe.travel(t0, t1) / probe.radius_mm()
+            )));
+        }
+        n = next;
+    }
 }
 
 /// Applies the inversion rule to a solved frame: a warning when inverted

@@ -162,7 +162,8 @@ pub struct TimeSection {
     pub duration_s: f64,
     /// Frames per second of simulated time. Default 60.
     pub frame_rate_hz: f64,
-    /// Load substeps per frame. Default 1.
+    /// Load substeps per frame (1 to 10,000); a frame whose probe would move
+    /// more than a quarter of its radius in one is split further. Default 1.
     pub substeps: usize,
 }
 
@@ -527,8 +528,12 @@ impl TimeSection {
     pub fn frames(&self) -> Result<(usize, f64, usize)> {
         let duration = positive("time.duration_s", self.duration_s)?;
         let rate = positive("time.frame_rate_hz", self.frame_rate_hz)?;
-        if self.substeps == 0 {
-            return Err(Error::parameter("time.substeps", "must be > 0, got 0"));
+        let most = crate::pipeline::MAX_LOAD_STEPS;
+        if self.substeps == 0 || self.substeps > most {
+            return Err(Error::parameter(
+                "time.substeps",
+                format!("must be 1 to {most}, got {}", self.substeps),
+            ));
         }
         let frames = (duration * rate).round() as usize;
         if frames == 0 || frames > 1_000_000 {
