@@ -95,6 +95,16 @@ fn clip(text: &str) -> std::borrow::Cow<'_, str> {
     format!("{head} … [{} characters left out] … {tail}", count - 380).into()
 }
 
+/// A number as an error message shows it: plainly when moderate, in
+/// exponent form when huge or tiny (`1e300`, not three hundred digits).
+pub fn shown(v: f64) -> String {
+    if v != 0.0 && v.is_finite() && !(1e-4..1e6).contains(&v.abs()) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
 /// Shorthand for results with the library error type.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 

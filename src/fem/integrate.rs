@@ -255,9 +255,12 @@ impl Simulation {
         let n = mesh.num_vertices();
         let (lo, hi) = mesh.bounds();
         let size = (hi - lo).norm();
+        // The largest modulus an element has: λ + 2μ (uniaxial strain),
+        // which grows without bound as ν → 0.5, and with it the round-off
+        // of the forces at rest.
         let stiffest = tet_material
             .iter()
-            .map(|m| m.youngs_mpa)
+            .map(|m| m.lambda() + 2.0 * m.mu())
             .fold(0.0, f64::max);
         Simulation {
             tets: mesh.tets.clone(),

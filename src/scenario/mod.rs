@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::{Error, Result};
+use crate::error::{shown, Error, Result};
 use crate::mesh::generate::PatchSpec;
 use crate::mesh::{io, TetMesh};
 
@@ -303,7 +303,10 @@ pub(crate) fn positive(key: &str, v: f64) -> Result<f64> {
     if v.is_finite() && v > 0.0 {
         Ok(v)
     } else {
-        Err(Error::parameter(key, format!("must be > 0, got {v}")))
+        Err(Error::parameter(
+            key,
+            format!("must be > 0, got {}", shown(v)),
+        ))
     }
 }
 
@@ -312,7 +315,10 @@ pub(crate) fn non_negative(key: &str, v: f64) -> Result<f64> {
     if v.is_finite() && v >= 0.0 {
         Ok(v)
     } else {
-        Err(Error::parameter(key, format!("must be ≥ 0, got {v}")))
+        Err(Error::parameter(
+            key,
+            format!("must be ≥ 0, got {}", shown(v)),
+        ))
     }
 }
 

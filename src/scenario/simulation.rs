@@ -10,7 +10,7 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use super::positive;
-use crate::error::{Error, Result};
+use crate::error::{shown, Error, Result};
 use crate::fem::boundary::{
     BottomCondition, BoundaryConditions, Caliper, Keyframes, NodeSets, Prescribed, SideCondition,
 };
@@ -360,10 +360,30 @@ impl BoundarySection {
     }
 }
 
+/// Largest probe size and distance from the origin (mm): 100 m. A double
+/// keeps about 16 digits, so beyond this the signed distances of the
+/// patch's nodes (µm apart) to the probe would be round-off.
+pub const MAX_PROBE_MM: f64 = 1e5;
+
 impl ProbeSection {
     /// Validates into a [`Probe`].
     pub fn probe(&self) -> Result<Probe> {
         let radius = positive("probe.radius_mm", self.radius_mm)?;
+        for (key, v) in [
+            ("probe.radius_mm", Some(radius)),
+            ("probe.length_mm", self.length_mm),
+        ] {
+            if v.is_some_and(|v| v > MAX_PROBE_MM) {
+                return Err(Error::parameter(
+                    key,
+                    format!(
+                        "must be at most {MAX_PROBE_MM:e} mm (distances to a larger probe lose \
+                         the precision contact needs at the patch's scale), got {}",
+                        shown(v.unwrap_or_default())
+                    ),
+                ));
+            }
+        }
         let shape = match self.shape.as_str() {
             "sphere" => ProbeShape::Sphere { radius_mm: radius },
             "punch" => ProbeShape::Punch { radius_mm: radius },
@@ -438,9 +458,23 @@ impl ProbeSection {
                 points: vec![(0.0, Vector3::x())],
             },
         };
+        let path = vector_keyframes("probe.path_mm", &self.path_mm)?;
+        for (i, (_, p)) in path.points.iter().enumerate() {
+            if p.amax() > MAX_PROBE_MM {
+                return Err(Error::parameter(
+                    format!("probe.path_mm[{i}]"),
+                    format!(
+                        "must stay within {MAX_PROBE_MM:e} mm of the origin, got [{}, {}, {}]",
+                        shown(p.x),
+                        shown(p.y),
+                        shown(p.z)
+                    ),
+                ));
+            }
+        }
         Ok(Probe {
             shape,
-            path: vector_keyframes("probe.path_mm", &self.path_mm)?,
+            path,
             axis,
             mode,
         })
