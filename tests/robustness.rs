@@ -229,6 +229,26 @@ fn physically_meaningless_values_are_refused() {
             "[time]\nsubsteps = 1000000000\n",
             "time.substeps must be 1 to 10000",
         ),
+        // The noise crate panicked on this scale (lattice indices overflow).
+        (
+            "[microstructure.procedural]\nnoise_scale_um = 1e-16\n",
+            "microstructure.procedural.noise_scale_um must be in [1e-3, 1e6] µm, got 1e-16",
+        ),
+        // These wrote maps of infinities and NaN.
+        (
+            "[microstructure.procedural]\ngroove_spacing_um = 1e-300\n",
+            "microstructure.procedural.groove_spacing_um must be in [1e-3, 1e6] µm",
+        ),
+        (
+            "[microstructure.procedural]\ngroove_depth_um = 1e308\n",
+            "microstructure.procedural.groove_depth_um must be at most 1e4, got 1e308",
+        ),
+        // Black frames: f32 overflow in the renderer.
+        (
+            "[microstructure]\n[render]\n[[render.lights]]\nkind = \"directional\"\n\
+             direction = [0.0, 0.0, -1.0]\nintensity = 1e300\n",
+            "render.lights[0].intensity must be at most 1e6",
+        ),
     ] {
         let o = run_scenario(dir.path(), toml, &out);
         let stderr = text(&o.stderr);

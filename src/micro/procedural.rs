@@ -26,7 +26,7 @@
 use noise::{Fbm, MultiFractal, NoiseFn, Perlin};
 
 use super::map::{DisplacementMap, Edge};
-use crate::error::{Error, Result};
+use crate::error::{shown, Error, Result};
 
 /// Parameters of the generator (lengths in µm unless named otherwise).
 #[derive(Clone, Debug, PartialEq)]
@@ -81,6 +81,21 @@ impl Default for SkinParams {
     }
 }
 
+/// Range of the feature sizes — groove spacing and width, pore radius,
+/// noise scale (µm): a nanometre to a metre.
+pub const FEATURE_UM: (f64, f64) = (1e-3, 1e6);
+
+/// Deepest groove, pore or noise amplitude (µm): a centimetre, twice the
+/// patch's thickness. The map's heights are f32 and their sum must stay
+/// finite.
+pub const MAX_DEPTH_UM: f64 = 1e4;
+
+/// Most pores per mm² (one per µm²).
+pub const MAX_PORES_PER_MM2: f64 = 1e6;
+
+/// Widest generated map (mm).
+pub const MAX_EXTENT_MM: f64 = 1e3;
+
 impl SkinParams {
     /// Checks every parameter; `key` prefixes the names in errors.
     pub fn validate(&self, key: &str) -> Result<()> {
@@ -101,9 +116,31 @@ impl SkinParams {
             if !(v.is_finite() && v > 0.0) {
                 return Err(Error::parameter(
                     format!("{key}.{name}"),
-                    format!("must be finite and > 0, got {v}"),
+                    format!("must be finite and > 0, got {}", shown(v)),
                 ));
             }
+        }
+        // Feature sizes between a nanometre and a metre: outside, the
+        // lattices would need more cells than an integer holds, Gaussian
+        // profiles would divide 0 by 0, and the noise coordinates would
+        // leave the range its lattice indices can take.
+        let (lo, hi) = FEATURE_UM;
+        for (name, v) in &positive[1..] {
+            if !(lo..=hi).contains(v) {
+                return Err(Error::parameter(
+                    format!("{key}.{name}"),
+                    format!("must be in [{lo:e}, {hi:e}] µm, got {}", shown(*v)),
+                ));
+            }
+        }
+        if !(self.extent_mm <= MAX_EXTENT_MM) {
+            return Err(Error::parameter(
+                format!("{key}.extent_mm"),
+                format!(
+                    "must be at most {MAX_EXTENT_MM:e} mm, got {}",
+                    shown(self.extent_mm)
+                ),
+            ));
         }
         let non_negative = [
             ("groove_depth_um", self.groove_depth_um),
@@ -115,7 +152,18 @@ impl SkinParams {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(Error::parameter(
                     format!("{key}.{name}"),
-                    format!("must be finite and ≥ 0, got {v}"),
+                    format!("must be finite and ≥ 0, got {}", shown(v)),
+                ));
+            }
+            let most = if name == "pore_density_per_mm2" {
+                MAX_PORES_PER_MM2
+            } else {
+                MAX_DEPTH_UM
+            };
+            if v > most {
+                return Err(Error::parameter(
+                    format!("{key}.{name}"),
+                    format!("must be at most {most:e}, got {}", shown(v)),
                 ));
             }
         }
@@ -276,5 +324,16 @@ pub fn generate(p: &SkinParams) -> Result<DisplacementMap> {
         h += p.noise_amplitude_um * fbm.get([r * cu, r * su, r * cv, r * sv]);
         h as f32
     });
+    if let Some(k) = map.data.iter().position(|h| !h.is_finite()) {
+        return Err(Error::parameter(
+            "microstructure.procedural",
+            format!(
+                "the generated map has a non-finite height at texel ({}, {}); the parameters \
+                 are out of the range the generator can represent",
+                k % size,
+                k / size
+            ),
+        ));
+    }
     Ok(map)
 }

@@ -7,7 +7,7 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
 use super::{non_negative, positive};
-use crate::error::{Error, Result};
+use crate::error::{shown, Error, Result};
 use crate::render::camera::{Camera, Projection};
 use crate::render::light::{Environment, Light, LightKind, GRACE_CATHEDRAL, MAX_LIGHTS};
 use crate::render::specular::{region_lobes, Lobes, REGIONS};
@@ -186,23 +186,66 @@ impl Default for EnvironmentSection {
     }
 }
 
+/// Largest magnitude of a render input — a position (mm), a colour, an
+/// intensity. The GPU stages compute in f32 and square distances and
+/// multiply radiances, so a value that fits f64 but not that headroom
+/// would turn the frame into infinities (a black image).
+pub const MAX_RENDER_VALUE: f64 = 1e6;
+
+/// `v` as written in a message.
+fn triple(v: [f64; 3]) -> String {
+    format!("[{}, {}, {}]", shown(v[0]), shown(v[1]), shown(v[2]))
+}
+
 fn finite_vec(key: &str, v: [f64; 3]) -> Result<Vec3> {
-    if v.iter().all(|x| x.is_finite()) {
+    if v.iter().all(|x| x.abs() <= MAX_RENDER_VALUE) {
         Ok(Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32))
     } else {
-        Err(Error::parameter(key, format!("must be finite, got {v:?}")))
+        Err(Error::parameter(
+            key,
+            format!(
+                "must be finite and within ±{MAX_RENDER_VALUE:e} (the renderer computes in f32), \
+                 got {}",
+                triple(v)
+            ),
+        ))
     }
 }
 
+/// A direction of any finite length, normalised in f64 after scaling by
+/// its largest component (so a huge one does not overflow, in f32 or in
+/// its norm).
 fn unit_vec(key: &str, v: [f64; 3]) -> Result<Vec3> {
-    let u = finite_vec(key, v)?;
-    if u.length() < 1e-6 {
+    if v.iter().any(|x| !x.is_finite()) {
         return Err(Error::parameter(
             key,
-            format!("must not be zero, got {v:?}"),
+            format!("must be finite, got {}", triple(v)),
         ));
     }
-    Ok(u.normalize())
+    let largest = v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    if largest < 1e-6 {
+        return Err(Error::parameter(
+            key,
+            format!("must not be zero, got {}", triple(v)),
+        ));
+    }
+    let u = (nalgebra::Vector3::from(v) / largest).normalize();
+    Ok(Vec3::new(u.x as f32, u.y as f32, u.z as f32))
+}
+
+/// An intensity: ≥ 0 and within [`MAX_RENDER_VALUE`].
+fn intensity(key: &str, v: f64) -> Result<f32> {
+    let v = non_negative(key, v)?;
+    if v > MAX_RENDER_VALUE {
+        return Err(Error::parameter(
+            key,
+            format!(
+                "must be at most {MAX_RENDER_VALUE:e} (the renderer computes in f32), got {}",
+                shown(v)
+            ),
+        ));
+    }
+    Ok(v as f32)
 }
 
 fn in_range(key: &str, v: usize, lo: usize, hi: usize) -> Result<usize> {
@@ -297,14 +340,14 @@ impl LightSection {
         Ok(Light {
             kind,
             color: finite_vec(&key("color"), self.color)?,
-            intensity: non_negative(&key("intensity"), self.intensity)? as f32,
+            intensity: intensity(&key("intensity"), self.intensity)?,
         })
     }
 }
 
 impl EnvironmentSection {
     fn environment(&self) -> Result<Option<Environment>> {
-        let intensity = non_negative("render.environment.intensity", self.intensity)? as f32;
+        let intensity = intensity("render.environment.intensity", self.intensity)?;
         let coefficients = match &self.coefficients {
             Some(list) => {
                 if list.len() != 9 {
@@ -523,5 +566,37 @@ impl RenderSection {
             lights,
             environment: self.environment.environment()?,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A direction is normalised before it meets f32, so a huge one is
+    /// the same direction, not infinities; positions and intensities that
+    /// f32 arithmetic cannot carry are refused with the key.
+    #[test]
+    fn render_inputs_fit_f32() {
+        let u = unit_vec("d", [1e300, 1e300, -1e300]).unwrap();
+        let expected = Vec3::new(1.0, 1.0, -1.0).normalize();
+        assert!((u - expected).length() < 1e-7, "{u}");
+        assert_eq!(
+            unit_vec("d", [0.0, 3.0, 4.0]).unwrap(),
+            Vec3::new(0.0, 0.6, 0.8)
+        );
+        let e = unit_vec("d", [0.0, 0.0, 1e-9]).unwrap_err();
+        assert!(e.to_string().contains("must not be zero"), "{e}");
+        let e = unit_vec("d", [f64::NAN, 0.0, 1.0]).unwrap_err();
+        assert!(e.to_string().contains("must be finite"), "{e}");
+        let e = finite_vec("render.camera.eye_mm", [0.0, -1e39, 1.0]).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "render.camera.eye_mm must be finite and within ±1e6 (the renderer computes in f32), \
+             got [0, -1e39, 1]"
+        );
+        let e = intensity("render.lights[0].intensity", 1e300).unwrap_err();
+        assert!(e.to_string().ends_with("got 1e300"), "{e}");
+        assert_eq!(intensity("i", 2.5).unwrap(), 2.5);
     }
 }
