@@ -133,7 +133,7 @@ impl SkinParams {
                 ));
             }
         }
-        if !(self.extent_mm <= MAX_EXTENT_MM) {
+        if self.extent_mm > MAX_EXTENT_MM {
             return Err(Error::parameter(
                 format!("{key}.extent_mm"),
                 format!(
