@@ -55,6 +55,11 @@ const OFFSET: &str = "skinpatch:height_offset";
 const SCALE: &str = "skinpatch:height_scale";
 const UNIT: &str = "skinpatch:height_unit_um";
 const EDGE: &str = "skinpatch:edge";
+/// The EXR form: one attribute holding `key=value` entries for TEXEL,
+/// UNIT and EDGE. One attribute, because the EXR writer stores its custom
+/// attributes in hash order, so three would make identical maps differ in
+/// bytes. (Files with the three as separate f64 attributes still read.)
+const EXR_METADATA: &str = "skinpatch:map";
 
 fn edge_name(edge: Edge) -> &'static str {
     match edge {
@@ -204,15 +209,15 @@ pub fn write_exr(path: &Path, map: &DisplacementMap) -> Result<()> {
         FlatSamples::F32(flip_rows(&map.data, map.width, map.height)),
     );
     let mut attributes = LayerAttributes::named("height");
-    for (key, value) in [
-        (TEXEL, map.texel_um),
-        (UNIT, map.height_unit_um),
-        (EDGE, if map.edge == Edge::Wrap { 0.0 } else { 1.0 }),
-    ] {
-        attributes
-            .other
-            .insert(Text::from(key), AttributeValue::F64(value));
-    }
+    let entries = [
+        format!("{TEXEL}={:e}", map.texel_um),
+        format!("{UNIT}={:e}", map.height_unit_um),
+        format!("{EDGE}={}", edge_name(map.edge)),
+    ];
+    attributes.other.insert(
+        Text::from(EXR_METADATA),
+        AttributeValue::TextVector(entries.iter().map(|e| Text::from(e.as_str())).collect()),
+    );
     write_exr_channels(path, (map.width, map.height), attributes, vec![channel])
 }
 
@@ -223,11 +228,17 @@ pub(crate) fn write_exr_channels(
     attributes: exr::prelude::LayerAttributes,
     channels: Vec<exr::prelude::AnyChannel<exr::prelude::FlatSamples>>,
 ) -> Result<()> {
-    use exr::prelude::{AnyChannels, Encoding, Image, Layer, SmallVec, WritableImage};
+    use exr::prelude::{AnyChannels, Encoding, Image, Layer, LineOrder, SmallVec, WritableImage};
+    // Tiles in increasing order: compressed in parallel, but written in a
+    // fixed order, so identical images give identical bytes.
+    let encoding = Encoding {
+        line_order: LineOrder::Increasing,
+        ..Encoding::FAST_LOSSLESS
+    };
     let layer = Layer::new(
         size,
         attributes,
-        Encoding::FAST_LOSSLESS,
+        encoding,
         AnyChannels::sort(SmallVec::from_vec(channels)),
     );
     let mut bytes = std::io::Cursor::new(Vec::new());
@@ -265,13 +276,36 @@ pub fn read_exr(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap> 
         })?;
     let (width, height) = (layer.size.width(), layer.size.height());
     let values: Vec<f32> = channel.sample_data.values_as_f32().collect();
-    let number = |key: &str| match layer.attributes.other.get(&Text::from(key)) {
-        Some(&AttributeValue::F64(v)) => Some(v),
-        Some(&AttributeValue::F32(v)) => Some(v as f64),
-        _ => None,
+    // key=value entries of the one metadata attribute, if present.
+    let mut entries = std::collections::BTreeMap::new();
+    if let Some(AttributeValue::TextVector(list)) =
+        layer.attributes.other.get(&Text::from(EXR_METADATA))
+    {
+        for entry in list {
+            let entry = entry.to_string();
+            let (key, value) = entry.split_once('=').ok_or_else(|| {
+                bad(format!(
+                    "metadata {EXR_METADATA} entry {entry:?} is not key=value"
+                ))
+            })?;
+            entries.insert(key.to_string(), value.to_string());
+        }
+    }
+    let number = |key: &str| -> Result<Option<f64>> {
+        if let Some(text) = entries.get(key) {
+            return text
+                .parse()
+                .map(Some)
+                .map_err(|_| bad(format!("metadata {key} = {text:?} is not a number")));
+        }
+        Ok(match layer.attributes.other.get(&Text::from(key)) {
+            Some(&AttributeValue::F64(v)) => Some(v),
+            Some(&AttributeValue::F32(v)) => Some(v as f64),
+            _ => None,
+        })
     };
-    let texel_um = number(TEXEL).unwrap_or_else(|| defaults.texel.of(width));
-    let height_unit_um = number(UNIT).unwrap_or(defaults.height_unit_um);
+    let texel_um = number(TEXEL)?.unwrap_or_else(|| defaults.texel.of(width));
+    let height_unit_um = number(UNIT)?.unwrap_or(defaults.height_unit_um);
     if [texel_um, height_unit_um]
         .iter()
         .any(|v| v.is_nan() || *v <= 0.0)
@@ -280,10 +314,19 @@ pub fn read_exr(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap> 
             "texel size ({texel_um} µm) and height unit ({height_unit_um} µm) must be > 0"
         )));
     }
-    let edge = match number(EDGE) {
-        None => defaults.edge,
-        Some(0.0) => Edge::Wrap,
-        Some(_) => Edge::Clamp,
+    let edge = match entries.get(EDGE).map(String::as_str) {
+        Some("wrap") => Edge::Wrap,
+        Some("clamp") => Edge::Clamp,
+        Some(other) => {
+            return Err(bad(format!(
+                "metadata {EDGE} = {other:?}, expected wrap or clamp"
+            )))
+        }
+        None => match layer.attributes.other.get(&Text::from(EDGE)) {
+            Some(&AttributeValue::F64(0.0)) => Edge::Wrap,
+            Some(&AttributeValue::F64(_)) => Edge::Clamp,
+            _ => defaults.edge,
+        },
     };
     if let Some(k) = values.iter().position(|v| !v.is_finite()) {
         return Err(bad(format!(
