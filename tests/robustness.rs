@@ -10,14 +10,6 @@ use std::process::{Command, Output};
 
 use common::root;
 
-fn skinpatch(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_skinpatch"))
-        .args(args)
-        .current_dir(root())
-        .output()
-        .expect("the skinpatch binary runs")
-}
-
 fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
 }
@@ -25,13 +17,41 @@ fn text(bytes: &[u8]) -> String {
 /// Writes `body` (with an `[output]` section pointing at `out`) to a
 /// scenario file in `dir` and runs it.
 fn run_scenario(dir: &Path, body: &str, out: &Path) -> Output {
+    run_scenario_with(dir, body, out, &[])
+}
+
+/// [`run_scenario`] with environment variables set.
+fn run_scenario_with(dir: &Path, body: &str, out: &Path, env: &[(&str, &str)]) -> Output {
     let scenario = dir.join("scenario.toml");
     std::fs::write(
         &scenario,
         format!("{body}\n[output]\ndir = {:?}\n", out.to_str().unwrap()),
     )
     .unwrap();
-    skinpatch(&["run", scenario.to_str().unwrap()])
+    Command::new(env!("CARGO_BIN_EXE_skinpatch"))
+        .args(["run", scenario.to_str().unwrap()])
+        .envs(env.iter().copied())
+        .current_dir(root())
+        .output()
+        .expect("the skinpatch binary runs")
+}
+
+/// Every file under `dir`, relative to it, sorted.
+fn files(dir: &Path) -> Vec<String> {
+    let mut found = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).unwrap().flatten() {
+            let path = entry.path();
+            if path.is_dir() {
+                stack.push(path);
+            } else {
+                found.push(path.strip_prefix(dir).unwrap().display().to_string());
+            }
+        }
+    }
+    found.sort();
+    found
 }
 
 /// The column `name` of every row of a metrics file.
@@ -281,4 +301,79 @@ fn a_load_free_state_converges_at_once_for_any_poisson_ratio() {
         let stats = sim.solve_static("rest").unwrap();
         assert_eq!(stats.iterations, 0, "ν = {nu}: {stats:?}");
     }
+}
+
+/// A rerun replaces the previous run as a set: a shorter rerun leaves none
+/// of the old run's later frames, nor the temporaries of a killed run,
+/// while files the run did not write stay; `frames.pvd` lists exactly the
+/// frames there are.
+#[test]
+fn a_rerun_replaces_the_previous_run_as_a_set() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let path = "[[0.0, 0.0, 0.0, 1.5], [1.0, 0.0, 0.0, 0.9]]";
+    let o = run_scenario(dir.path(), &sphere_press(path, 4.0), &out);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(out.join("frames/frame_0004.vtu").exists());
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    std::fs::write(out.join("frames/frame_0005.vtu.tmp4242"), "killed").unwrap();
+    let o = run_scenario(dir.path(), &sphere_press(path, 2.0), &out);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert_eq!(
+        files(&out),
+        [
+            "frames.pvd",
+            "frames/frame_0000.vtu",
+            "frames/frame_0001.vtu",
+            "frames/frame_0002.vtu",
+            "mesh.vtu",
+            "metrics.csv",
+            "notes.txt",
+        ]
+    );
+    let pvd = std::fs::read_to_string(out.join("frames.pvd")).unwrap();
+    assert_eq!(pvd.matches("<DataSet").count(), 3, "{pvd}");
+    let metrics = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    assert_eq!(column(&metrics, "frame"), [0.0, 1.0, 2.0]);
+}
+
+/// A rerun that fails before its first frame (here: a GPU required but
+/// the adapter named does not exist) leaves the previous run untouched.
+#[test]
+fn a_rerun_that_fails_up_front_keeps_the_previous_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let path = "[[0.0, 0.0, 0.0, 1.5], [1.0, 0.0, 0.0, 0.9]]";
+    let o = run_scenario(dir.path(), &sphere_press(path, 2.0), &out);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let before: Vec<(String, Vec<u8>)> = files(&out)
+        .into_iter()
+        .map(|f| {
+            let bytes = std::fs::read(out.join(&f)).unwrap();
+            (f, bytes)
+        })
+        .collect();
+    let o = run_scenario_with(
+        dir.path(),
+        &format!(
+            "{}\n[microstructure]\n[microstructure.procedural]\nsize_px = 64\n",
+            sphere_press(path, 4.0)
+        ),
+        &out,
+        &[
+            ("SKINPATCH_REQUIRE_GPU", "1"),
+            ("SKINPATCH_ADAPTER", "no adapter has this name"),
+        ],
+    );
+    let stderr = text(&o.stderr);
+    assert!(!o.status.success());
+    assert!(stderr.contains("SKINPATCH_REQUIRE_GPU=1"), "{stderr}");
+    let after: Vec<(String, Vec<u8>)> = files(&out)
+        .into_iter()
+        .map(|f| {
+            let bytes = std::fs::read(out.join(&f)).unwrap();
+            (f, bytes)
+        })
+        .collect();
+    assert!(before == after, "the folder changed");
 }

@@ -14,6 +14,7 @@ use crate::mesh::{TetMesh, Vec3};
 use crate::strain::{ElementStrains, SurfaceField};
 
 pub mod frames;
+pub mod outputs;
 pub mod strain_images;
 
 /// One row of `metrics.csv`.

@@ -99,6 +99,35 @@ impl MicroEngine {
 /// Runs the scenario; `on_frame` is called after each frame (for progress).
 pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Result<RunSummary> {
     let dir = &setup.output_dir;
+    // Everything that can fail before the first frame is checked before
+    // the folder is touched: the adapters and ffmpeg.
+    let mut engine = match &setup.micro {
+        Some(micro) => Some(MicroEngine::new(micro)?),
+        None => None,
+    };
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let mesh = &setup.mesh;
+    let mut renderer = match &setup.render {
+        Some(r) => {
+            let (lo, hi) = mesh.bounds();
+            Some(render::RenderEngine::new(
+                dir,
+                r,
+                setup.micro.as_ref(),
+                engine.as_ref(),
+                hi.x - lo.x,
+            )?)
+        }
+        None => None,
+    };
+    // Then the previous run's files go, so the folder holds one run.
+    let cleared = export::outputs::clear_previous_run(dir)?;
+    if cleared > 0 {
+        log::info!(
+            "removed {cleared} files of an earlier run from {}",
+            dir.display()
+        );
+    }
     std::fs::create_dir_all(dir.join("frames")).map_err(|e| Error::io(dir, e))?;
     let mut written = Vec::new();
     if setup.write_mesh_vtu {
@@ -120,26 +149,10 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Res
         let folder = dir.join("strain");
         std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
     }
-    let mut engine = None;
     if let Some(micro) = &setup.micro {
         written.extend(write_neutral(dir, setup, micro)?);
-        engine = Some(MicroEngine::new(micro)?);
     }
     let micro_device = engine.as_ref().map(MicroEngine::describe);
-    let mesh = &setup.mesh;
-    let mut renderer = match &setup.render {
-        Some(r) => {
-            let (lo, hi) = mesh.bounds();
-            Some(render::RenderEngine::new(
-                dir,
-                r,
-                setup.micro.as_ref(),
-                engine.as_ref(),
-                hi.x - lo.x,
-            )?)
-        }
-        None => None,
-    };
     let result = simulate(setup, |m, sim| {
         let mut m = *m;
         let field = SurfaceField::new(&mesh.top, &mesh.positions, &sim.x);
@@ -152,6 +165,9 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Res
             let strains = ElementStrains::compute(mesh, &sim.x);
             let grid = export::frame_grid(mesh, &sim.x, &strains, &field);
             collection.push((m.time_s, export::write_frame(dir, m.frame, &grid)?));
+            // Rewritten (atomically) after every frame, so a killed run's
+            // frames open in ParaView too.
+            export::write_collection(dir, &collection)?;
         }
         if let Some(images) = setup.strain_images {
             let raster = StrainRaster::new(&field, images.px, images.px);
@@ -187,7 +203,7 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Res
         Ok(())
     });
     if !collection.is_empty() {
-        written.push(export::write_collection(dir, &collection)?);
+        written.push(dir.join("frames.pvd"));
     }
     result?;
     if let (Some(r), Some(renderer)) = (&setup.render, &renderer) {

@@ -73,7 +73,6 @@ impl RenderEngine {
             let folder = dir.join("render").join(mode.name());
             std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
             probe_writable(&folder)?;
-            remove_stale_temporaries(&folder);
             folders.push((mode, folder));
         }
         let albedo = Albedo::from_source(&setup.albedo, setup.texture_px, patch_width_mm)?;
@@ -186,21 +185,6 @@ fn probe_writable(folder: &Path) -> Result<()> {
     let probe = folder.join(".write-test");
     std::fs::write(&probe, b"").map_err(|e| Error::io(folder, e))?;
     std::fs::remove_file(&probe).map_err(|e| Error::io(folder, e))
-}
-
-/// Removes temporary frame files an interrupted earlier run left behind
-/// (complete frames are only ever renamed into place).
-fn remove_stale_temporaries(folder: &Path) {
-    let Ok(entries) = std::fs::read_dir(folder) else {
-        return;
-    };
-    for entry in entries.flatten() {
-        let name = entry.file_name();
-        let name = name.to_string_lossy();
-        if name.starts_with("frame_") && name.contains(".tmp") {
-            let _ = std::fs::remove_file(entry.path());
-        }
-    }
 }
 
 /// The device of the microstructure chain, or `own` without one.

@@ -1,0 +1,158 @@
+//! The output folder as one set: before a run writes anything, the files a
+//! previous run left there — its outputs and the temporaries of a killed
+//! run — are removed, so the folder never mixes two runs (a shorter rerun
+//! used to leave the old run's later frames beside its own metrics).
+//!
+//! Only names this crate writes are touched (see [`is_run_output`]); any
+//! other file in the folder is left alone.
+
+use std::path::{Path, PathBuf};
+
+use crate::error::{Error, Result};
+
+/// Subfolders a run writes into, with the names it writes there.
+const SUBFOLDERS: [&str; 4] = ["frames", "strain", "micro", "render"];
+
+/// Whether `name`, found in `folder` (relative to the output folder: `""`,
+/// `frames`, `strain`, `micro` or `render/<mode>`), is a file a run writes.
+pub fn is_run_output(folder: &str, name: &str) -> bool {
+    if is_temporary(name) {
+        return true;
+    }
+    let numbered = |prefix: &str, extensions: &[&str]| {
+        name.strip_prefix(prefix).is_some_and(|rest| {
+            extensions.iter().any(|ext| {
+                rest.strip_suffix(ext)
+                    .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
+            })
+        })
+    };
+    match folder {
+        "" => matches!(
+            name,
+            "mesh.vtu" | "mesh.node" | "mesh.ele" | "mesh.face" | "metrics.csv" | "frames.pvd"
+        ),
+        "frames" => numbered("frame_", &[".vtu"]),
+        "strain" => ["rs_", "rt_", "axes_"]
+            .iter()
+            .any(|p| numbered(p, &[".png"])),
+        "micro" => {
+            name == "roughness.csv"
+                || ["height_", "normal_"].iter().any(|p| {
+                    numbered(p, &[".png", ".exr"])
+                        || name == format!("{p}neutral.png")
+                        || name == format!("{p}neutral.exr")
+                })
+        }
+        "render" => name.ends_with(".mp4"),
+        _ if folder.starts_with("render/") => numbered("frame_", &[".png", ".exr"]),
+        _ => false,
+    }
+}
+
+/// A temporary of an atomic write (`<name>.tmp<pid>`), complete or not:
+/// finished files are only ever renamed into place, so one that is still
+/// there belongs to a run that was killed.
+fn is_temporary(name: &str) -> bool {
+    name.rsplit_once(".tmp")
+        .is_some_and(|(_, pid)| !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()))
+}
+
+/// Removes every earlier run's file from `dir` (see [`is_run_output`]) and
+/// returns how many. Folders that do not exist are skipped.
+pub fn clear_previous_run(dir: &Path) -> Result<usize> {
+    let mut folders: Vec<(String, PathBuf)> = vec![(String::new(), dir.to_path_buf())];
+    folders.extend(SUBFOLDERS.iter().map(|f| (f.to_string(), dir.join(f))));
+    if let Ok(entries) = std::fs::read_dir(dir.join("render")) {
+        for entry in entries.flatten() {
+            if entry.file_type().is_ok_and(|t| t.is_dir()) {
+                let name = entry.file_name().to_string_lossy().into_owned();
+                folders.push((format!("render/{name}"), entry.path()));
+            }
+        }
+    }
+    let mut removed = 0;
+    for (label, folder) in folders {
+        let Ok(entries) = std::fs::read_dir(&folder) else {
+            continue;
+        };
+        for entry in entries.flatten() {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if entry.file_type().is_ok_and(|t| t.is_file()) && is_run_output(&label, &name) {
+                let path = entry.path();
+                std::fs::remove_file(&path).map_err(|e| Error::io(&path, e))?;
+                removed += 1;
+            }
+        }
+    }
+    Ok(removed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn run_outputs_are_recognised_by_name_and_folder() {
+        for (folder, name) in [
+            ("", "metrics.csv"),
+            ("", "frames.pvd"),
+            ("", "metrics.csv.tmp4242"),
+            ("frames", "frame_0007.vtu"),
+            ("frames", "frame_0007.vtu.tmp17"),
+            ("strain", "axes_0012.png"),
+            ("micro", "height_neutral.exr"),
+            ("micro", "normal_0003.png"),
+            ("micro", "roughness.csv"),
+            ("render", "dynamic.mp4"),
+            ("render/dynamic", "frame_0060.png"),
+        ] {
+            assert!(is_run_output(folder, name), "{folder}/{name}");
+        }
+        for (folder, name) in [
+            ("", "notes.txt"),
+            ("", "press.toml"),
+            ("frames", "frame_.vtu"),
+            ("frames", "frame_12a.vtu"),
+            ("strain", "rs_0001.jpg"),
+            ("micro", "height_mine.png"),
+            ("render/dynamic", "poster.png"),
+            ("", "data.tmp"),
+            ("elsewhere", "frame_0001.vtu"),
+        ] {
+            assert!(!is_run_output(folder, name), "{folder}/{name}");
+        }
+    }
+
+    /// Old outputs and temporaries go, the user's own files stay.
+    #[test]
+    fn clearing_keeps_what_the_run_did_not_write() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        for f in ["frames", "micro", "render/static"] {
+            std::fs::create_dir_all(d.join(f)).unwrap();
+        }
+        let old = [
+            "metrics.csv",
+            "frames.pvd.tmp99",
+            "frames/frame_0060.vtu",
+            "frames/frame_0061.vtu.tmp99",
+            "micro/height_0003.exr",
+            "render/static/frame_0001.png",
+            "render/static.mp4",
+        ];
+        let mine = ["notes.txt", "frames/readme.md", "render/static/cover.png"];
+        for f in old.iter().chain(&mine) {
+            std::fs::write(d.join(f), "x").unwrap();
+        }
+        assert_eq!(clear_previous_run(d).unwrap(), old.len());
+        for f in old {
+            assert!(!d.join(f).exists(), "{f}");
+        }
+        for f in mine {
+            assert!(d.join(f).exists(), "{f}");
+        }
+        // A folder that does not exist yet is nothing to clear.
+        assert_eq!(clear_previous_run(&d.join("new")).unwrap(), 0);
+    }
+}
