@@ -75,6 +75,22 @@ fn tetgen_node_errors() {
             edit(&node, "8 3 0 0", "-8 3 0 0"),
             vec!["cube.node:2:", "number of points: cannot parse '-8'"],
         ),
+        // A header claiming 4e9 points used to abort on the allocation
+        // (96 GB); now the file just ends early.
+        (
+            edit(&node, "8 3 0 0", "4000000000 3 0 0"),
+            vec![
+                "cube.node:10:",
+                "file ends early: expected point 9 of 4000000000",
+            ],
+        ),
+        (
+            edit(&node, "8 3 0 0", "8 3 18446744073709551615 0"),
+            vec![
+                "cube.node:3:",
+                "a point line needs 18446744073709551615 fields",
+            ],
+        ),
     ];
     for (bad, expected) in cases {
         check_tetgen(&bad, &ele, &expected);
@@ -90,6 +106,13 @@ fn tetgen_ele_errors() {
             vec![
                 "cube.ele:7:",
                 "file ends early: expected tetrahedron 7 of 7",
+            ],
+        ),
+        (
+            edit(&ele, "6 4 1", "4000000000 4 1"),
+            vec![
+                "cube.ele:",
+                "file ends early: expected tetrahedron 7 of 4000000000",
             ],
         ),
         (
@@ -339,4 +362,44 @@ fn replace_last_tet_node(text: &str, tag: &str) -> String {
     *f.last_mut().unwrap() = tag.to_string();
     lines[end - 1] = f.join(" ");
     lines.join("\n")
+}
+
+/// A FIFO (or any non-regular file) as an input is refused at once instead
+/// of blocking the read forever; the message names the file.
+#[cfg(unix)]
+#[test]
+fn a_fifo_is_not_read() {
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["patch.node", "scenario.toml", "map.png"] {
+        let fifo = dir.path().join(name);
+        let status = std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .expect("mkfifo runs");
+        assert!(status.success());
+        let err = match name {
+            "patch.node" => io::read_mesh(&fifo).map(|_| ()).unwrap_err(),
+            "scenario.toml" => skinpatch::scenario::Scenario::load(&fifo)
+                .map(|_| ())
+                .unwrap_err(),
+            _ => skinpatch::micro::io::read_map(
+                &fifo,
+                &skinpatch::micro::io::MapDefaults {
+                    texel: skinpatch::micro::io::TexelSize::Um(1.0),
+                    height_unit_um: 1.0,
+                    edge: skinpatch::micro::Edge::Clamp,
+                },
+            )
+            .map(|_| ())
+            .unwrap_err(),
+        }
+        .to_string();
+        assert!(
+            err.contains(name) && err.contains("not a regular file"),
+            "{err}"
+        );
+    }
+    // A folder is refused as such.
+    let err = skinpatch::scenario::Scenario::load(dir.path()).unwrap_err();
+    assert!(err.to_string().contains("is a folder"), "{err}");
 }

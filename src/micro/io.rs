@@ -107,6 +107,7 @@ pub fn write_png16(path: &Path, map: &DisplacementMap) -> Result<()> {
 /// Reads a 16-bit (or 8-bit) greyscale PNG.
 pub fn read_png16(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap> {
     let bad = |message: String| Error::malformed(path, message);
+    crate::mesh::io::regular_file(path)?;
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let decoder = png::Decoder::new(std::io::BufReader::new(file));
     let mut reader = decoder
@@ -253,9 +254,7 @@ pub(crate) fn write_exr_channels(
 pub fn read_exr(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap> {
     use exr::prelude::{read_first_flat_layer_from_file, AttributeValue, Text};
     let bad = |message: String| Error::malformed(path, message);
-    if !path.exists() {
-        return Err(Error::not_found(path));
-    }
+    crate::mesh::io::regular_file(path)?;
     let image = read_first_flat_layer_from_file(path)
         .map_err(|e| bad(format!("not a readable EXR: {e}")))?;
     let layer = &image.layer_data;

@@ -741,7 +741,7 @@ fn read_histogram(
     path: &std::path::Path,
     hist: crate::micro::fit::HistogramSettings,
 ) -> Result<crate::micro::NormalHistogram> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let text = io::read_input_text(path)?;
     let bad = |line: usize, message: String| Error::Parse {
         path: path.to_path_buf(),
         line,

@@ -213,7 +213,7 @@ impl Scenario {
 
     /// Reads and parses a scenario file.
     pub fn load(path: &Path) -> Result<Scenario> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = crate::mesh::io::read_input_text(path)?;
         Scenario::parse(&text, path)
     }
 }
@@ -221,7 +221,7 @@ impl Scenario {
 /// Reads and deserialises a small TOML file (kernel files, fit samples);
 /// errors name the file and line.
 pub fn read_toml_file<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let text = crate::mesh::io::read_input_text(path)?;
     toml::from_str(&text).map_err(|e| Error::Parse {
         path: path.to_path_buf(),
         line: e.span().map_or(0, |s| line_of(&text, s.start)),

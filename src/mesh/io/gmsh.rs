@@ -202,7 +202,7 @@ fn read_nodes(lines: &mut Lines, state: &mut State) -> Result<()> {
         let dim: usize = r.get(0, "entity dimension")?;
         let parametric: u8 = r.get(2, "parametric flag")?;
         let n = count(&r, 3, "number of nodes in block")?;
-        let mut tags = Vec::with_capacity(n);
+        let mut tags = Vec::with_capacity(lines.capacity(n));
         for _ in 0..n {
             let t = lines.next_record("a node tag")?;
             tags.push((t.get::<u64>(0, "node tag")?, t.line));

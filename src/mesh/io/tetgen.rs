@@ -105,8 +105,8 @@ fn read_node(path: &Path) -> Result<(Vec<Vec3>, usize)> {
         None => 0,
     };
     let marker_column = flag(&head, 3, "boundary marker flag")?;
-    let width = 4 + attributes + usize::from(marker_column);
-    let mut positions = Vec::with_capacity(n);
+    let width = attributes.saturating_add(4 + usize::from(marker_column));
+    let mut positions = Vec::with_capacity(lines.capacity(n));
     let mut offset = 0;
     for k in 0..n {
         let r = lines.next_record(&format!("point {} of {n}", k + 1))?;
@@ -162,11 +162,11 @@ fn read_ele(path: &Path, num_vertices: usize, offset: usize) -> Result<EleData> 
         Some(_) => count(&head, 2, "number of attributes")?,
         None => 0,
     };
-    let mut tets = Vec::with_capacity(n);
-    let mut regions = Vec::with_capacity(n);
+    let mut tets = Vec::with_capacity(lines.capacity(n));
+    let mut regions = Vec::with_capacity(lines.capacity(n));
     for k in 0..n {
         let r = lines.next_record(&format!("tetrahedron {} of {n}", k + 1))?;
-        r.expect_len(1 + per_tet + attributes, "a tetrahedron line")?;
+        r.expect_len(attributes.saturating_add(1 + per_tet), "a tetrahedron line")?;
         check_index(&r, k, offset, "tetrahedron")?;
         let mut tet = [0; 4];
         for (i, v) in tet.iter_mut().enumerate() {
@@ -216,7 +216,7 @@ fn read_face(path: &Path, num_vertices: usize, offset: usize) -> Result<HashMap<
     let head = lines.next_record("the .face header")?;
     let n = count(&head, 0, "number of faces")?;
     let marker_column = flag(&head, 1, "boundary marker flag")?;
-    let mut markers = HashMap::with_capacity(n);
+    let mut markers = HashMap::with_capacity(lines.capacity(n));
     for k in 0..n {
         let r = lines.next_record(&format!("face {} of {n}", k + 1))?;
         r.expect_len(4 + usize::from(marker_column), "a face line")?;

@@ -68,6 +68,7 @@ pub(crate) struct Lines<'a> {
     inner: std::iter::Enumerate<std::str::Lines<'a>>,
     comment: Option<char>,
     last_line: usize,
+    lines_in_file: usize,
 }
 
 impl<'a> Lines<'a> {
@@ -77,7 +78,16 @@ impl<'a> Lines<'a> {
             inner: text.lines().enumerate(),
             comment,
             last_line: 0,
+            lines_in_file: text.lines().count(),
         }
+    }
+
+    /// Room to reserve for `n` records announced by a header: at most one
+    /// per line of the file, so a header claiming 4e9 entries cannot make
+    /// the reader allocate for them (the file then simply ends early, an
+    /// error naming the line).
+    pub fn capacity(&self, n: usize) -> usize {
+        n.min(self.lines_in_file)
     }
 
     /// The next record, or an error saying the file ended while `what` was expected.
@@ -140,7 +150,7 @@ impl<'a> Iterator for Lines<'a> {
 
 /// Reads a whole text file, naming it in the error.
 pub(crate) fn read_text(path: &Path) -> Result<String, Error> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = super::read_input(path)?;
     String::from_utf8(bytes).map_err(|e| {
         let line = 1 + e.as_bytes()[..e.utf8_error().valid_up_to()]
             .iter()
