@@ -35,6 +35,10 @@ enum Command {
         /// Output folder, overriding the scenario's [output] dir.
         #[arg(short, long)]
         output: Option<PathBuf>,
+        /// Run even if the outputs would exceed 50 GB (the estimate is
+        /// checked before anything is written).
+        #[arg(long)]
+        force: bool,
     },
     /// Generate a layered patch mesh with TetGen, or inspect a mesh file.
     ///
@@ -197,7 +201,11 @@ fn main() -> ExitCode {
         .format_timestamp(None)
         .init();
     let result = match cli.command {
-        Command::Run { scenario, output } => run(&scenario, output),
+        Command::Run {
+            scenario,
+            output,
+            force,
+        } => run(&scenario, output, force),
         Command::Mesh(args) => mesh(*args),
         Command::Fit { samples } => fit(&samples),
         Command::Bench {
@@ -223,19 +231,20 @@ fn main() -> ExitCode {
     }
 }
 
-fn run(path: &Path, output: Option<PathBuf>) -> anyhow::Result<()> {
+fn run(path: &Path, output: Option<PathBuf>, force: bool) -> anyhow::Result<()> {
     let scenario = Scenario::load(path)?;
     let mut setup = Setup::from_scenario(&scenario, path)
         .with_context(|| format!("scenario {}", path.display()))?;
     if let Some(dir) = output {
         setup.output_dir = dir;
     }
+    setup.force_large_output = force;
     let progress = Progress::new();
     let result = skinpatch::pipeline::run(&setup, |m, total| progress.frame(m, total));
     progress.finish();
     let summary = result.with_context(|| {
         format!(
-            "running scenario {} (outputs so far are in {})",
+            "running scenario {} (output folder {})",
             path.display(),
             setup.output_dir.display()
         )

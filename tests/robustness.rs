@@ -377,3 +377,26 @@ fn a_rerun_that_fails_up_front_keeps_the_previous_run() {
         .collect();
     assert!(before == after, "the folder changed");
 }
+
+/// A scenario that would write terabytes (a million frames of VTUs) is
+/// refused up front, naming the estimate and the way out, and nothing is
+/// written.
+#[test]
+fn a_run_that_would_flood_the_disk_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let o = run_scenario(
+        dir.path(),
+        &format!(
+            "[mesh]\nfile = {:?}\n[time]\nduration_s = 1.0\nframe_rate_hz = 1e6\n",
+            root().join("meshes/patch_3k.node").to_str().unwrap()
+        ),
+        &out,
+    );
+    let stderr = text(&o.stderr);
+    assert!(!o.status.success());
+    for part in ["the run would write about", "1000001 frames", "--force"] {
+        assert!(stderr.contains(part), "{stderr:?} should contain {part:?}");
+    }
+    assert!(!out.exists());
+}

@@ -14,6 +14,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
+pub mod plan;
 mod render;
 
 pub use render::{bench_render, RenderBench};
@@ -100,7 +101,9 @@ impl MicroEngine {
 pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Result<RunSummary> {
     let dir = &setup.output_dir;
     // Everything that can fail before the first frame is checked before
-    // the folder is touched: the adapters and ffmpeg.
+    // the folder is touched: the planned output size, the adapters and
+    // ffmpeg.
+    plan::check(setup, setup.force_large_output)?;
     let mut engine = match &setup.micro {
         Some(micro) => Some(MicroEngine::new(micro)?),
         None => None,

@@ -135,6 +135,9 @@ pub struct Setup {
     pub render: Option<crate::render::RenderSetup>,
     /// The simulation.
     pub simulation: SimulationSetup,
+    /// Run even when the planned output exceeds
+    /// [`crate::pipeline::plan::MAX_PLANNED_BYTES`] (`skinpatch run --force`).
+    pub force_large_output: bool,
 }
 
 /// Size and colour range of the per-frame strain maps.
@@ -367,6 +370,7 @@ impl Setup {
             strain_images,
             micro,
             simulation,
+            force_large_output: false,
         })
     }
 
