@@ -400,3 +400,51 @@ fn a_run_that_would_flood_the_disk_is_refused() {
     }
     assert!(!out.exists());
 }
+
+/// A key that would be ignored is an error naming it and saying why, like
+/// a procedural parameter beside a map file.
+#[test]
+fn keys_without_effect_are_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let mesh = format!(
+        "[mesh]\nfile = {:?}\n",
+        root().join("meshes/patch_3k.node").to_str().unwrap()
+    );
+    for (toml, expected) in [
+        (
+            "[time]\ndamping_alpha_per_s = nan\n",
+            "time.damping_alpha_per_s has no effect with integrator = \"quasi-static\" (got NaN)",
+        ),
+        (
+            "[time]\ndamping_beta_s = -1.0\n",
+            "time.damping_beta_s has no effect with integrator = \"quasi-static\"",
+        ),
+        (
+            "[microstructure]\ntexel_um = -5.0\n[microstructure.procedural]\nsize_px = 32\n",
+            "microstructure.texel_um has no effect without microstructure.map (got -5)",
+        ),
+        (
+            "[render]\nmodes = [\"none\"]\n[[render.lights]]\nkind = \"point\"\nposition_mm = [0.0, 0.0, 50.0]\nintensity = 1.0\n\
+             direction = [0.0, 0.0, -1.0]\n",
+            "render.lights[0].direction has no effect on a point light",
+        ),
+        (
+            "[render]\nmodes = [\"none\"]\n[[render.lights]]\nkind = \"directional\"\nintensity = 1.0\ndirection = [0.0, 0.0, -1.0]\n\
+             position_mm = [0.0, 0.0, 50.0]\n",
+            "render.lights[0].position_mm has no effect on a directional light",
+        ),
+        (
+            "[render]\nmodes = [\"none\"]\n[render.environment]\npreset = \"none\"\ncoefficients = [[1.0, 1.0, 1.0], \
+             [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], \
+             [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]\n",
+            "render.environment.preset has no effect together with render.environment.coefficients",
+        ),
+    ] {
+        let o = run_scenario(dir.path(), &format!("{mesh}{toml}"), &out);
+        let stderr = text(&o.stderr);
+        assert!(!o.status.success(), "{toml}");
+        assert!(stderr.contains(expected), "{stderr:?} should contain {expected:?}");
+        assert!(!out.exists());
+    }
+}

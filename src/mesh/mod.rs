@@ -171,7 +171,7 @@ impl TetMesh {
             )));
         }
         check_indices(&tets, positions.len()).map_err(bad)?;
-        orient(&positions, &mut tets).map_err(bad)?;
+        orient(origin, &positions, &mut tets).map_err(bad)?;
         let regions = collect_regions(&tet_region, region_names).map_err(bad)?;
         let (mut positions, mut face_markers) = (positions, face_markers);
         drop_unused_vertices(&mut positions, &mut tets, &mut face_markers);
@@ -281,7 +281,11 @@ fn check_indices(tets: &[[usize; 4]], num_vertices: usize) -> std::result::Resul
 }
 
 /// Makes every tet positively oriented; rejects degenerate and inverted tets.
-fn orient(positions: &[Vec3], tets: &mut [[usize; 4]]) -> std::result::Result<(), String> {
+fn orient(
+    origin: &str,
+    positions: &[Vec3],
+    tets: &mut [[usize; 4]],
+) -> std::result::Result<(), String> {
     let mut signs = Vec::with_capacity(tets.len());
     for (t, tet) in tets.iter().enumerate() {
         let [a, b, c, d] = tet.map(|v| positions[v]);
@@ -308,7 +312,7 @@ fn orient(positions: &[Vec3], tets: &mut [[usize; 4]]) -> std::result::Result<()
         ));
     }
     if negative > 0 {
-        log::info!("all {negative} tets are negatively oriented; flipping them");
+        log::warn!("{origin}: all {negative} tets are negatively oriented (the opposite vertex order); flipping them");
         for tet in tets.iter_mut() {
             tet.swap(2, 3);
         }

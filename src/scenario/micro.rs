@@ -212,7 +212,19 @@ impl MicrostructureSection {
                 };
                 read_map(&base.join(file), &defaults)?
             }
-            None => generate(&self.procedural.params(patch_width_mm))?,
+            None => {
+                if let Some(t) = self.texel_um {
+                    return Err(Error::parameter(
+                        "microstructure.texel_um",
+                        format!(
+                            "has no effect without microstructure.map (got {}): a generated \
+                             map's texel is the patch width over procedural.size_px",
+                            crate::error::shown(t)
+                        ),
+                    ));
+                }
+                generate(&self.procedural.params(patch_width_mm))?
+            }
         };
         Ok(MicroSetup {
             neutral,

@@ -165,9 +165,9 @@ fn white() -> [f64; 3] {
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct EnvironmentSection {
-    /// `grace_cathedral` (Ramamoorthi & Hanrahan 2001) or `none`; ignored
-    /// when `coefficients` are given. Default `grace_cathedral`.
-    pub preset: String,
+    /// `grace_cathedral` (Ramamoorthi & Hanrahan 2001) or `none`; not
+    /// together with `coefficients`. Default `grace_cathedral`.
+    pub preset: Option<String>,
     /// Nine RGB SH radiance coefficients L00, L1−1, L10, L11, L2−2, L2−1,
     /// L20, L21, L22 (z up).
     #[serde(default, deserialize_with = "super::arrays::exact_rows_opt")]
@@ -179,7 +179,7 @@ pub struct EnvironmentSection {
 impl Default for EnvironmentSection {
     fn default() -> Self {
         EnvironmentSection {
-            preset: "grace_cathedral".into(),
+            preset: None,
             coefficients: None,
             intensity: 0.4,
         }
@@ -320,7 +320,19 @@ impl CameraSection {
 impl LightSection {
     fn light(&self, k: usize) -> Result<Light> {
         let key = |field: &str| format!("render.lights[{k}].{field}");
-        let kind = match one_of(&key("kind"), &self.kind, &["directional", "point"])? {
+        let kind = one_of(&key("kind"), &self.kind, &["directional", "point"])?;
+        // A key of the other kind of light would be silently ignored.
+        let (unused, used_by) = match kind {
+            "directional" => ("position_mm", self.position_mm.is_some()),
+            _ => ("direction", self.direction.is_some()),
+        };
+        if used_by {
+            return Err(Error::parameter(
+                key(unused),
+                format!("has no effect on a {kind} light; remove it"),
+            ));
+        }
+        let kind = match kind {
             "directional" => {
                 let d = self.direction.ok_or_else(|| {
                     Error::parameter(key("direction"), "is required for a directional light")
@@ -349,6 +361,10 @@ impl EnvironmentSection {
     fn environment(&self) -> Result<Option<Environment>> {
         let intensity = intensity("render.environment.intensity", self.intensity)?;
         let coefficients = match &self.coefficients {
+            Some(_) if self.preset.is_some() => return Err(Error::parameter(
+                "render.environment.preset",
+                "has no effect together with render.environment.coefficients; remove one of them",
+            )),
             Some(list) => {
                 if list.len() != 9 {
                     return Err(Error::parameter(
@@ -365,7 +381,7 @@ impl EnvironmentSection {
             }
             None => match one_of(
                 "render.environment.preset",
-                &self.preset,
+                self.preset.as_deref().unwrap_or("grace_cathedral"),
                 &["grace_cathedral", "none"],
             )? {
                 "none" => return Ok(None),

@@ -541,7 +541,24 @@ impl TimeSection {
     /// The integrator: `None` for quasi-static, else backward-Euler settings.
     pub fn dynamics(&self, frame_dt: f64, substeps: usize) -> Result<Option<Dynamics>> {
         match self.integrator.as_str() {
-            "quasi-static" => Ok(None),
+            "quasi-static" => {
+                for (key, v) in [
+                    ("time.damping_alpha_per_s", self.damping_alpha_per_s),
+                    ("time.damping_beta_s", self.damping_beta_s),
+                ] {
+                    if v != 0.0 {
+                        return Err(Error::parameter(
+                            key,
+                            format!(
+                                "has no effect with integrator = \"quasi-static\" (got {}); \
+                                 remove it or set integrator = \"implicit-euler\"",
+                                shown(v)
+                            ),
+                        ));
+                    }
+                }
+                Ok(None)
+            }
             "implicit-euler" => {
                 let a = super::non_negative("time.damping_alpha_per_s", self.damping_alpha_per_s)?;
                 let b = super::non_negative("time.damping_beta_s", self.damping_beta_s)?;
