@@ -396,7 +396,10 @@ fn bench_render(path: &Path, frames: usize, width: usize, height: usize) -> anyh
 fn gpu_info() -> anyhow::Result<()> {
     let adapters = skinpatch::gpu::adapters();
     if adapters.is_empty() {
-        bail!("no Vulkan adapter found (install a Vulkan driver, e.g. Mesa's lavapipe: mesa-vulkan-drivers)");
+        bail!(
+            "{}",
+            skinpatch::gpu::vulkan::explain(&skinpatch::gpu::vulkan::look())
+        );
     }
     let mut text = String::new();
     for (k, a) in adapters.iter().enumerate() {

@@ -37,6 +37,7 @@ pub mod micro;
 pub mod normals;
 pub mod raster;
 pub mod svd2;
+pub mod vulkan;
 
 use std::sync::{Arc, Mutex};
 
@@ -112,9 +113,7 @@ impl Context {
     pub fn with_adapter(name: Option<&str>) -> Result<Context> {
         let all = pollster::block_on(instance().enumerate_adapters(wgpu::Backends::VULKAN));
         if all.is_empty() {
-            return Err(Error::Gpu(
-                "no Vulkan adapter found (install a Vulkan driver, e.g. Mesa's lavapipe)".into(),
-            ));
+            return Err(Error::Gpu(vulkan::explain(&vulkan::look())));
         }
         let names: Vec<String> = all.iter().map(|a| a.get_info().name).collect();
         let adapter = match name.filter(|n| !n.is_empty()) {

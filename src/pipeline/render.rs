@@ -28,8 +28,8 @@ pub(super) struct RenderEngine {
 /// The message for a render request without a GPU.
 fn no_gpu() -> Error {
     Error::Gpu(
-        "[render] needs a GPU adapter (Vulkan; for a software one install mesa-vulkan-drivers) — \
-         or remove the [render] section"
+        "[render] needs a GPU adapter (the warning above says why none is usable) — or remove \
+         the [render] section"
             .into(),
     )
 }
