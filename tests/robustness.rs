@@ -448,3 +448,56 @@ fn keys_without_effect_are_errors() {
         assert!(!out.exists());
     }
 }
+
+/// A valid mesh without a top surface — one tet with its apex up, so no
+/// face is marked top or faces +z at the highest z — runs in the FEM (with
+/// a warning; the surface columns of metrics.csv are NaN), and is refused,
+/// naming the stage, only where a stage needs the skin surface.
+#[test]
+fn a_mesh_without_a_top_surface_runs_the_fem() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("apex.node"),
+        "4 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0.3 0.3 1\n",
+    )
+    .unwrap();
+    std::fs::write(dir.path().join("apex.ele"), "1 4 0\n1 1 2 3 4\n").unwrap();
+    let mesh = format!(
+        "[mesh]\nfile = {:?}\n[material.region_1]\nyoungs_modulus_kpa = 100.0\n",
+        dir.path().join("apex.node").to_str().unwrap()
+    );
+    let out = dir.path().join("out");
+    let o = run_scenario(
+        dir.path(),
+        &format!(
+            "{mesh}[boundary]\nbottom = \"fixed\"\nsides = \"free\"\n[[boundary.prescribed]]\n\
+             set = \"top\"\ndisplacement_mm = [[0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.1]]\n\
+             [time]\nduration_s = 1.0\nframe_rate_hz = 2.0\n"
+        ),
+        &out,
+    );
+    let stderr = text(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.contains("no top surface"), "{stderr}");
+    let metrics = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    assert!(
+        column(&metrics, "rs_min").iter().all(|v| v.is_nan()),
+        "{metrics}"
+    );
+    // The apex moved up 0.1 of the unit height: the volume ratio is 1.1.
+    let j = column(&metrics, "min_volume_ratio");
+    assert!((j[2] - 1.1).abs() < 1e-9, "{metrics}");
+    let out = dir.path().join("probe");
+    let o = run_scenario(
+        dir.path(),
+        &format!("{mesh}[probe]\nshape = \"sphere\"\nradius_mm = 1.0\npath_mm = [[0.0, 0.0, 0.0, 3.0]]\n"),
+        &out,
+    );
+    let stderr = text(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        stderr.contains("apex.node: has no top surface")
+            && stderr.contains("which probe contact ([probe]) needs"),
+        "{stderr}"
+    );
+}

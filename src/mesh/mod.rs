@@ -118,7 +118,7 @@ pub struct TetMesh {
     pub regions: Vec<Region>,
     /// Boundary faces, outward oriented, in a deterministic order.
     pub boundary: Vec<BoundaryFace>,
-    /// The top (skin) surface with UVs.
+    /// The top (skin) surface with UVs; empty when the mesh has none.
     pub top: TopSurface,
 }
 
@@ -177,6 +177,14 @@ impl TetMesh {
         drop_unused_vertices(&mut positions, &mut tets, &mut face_markers);
         let boundary = surface::boundary_faces(&tets, &face_markers).map_err(bad)?;
         let top = TopSurface::extract(&positions, &boundary).map_err(bad)?;
+        if top.is_empty() {
+            log::warn!(
+                "{origin}: no top surface (no boundary face marked {} and none facing +z at \
+                 the highest z); the FEM runs, but a probe, strain maps, the microstructure \
+                 and rendering need one",
+                markers::TOP
+            );
+        }
         Ok(TetMesh {
             positions,
             tets,

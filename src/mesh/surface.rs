@@ -27,6 +27,13 @@ pub struct TopSurface {
 }
 
 impl TopSurface {
+    /// Whether the mesh has no top surface (no boundary face marked top and
+    /// none facing +z at the highest z). The FEM runs on such a mesh; the
+    /// stages that work on the skin surface refuse it.
+    pub fn is_empty(&self) -> bool {
+        self.triangles.is_empty()
+    }
+
     /// The surface vertex of mesh vertex `v`, if `v` lies on the top surface.
     pub fn surface_vertex(&self, v: usize) -> Option<usize> {
         self.mesh_to_surface.get(&v).copied()
@@ -47,7 +54,10 @@ impl TopSurface {
         positions: &[Vec3],
         boundary: &[BoundaryFace],
     ) -> Result<TopSurface, String> {
-        let faces = select_top_faces(positions, boundary)?;
+        let faces = select_top_faces(positions, boundary);
+        if faces.is_empty() {
+            return Ok(TopSurface::default());
+        }
         let mut vertices: Vec<usize> = faces
             .iter()
             .flat_map(|&f| boundary[f].nodes)
@@ -82,13 +92,14 @@ impl TopSurface {
     }
 }
 
-/// Indices of the boundary faces forming the top surface.
-fn select_top_faces(positions: &[Vec3], boundary: &[BoundaryFace]) -> Result<Vec<usize>, String> {
+/// Indices of the boundary faces forming the top surface: those marked
+/// top, else those facing +z at the highest z; none when neither exists.
+fn select_top_faces(positions: &[Vec3], boundary: &[BoundaryFace]) -> Vec<usize> {
     let marked: Vec<usize> = (0..boundary.len())
         .filter(|&f| boundary[f].marker == markers::TOP)
         .collect();
     if !marked.is_empty() {
-        return Ok(marked);
+        return marked;
     }
     let (lo, hi) = bounds(positions);
     let tol = 1e-9 * (hi - lo).norm();
@@ -99,14 +110,7 @@ fn select_top_faces(positions: &[Vec3], boundary: &[BoundaryFace]) -> Result<Vec
             n.z > 1.0 - 1e-9 && [a, b, c].iter().all(|p| (p.z - hi.z).abs() <= tol)
         })
         .collect();
-    if top.is_empty() {
-        return Err(format!(
-            "no top surface: no boundary face has marker {} and none faces +z at z = {}",
-            markers::TOP,
-            hi.z
-        ));
-    }
-    Ok(top)
+    top
 }
 
 /// Boundary faces of a positively oriented tet mesh, outward oriented, ordered

@@ -345,6 +345,35 @@ impl Setup {
             MeshSource::Generated(spec) => crate::mesh::generate::generate(spec)?,
             MeshSource::File(file) => io::read_mesh(file)?,
         };
+        if mesh.top.is_empty() {
+            let needs = [
+                ("probe contact ([probe])", scenario.probe.is_some()),
+                (
+                    "strain maps (output.strain_images)",
+                    strain_images.is_some(),
+                ),
+                (
+                    "the microstructure ([microstructure])",
+                    scenario.microstructure.is_some(),
+                ),
+                ("rendering ([render])", scenario.render.is_some()),
+            ];
+            if let Some((stage, _)) = needs.iter().find(|(_, asked)| *asked) {
+                return Err(Error::InvalidMesh {
+                    origin: match &mesh_source {
+                        MeshSource::Generated(_) => "generated mesh".to_string(),
+                        MeshSource::File(f) => f.display().to_string(),
+                    },
+                    message: format!(
+                        "has no top surface (no boundary face marked {} and none facing +z at \
+                         the highest z), which {stage} needs; mark the skin faces with {} or \
+                         remove that section",
+                        crate::mesh::markers::TOP,
+                        crate::mesh::markers::TOP
+                    ),
+                });
+            }
+        }
         let simulation = scenario.simulation(&mesh)?;
         let micro = match &scenario.microstructure {
             Some(m) => {

@@ -254,6 +254,10 @@ impl SurfaceField {
     /// Per-vertex extremes: ((min r_s, max r_s), (min r_t, max r_t)) and the
     /// number of folded vertices (det T < 0).
     pub fn extremes(&self) -> ((f64, f64), (f64, f64), usize) {
+        if self.vertices.is_empty() {
+            // A mesh without a top surface has no stretch ratios.
+            return ((f64::NAN, f64::NAN), (f64::NAN, f64::NAN), 0);
+        }
         let mut rs = (f64::INFINITY, f64::NEG_INFINITY);
         let mut rt = rs;
         let mut folded = 0;
