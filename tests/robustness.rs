@@ -501,3 +501,51 @@ fn a_mesh_without_a_top_surface_runs_the_fem() {
         "{stderr}"
     );
 }
+
+/// A map the GPU cannot hold is refused at once when a GPU is required —
+/// not after the minutes it takes to generate 16384² texels — naming the
+/// limit; so is one with no usable adapter at all.
+#[test]
+fn a_map_the_gpu_cannot_hold_is_refused_before_it_is_generated() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let scenario = format!(
+        "[mesh]\nfile = {:?}\n[microstructure]\n[microstructure.procedural]\nsize_px = 16384\n",
+        root().join("meshes/patch_3k.node").to_str().unwrap()
+    );
+    // 16384² f32 texels are 1 GiB: more than lavapipe's 128 MiB binding.
+    let adapters = skinpatch::gpu::adapters();
+    let small_binding = !adapters.is_empty()
+        && adapters
+            .iter()
+            .all(|a| a.limits.max_storage_buffer_binding_size < 1 << 30);
+    let mut cases = vec![(
+        vec![
+            ("SKINPATCH_REQUIRE_GPU", "1"),
+            ("SKINPATCH_ADAPTER", "no adapter has this name"),
+        ],
+        "SKINPATCH_REQUIRE_GPU=1, but",
+    )];
+    if small_binding && std::env::var("SKINPATCH_ADAPTER").is_err() {
+        cases.push((
+            vec![("SKINPATCH_REQUIRE_GPU", "1")],
+            "max_storage_buffer_binding_size",
+        ));
+    }
+    for (env, expected) in cases {
+        let start = std::time::Instant::now();
+        let o = run_scenario_with(dir.path(), &scenario, &out, &env);
+        let stderr = text(&o.stderr);
+        assert!(!o.status.success(), "{stderr}");
+        assert!(
+            stderr.contains(expected),
+            "{stderr:?} should contain {expected:?}"
+        );
+        assert!(
+            start.elapsed().as_secs_f64() < 20.0,
+            "{:?}",
+            start.elapsed()
+        );
+        assert!(!out.exists());
+    }
+}

@@ -111,28 +111,7 @@ impl Context {
 
     /// Opens the adapter whose name contains `name` (any if `None`).
     pub fn with_adapter(name: Option<&str>) -> Result<Context> {
-        let all = pollster::block_on(instance().enumerate_adapters(wgpu::Backends::VULKAN));
-        if all.is_empty() {
-            return Err(Error::Gpu(vulkan::explain(&vulkan::look())));
-        }
-        let names: Vec<String> = all.iter().map(|a| a.get_info().name).collect();
-        let adapter = match name.filter(|n| !n.is_empty()) {
-            Some(wanted) => {
-                let wanted_lc = wanted.to_lowercase();
-                all.into_iter()
-                    .find(|a| a.get_info().name.to_lowercase().contains(&wanted_lc))
-                    .ok_or_else(|| {
-                        Error::Gpu(format!(
-                            "{ADAPTER_VAR}={wanted:?} matches no adapter; found: {}",
-                            names.join(", ")
-                        ))
-                    })?
-            }
-            None => all
-                .into_iter()
-                .min_by_key(|a| rank(a.get_info().device_type))
-                .expect("the adapter list is not empty"),
-        };
+        let adapter = select_adapter(name)?;
         let info = adapter.get_info();
         let limits = adapter.limits();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
@@ -206,28 +185,13 @@ impl Context {
     /// and the largest storage buffer a stage binds (`bytes_per_texel` per
     /// texel). Names the limit and the adapter when it does not.
     pub fn check_map(&self, width: usize, height: usize, bytes_per_texel: u64) -> Result<()> {
-        let side = self.limits.max_texture_dimension_2d as usize;
-        if width == 0 || height == 0 {
-            return Err(Error::Gpu(format!("a {width} × {height} map is empty")));
-        }
-        if width > side || height > side {
-            return Err(Error::Gpu(format!(
-                "a {width} × {height} map exceeds max_texture_dimension_2d = {side} of {}",
-                self.info.name
-            )));
-        }
-        let bytes = width as u64 * height as u64 * bytes_per_texel;
-        let binding = self.limits.max_storage_buffer_binding_size;
-        let buffer = self.limits.max_buffer_size;
-        if bytes > binding.min(buffer) {
-            return Err(Error::Gpu(format!(
-                "a {width} × {height} map needs storage buffers of {bytes} bytes; {} allows \
-                 {binding} per binding (max_storage_buffer_binding_size) and {buffer} per buffer \
-                 (max_buffer_size): use a smaller map",
-                self.info.name
-            )));
-        }
-        Ok(())
+        check_map_limits(
+            &self.info.name,
+            &self.limits,
+            width,
+            height,
+            bytes_per_texel,
+        )
     }
 
     /// Workgroup counts covering `width × height` texels.
@@ -237,6 +201,102 @@ impl Context {
             (height as u32).div_ceil(WORKGROUP),
         )
     }
+}
+
+/// The adapter [`Context::with_adapter`] opens: the one whose name
+/// contains `name`, else the best by device type.
+fn select_adapter(name: Option<&str>) -> Result<wgpu::Adapter> {
+    let all = pollster::block_on(instance().enumerate_adapters(wgpu::Backends::VULKAN));
+    if all.is_empty() {
+        return Err(Error::Gpu(vulkan::explain(&vulkan::look())));
+    }
+    let names: Vec<String> = all.iter().map(|a| a.get_info().name).collect();
+    match name.filter(|n| !n.is_empty()) {
+        Some(wanted) => {
+            let wanted_lc = wanted.to_lowercase();
+            all.into_iter()
+                .find(|a| a.get_info().name.to_lowercase().contains(&wanted_lc))
+                .ok_or_else(|| {
+                    Error::Gpu(format!(
+                        "{ADAPTER_VAR}={wanted:?} matches no adapter; found: {}",
+                        names.join(", ")
+                    ))
+                })
+        }
+        None => Ok(all
+            .into_iter()
+            .min_by_key(|a| rank(a.get_info().device_type))
+            .expect("the adapter list is not empty")),
+    }
+}
+
+/// [`Context::check_map`] against the limits of adapter `name`.
+fn check_map_limits(
+    name: &str,
+    limits: &wgpu::Limits,
+    width: usize,
+    height: usize,
+    bytes_per_texel: u64,
+) -> Result<()> {
+    let side = limits.max_texture_dimension_2d as usize;
+    if width == 0 || height == 0 {
+        return Err(Error::Gpu(format!("a {width} × {height} map is empty")));
+    }
+    if width > side || height > side {
+        return Err(Error::Gpu(format!(
+            "a {width} × {height} map exceeds max_texture_dimension_2d = {side} of {name}"
+        )));
+    }
+    let bytes = width as u64 * height as u64 * bytes_per_texel;
+    let binding = limits.max_storage_buffer_binding_size;
+    let buffer = limits.max_buffer_size;
+    if bytes > binding.min(buffer) {
+        return Err(Error::Gpu(format!(
+            "a {width} × {height} map needs storage buffers of {bytes} bytes; {name} allows \
+             {binding} per binding (max_storage_buffer_binding_size) and {buffer} per buffer \
+             (max_buffer_size): use a smaller map"
+        )));
+    }
+    Ok(())
+}
+
+/// Checks a `width × height` microstructure map against the adapter the
+/// run would open, before the map is generated (no device is created):
+/// minutes of generating a map the GPU cannot hold are not spent first.
+/// A map that does not fit (or no adapter) is an error when
+/// `SKINPATCH_REQUIRE_GPU=1`, else a warning that the CPU references will
+/// run the microstructure.
+pub fn precheck_map(width: usize, height: usize) -> Result<()> {
+    let adapter = match select_adapter(std::env::var(ADAPTER_VAR).ok().as_deref()) {
+        Ok(a) => a,
+        Err(e) if gpu_required() => return Err(required(e)),
+        // The run warns about the missing adapter when it looks for one.
+        Err(_) => return Ok(()),
+    };
+    let checked = check_map_limits(
+        &adapter.get_info().name,
+        &adapter.limits(),
+        width,
+        height,
+        micro::LARGEST_BYTES_PER_TEXEL,
+    );
+    match checked {
+        Ok(()) => Ok(()),
+        Err(e) if gpu_required() => Err(required(e)),
+        Err(e) => {
+            log::warn!("{e}; the microstructure will run on the CPU reference stages");
+            Ok(())
+        }
+    }
+}
+
+/// A GPU error as the reason a required GPU is unusable.
+fn required(e: Error) -> Error {
+    let reason = match e {
+        Error::Gpu(m) => m,
+        other => other.to_string(),
+    };
+    Error::Gpu(format!("{REQUIRE_VAR}=1, but {reason}"))
 }
 
 /// Whether `SKINPATCH_REQUIRE_GPU` asks for a GPU (`1`, `true` or `yes`).

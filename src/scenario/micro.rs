@@ -223,7 +223,10 @@ impl MicrostructureSection {
                         ),
                     ));
                 }
-                generate(&self.procedural.params(patch_width_mm))?
+                let params = self.procedural.params(patch_width_mm);
+                params.validate("microstructure.procedural")?;
+                crate::gpu::precheck_map(params.size_px, params.size_px)?;
+                generate(&params)?
             }
         };
         Ok(MicroSetup {
