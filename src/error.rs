@@ -73,6 +73,18 @@ pub enum Error {
     #[error("{}", clip(.0))]
     MissingTool(String),
 
+    /// A stage produced a value that is not finite (NaN or infinity); its
+    /// output is not written.
+    #[error("{stage} produced a non-finite value at frame {frame} ({})", clip(.detail))]
+    NonFinite {
+        /// The stage, e.g. `microstructure (GPU)` or `render (dynamic)`.
+        stage: String,
+        /// The frame.
+        frame: usize,
+        /// Where (texel or pixel) and what.
+        detail: String,
+    },
+
     /// No usable GPU adapter, a limit a stage needs, or a failed GPU
     /// operation (what failed and on which adapter).
     #[error("GPU: {}", clip(.0))]
@@ -107,6 +119,33 @@ pub fn shown(v: f64) -> String {
 
 /// Shorthand for results with the library error type.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// The first non-finite value of `values` — `components` numbers per
+/// element of a `width`-wide grid — as an error of `stage` at `frame`,
+/// naming the element's column and row.
+pub fn check_finite<'a, I>(
+    stage: &str,
+    frame: usize,
+    width: usize,
+    components: usize,
+    values: I,
+) -> Result<()>
+where
+    I: IntoIterator<Item = &'a f32>,
+{
+    let (width, components) = (width.max(1), components.max(1));
+    match values.into_iter().position(|v| !v.is_finite()) {
+        None => Ok(()),
+        Some(k) => {
+            let e = k / components;
+            Err(Error::NonFinite {
+                stage: stage.to_string(),
+                frame,
+                detail: format!("at column {}, row {}", e % width, e / width),
+            })
+        }
+    }
+}
 
 impl Error {
     /// Wraps an I/O error with the path it concerns.
@@ -150,6 +189,19 @@ mod tests {
 
     /// A megabyte value echoed in an error is shown by its ends only; short
     /// messages are untouched.
+    /// The error names the stage, the frame and the element.
+    #[test]
+    fn non_finite_values_are_located() {
+        let ok = [1.0f32, 2.0, 3.0, 4.0];
+        assert!(check_finite("s", 0, 2, 1, &ok).is_ok());
+        let bad = [0.0f32, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, f32::NAN, 0.0];
+        let e = check_finite("rendering (dynamic)", 7, 2, 3, &bad).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "rendering (dynamic) produced a non-finite value at frame 7 (at column 0, row 1)"
+        );
+    }
+
     #[test]
     fn long_messages_are_clipped_when_shown() {
         let value = "x".repeat(1 << 20);

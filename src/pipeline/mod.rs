@@ -180,6 +180,17 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Res
         if let (Some(micro), Some(engine)) = (&setup.micro, engine.as_mut()) {
             if m.frame % micro.frame_stride == 0 {
                 let (deformed, normals) = engine.deform(micro, &field)?;
+                let stage = format!("the microstructure ({})", engine.describe());
+                crate::error::check_finite(&stage, m.frame, deformed.width, 1, &deformed.data)?;
+                if let Some(n) = &normals {
+                    crate::error::check_finite(
+                        &format!("{stage}, normals"),
+                        m.frame,
+                        deformed.width,
+                        3,
+                        n.iter().flatten(),
+                    )?;
+                }
                 fresh_normals = micro.normal_maps;
                 let folder = dir.join("micro");
                 let tag = format!("{:04}", m.frame);

@@ -152,6 +152,13 @@ impl RenderEngine {
                 .renderer
                 .render(ctx, *mode)
                 .map_err(|e| at_frame(e, frame, *mode))?;
+            crate::error::check_finite(
+                &format!("rendering ({})", mode.name()),
+                frame,
+                image.width,
+                4,
+                image.pixels.iter().flatten(),
+            )?;
             let path = folder.join(frames::frame_name(frame, setup.format));
             frames::write_image(&path, &image, setup.format)?;
         }
