@@ -112,9 +112,9 @@ impl Probe {
 }
 
 impl Probe {
-    /// Radius of the probe's rounded or flat part (mm): the thinnest it is,
-    /// so a load step in which it moves less than this cannot carry it past
-    /// a node without the node ending inside it.
+    /// Radius of the probe's rounded or flat part (mm). The probe is at
+    /// least twice this thick, so a load step in which it moves less than
+    /// that cannot carry it past a node without the node ending inside it.
     pub fn radius_mm(&self) -> f64 {
         match self.shape {
             ProbeShape::Sphere { radius_mm }

@@ -24,7 +24,7 @@ pub const MAX_POISSON: f64 = 0.49;
 /// diamond. Outside, force scales leave the range the tolerances assume.
 pub const YOUNGS_KPA_RANGE: (f64, f64) = (1e-6, 1e9);
 
-/// Densities accepted (kg/m³): lighter than air to heavier than osmium.
+/// Densities accepted (kg/m³): about that of air to more than osmium's.
 pub const DENSITY_RANGE: (f64, f64) = (1.0, 1e5);
 
 /// Material constants of one region, in FEM units.

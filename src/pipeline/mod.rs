@@ -392,10 +392,13 @@ fn simulate(
                 log::info!("frame {frame}: {n} load steps for the probe's motion");
             }
             if let Some(d) = s.dynamics {
-                sim.dynamics = Some(Dynamics {
-                    dt: (t - t_prev) / n as f64,
-                    ..d
-                });
+                // A split frame takes shorter backward-Euler steps.
+                let dt = if n == s.substeps {
+                    d.dt
+                } else {
+                    (t - t_prev) / n as f64
+                };
+                sim.dynamics = Some(Dynamics { dt, ..d });
             }
             n
         };
