@@ -36,6 +36,17 @@ fn run_scenario_with(dir: &Path, body: &str, out: &Path, env: &[(&str, &str)]) -
         .expect("the skinpatch binary runs")
 }
 
+/// Every file under `dir` (see [`files`]) with its bytes.
+fn contents(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    files(dir)
+        .into_iter()
+        .map(|f| {
+            let bytes = std::fs::read(dir.join(&f)).unwrap();
+            (f, bytes)
+        })
+        .collect()
+}
+
 /// Every file under `dir`, relative to it, sorted.
 fn files(dir: &Path) -> Vec<String> {
     let mut found = Vec::new();
@@ -346,13 +357,7 @@ fn a_rerun_that_fails_up_front_keeps_the_previous_run() {
     let path = "[[0.0, 0.0, 0.0, 1.5], [1.0, 0.0, 0.0, 0.9]]";
     let o = run_scenario(dir.path(), &sphere_press(path, 2.0), &out);
     assert!(o.status.success(), "{}", text(&o.stderr));
-    let before: Vec<(String, Vec<u8>)> = files(&out)
-        .into_iter()
-        .map(|f| {
-            let bytes = std::fs::read(out.join(&f)).unwrap();
-            (f, bytes)
-        })
-        .collect();
+    let before = contents(&out);
     let o = run_scenario_with(
         dir.path(),
         &format!(
@@ -368,14 +373,7 @@ fn a_rerun_that_fails_up_front_keeps_the_previous_run() {
     let stderr = text(&o.stderr);
     assert!(!o.status.success());
     assert!(stderr.contains("SKINPATCH_REQUIRE_GPU=1"), "{stderr}");
-    let after: Vec<(String, Vec<u8>)> = files(&out)
-        .into_iter()
-        .map(|f| {
-            let bytes = std::fs::read(out.join(&f)).unwrap();
-            (f, bytes)
-        })
-        .collect();
-    assert!(before == after, "the folder changed");
+    assert!(before == contents(&out), "the folder changed");
 }
 
 /// A scenario that would write terabytes (a million frames of VTUs) is

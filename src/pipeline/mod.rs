@@ -363,21 +363,9 @@ fn simulate(
         // it during frame 0, in steps like any other motion.
         let mut lift = 0.0;
         let substeps = if frame == 0 {
-            match &s.probe {
-                Some(probe) => {
-                    lift = embedded_lift(mesh, &probe.pose(0.0), sim.position_tol());
-                    let n = (lift / (MAX_PROBE_STEP * probe.radius_mm())).ceil() as usize;
-                    if lift > 0.0 {
-                        log::warn!(
-                            "the probe starts inside the skin at t = 0; frame 0 presses it in \
-                             from {lift:.4} mm higher in {n} load steps (start its path above \
-                             the surface to choose how it gets there)"
-                        );
-                    }
-                    n.max(1)
-                }
-                None => 1,
-            }
+            let (height, n) = press_in(s.probe.as_ref(), mesh, sim.position_tol());
+            lift = height;
+            n
         } else {
             let n = load_steps(s.probe.as_ref(), s.substeps, t_prev, t, frame)?;
             if n > s.substeps {
@@ -475,6 +463,30 @@ fn simulate(
         emit(&m, &sim)?;
     }
     Ok(sim.timings)
+}
+
+/// Frame 0's load steps and the height (mm) its probe starts above its
+/// t = 0 pose: one step from that pose, or, for a probe that starts inside
+/// the skin, steps of at most [`MAX_PROBE_STEP`] of its radius from just
+/// above the patch (with a warning).
+fn press_in(
+    probe: Option<&crate::fem::contact::Probe>,
+    mesh: &crate::mesh::TetMesh,
+    tol: f64,
+) -> (f64, usize) {
+    let Some(probe) = probe else {
+        return (0.0, 1);
+    };
+    let lift = embedded_lift(mesh, &probe.pose(0.0), tol);
+    if lift == 0.0 {
+        return (0.0, 1);
+    }
+    let n = ((lift / (MAX_PROBE_STEP * probe.radius_mm())).ceil() as usize).max(1);
+    log::warn!(
+        "the probe starts inside the skin at t = 0; frame 0 presses it in from {lift:.4} mm \
+         higher in {n} load steps (start its path above the surface to choose how it gets there)"
+    );
+    (lift, n)
 }
 
 /// How far (mm) `pose` must be lifted so that no node of `mesh` at rest is
