@@ -169,14 +169,35 @@ fn sliding_punch_force_ratio_is_mu() {
     }
 }
 
-/// With μ = 0 a dragged probe carries no tangential force (up to the
-/// faceting of the mesh: under 0.5% of the normal force).
+/// With μ = 0 a dragged probe carries no tangential force, up to the
+/// faceting of the mesh: the contact nodes sit unevenly around the probe's
+/// lowest point, and the node-by-node normal reactions of the exact discrete
+/// solution add up to a small tangential force that changes as the probe
+/// passes nodes. With the 3 mm sphere of this test (about 82 nodes in
+/// contact) it stays under 0.5% of the normal force (measured ≤ 0.14% once
+/// dragging); with the fixture's 1.5 mm sphere (about 37 nodes) under 1%
+/// (measured ≤ 0.53%).
 #[test]
 fn frictionless_drag_has_no_tangential_force() {
-    let (summary, _dir) = drag("contact = \"frictionless\"");
+    let (summary, _dir) = common::run_fixture("drag.toml", |t| {
+        let t = t
+            .replace("radius_mm = 1.5", "radius_mm = 3.0")
+            .replace(
+                "path_mm = [[0.0, -0.25, 0.0, 1.5], [0.5, -0.25, 0.0, 1.0], [1.0, 0.25, 0.0, 1.0]]",
+                "path_mm = [[0.0, -0.25, 0.0, 3.0], [0.5, -0.25, 0.0, 2.5], [1.0, 0.25, 0.0, 2.5]]",
+            )
+            .replace("[time]", "contact = \"frictionless\"\n[time]");
+        assert!(t.contains("3.0]") && t.contains("2.5]]"));
+        t
+    });
     for m in &summary.frames[4..] {
         let [fx, fy, fz] = m.probe_force_n;
         assert!(fx.hypot(fy) < 0.005 * fz, "{m:?}");
+    }
+    let (summary, _dir) = drag("contact = \"frictionless\"");
+    for m in &summary.frames[4..] {
+        let [fx, fy, fz] = m.probe_force_n;
+        assert!(fx.hypot(fy) < 0.01 * fz, "{m:?}");
     }
 }
 
@@ -185,9 +206,9 @@ fn frictionless_drag_has_no_tangential_force() {
 /// is its closest point's tangent plane at convergence, not one left from an
 /// earlier iterate. A 3 mm press (60% of the patch) into patch_3k: every
 /// node carrying at least 1% of the largest nodal force has a tangential /
-/// normal ratio ≤ 2e-3 (measured 1.3e-3: a kept plane may tilt by the
-/// node's drift since it was projected) and sits within 1e-5 mm of the
-/// sphere.
+/// normal ratio ≤ 1e-3 (measured 4.4e-4; planes tilted by more than 2e-4
+/// rad are re-projected near convergence, and without that it is 1.3e-3)
+/// and sits within 1e-5 mm of the sphere.
 #[test]
 fn frictionless_forces_are_normal_node_by_node() {
     let mesh = io::read_tetgen(&common::root().join("meshes/patch_3k")).unwrap();
@@ -223,7 +244,7 @@ fn frictionless_forces_are_normal_node_by_node() {
         "{loaded} loaded nodes: tangential/normal ≤ {worst_ratio:.2e}, |gap| ≤ {worst_gap:.2e} mm"
     );
     assert!(loaded >= 10, "{loaded} loaded nodes");
-    assert!(worst_ratio <= 2e-3, "tangential/normal {worst_ratio:.3e}");
+    assert!(worst_ratio <= 1e-3, "tangential/normal {worst_ratio:.3e}");
     assert!(worst_gap <= 1e-5, "gap {worst_gap:.3e} mm");
 }
 

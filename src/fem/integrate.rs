@@ -61,6 +61,16 @@ pub enum LinearSolver {
 /// (the factor has drifted too far from the matrix) and starts again.
 pub const REFACTOR_AFTER: usize = 12;
 
+/// Refinements of a nearly converged iterate's constraints per solve (see
+/// [`Simulation::solve_with`]); the last refined problem is accepted once
+/// converged.
+pub const MAX_REFINEMENTS: usize = 4;
+
+/// An iterate is offered for refinement once its relative residual is below
+/// this multiple of the Newton tolerance, so the step that follows a
+/// refinement is one the solve would take anyway.
+pub const REFINE_BELOW: f64 = 100.0;
+
 /// Newton iteration settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NewtonSettings {
@@ -541,43 +551,61 @@ impl Simulation {
     /// Solves for static equilibrium with the current constraints and loads.
     /// `context` names the step in errors (e.g. `frame 12`).
     pub fn solve_static(&mut self, context: &str) -> Result<NewtonStats> {
-        self.solve_with(context, |_, _| false)
+        self.solve_with(context, |_, _, _| false)
     }
 
     /// Solves for equilibrium while `update` may change the problem: it is
     /// called at the start of every Newton iteration, with the forces
     /// evaluated at the current positions, may set new filters, targets and
     /// loads, and returns whether it changed anything that decides the
-    /// solution (a contact set, a stick/slip state). The solve converges on
-    /// an iteration whose update changed nothing, whose residual is within
-    /// tolerance and whose nodes sit on their targets (within 1e-7 of the
-    /// mesh size). Each Newton step moves the constrained directions onto
+    /// solution (a contact set, a stick/slip state); its third argument is
+    /// then `false`. The solve converges on an iteration whose update
+    /// changed nothing, whose residual is within tolerance and whose nodes
+    /// sit on their targets (within 1e-7 of the mesh size). An iterate
+    /// whose update changed nothing, whose nodes sit on their targets and
+    /// whose residual is within [`REFINE_BELOW`] times the tolerance is
+    /// offered to `update` once more with `true`: it may refine the
+    /// constraints (re-project contact planes) and return `true`; the
+    /// convergence test then applies to the refined problem (at most
+    /// [`MAX_REFINEMENTS`] refinements per solve). Each Newton step moves the constrained directions onto
     /// their targets and solves the free ones with that move's coupling
     /// (`S K S y = S (r − K d)`), so a target that moves every iteration —
     /// a contact node re-projected onto a curved probe — costs no extra solve.
     pub fn solve_with<U>(&mut self, context: &str, mut update: U) -> Result<NewtonStats>
     where
-        U: FnMut(&mut Simulation, usize) -> bool,
+        U: FnMut(&mut Simulation, usize, bool) -> bool,
     {
         self.evaluate_forces();
         let mut stats = NewtonStats::default();
         self.tangent_kind = TangentKind::Exact;
         self.coarse_stale = true;
+        let mut refinements = 0;
         for it in 0..=self.settings.max_iterations {
-            let changed = update(self, it);
+            let changed = update(self, it, false);
             if changed {
                 // A new contact problem: start again from the exact tangent.
                 self.tangent_kind = TangentKind::Exact;
             }
-            let (norm, scale) = self.residual();
-            let violation = self.constraint_violation();
+            let (mut norm, mut scale) = self.residual();
+            let mut violation = self.constraint_violation();
             stats.iterations = it;
             stats.rel_residual = self.relative(norm, scale);
             stats.scale = scale;
             if !stats.rel_residual.is_finite() || !violation.is_finite() {
                 return Err(not_converged(context, it, stats.rel_residual));
             }
-            if !changed && violation <= self.position_tol && self.converged(norm, scale) {
+            let settled = !changed && violation <= self.position_tol;
+            if settled
+                && refinements < MAX_REFINEMENTS
+                && stats.rel_residual <= REFINE_BELOW * self.settings.rel_tol
+                && update(self, it, true)
+            {
+                refinements += 1;
+                (norm, scale) = self.residual();
+                violation = self.constraint_violation();
+                stats.rel_residual = self.relative(norm, scale);
+            }
+            if settled && violation <= self.position_tol && self.converged(norm, scale) {
                 return Ok(stats);
             }
             if it == self.settings.max_iterations {
