@@ -87,7 +87,7 @@ pub struct NewtonSettings {
 impl Default for NewtonSettings {
     fn default() -> Self {
         NewtonSettings {
-            linear: LinearSolver::Cg,
+            linear: LinearSolver::TwoLevel,
             rel_tol: 1e-6,
             max_iterations: 50,
             cg: CgSettings {

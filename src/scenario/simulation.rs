@@ -135,7 +135,7 @@ pub struct SolverSection {
 impl Default for SolverSection {
     fn default() -> Self {
         SolverSection {
-            linear: "cg".into(),
+            linear: "two-level".into(),
             rel_tol: 1e-6,
             max_newton_iterations: 50,
             linear_rel_tol: 1e-4,
