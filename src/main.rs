@@ -154,22 +154,63 @@ struct MeshArgs {
 }
 
 fn fit(samples: &Path) -> anyhow::Result<()> {
-    let report = skinpatch::pipeline::fit(samples)?;
+    use std::io::IsTerminal;
+    let bar = std::io::stderr().is_terminal().then(|| {
+        let bar = indicatif::ProgressBar::new(1000);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {msg}")
+                .expect("valid template")
+                .progress_chars("=> "),
+        );
+        bar
+    });
+    let report = skinpatch::pipeline::fit(samples, |k, total, fraction| {
+        if let Some(bar) = &bar {
+            bar.set_message(format!("sample {}/{total}", k + 1));
+            bar.set_position(((k as f64 + fraction) / total as f64 * 1000.0) as u64);
+        }
+    })?;
+    if let Some(bar) = &bar {
+        bar.finish_and_clear();
+    }
     let mut text = String::new();
     let mut line = |s: String| {
         text.push_str(&s);
         text.push('\n');
     };
     line(format!(
-        "{:>8}  {:>6}  {:>8}  {:>9}  source",
-        "r", "α", "σ (µm)", "distance"
+        "{:>8}  {:>6}  {:>8}  {:>9}  {:>6}  {:>13}  {:>13}  {:>6}  source",
+        "r", "α", "σ (µm)", "distance", "range", "α valley", "σ valley", "s"
     ));
     for row in &report.rows {
-        let distance = row.distance.map_or("-".to_string(), |d| format!("{d:.4}"));
-        line(format!(
-            "{:>8.3}  {:>6.2}  {:>8.1}  {distance:>9}  {}",
-            row.r, row.alpha, row.sigma_um, row.source
-        ));
+        match &row.fit {
+            Some(f) => {
+                let v = &f.result;
+                line(format!(
+                    "{:>8.3}  {:>6.2}  {:>8.1}  {:>9.4}  {:>6.2}  {:>13}  {:>13}  {:>6.1}  {}",
+                    row.r,
+                    row.alpha,
+                    row.sigma_um,
+                    v.distance,
+                    f.range,
+                    format!("{:.2}…{:.2}", v.alpha_range.0, v.alpha_range.1),
+                    format!("{:.1}…{:.1}", v.sigma_range_um.0, v.sigma_range_um.1),
+                    f.seconds,
+                    row.source
+                ))
+            }
+            None => line(format!(
+                "{:>8.3}  {:>6.2}  {:>8.1}  {:>9}  {:>6}  {:>13}  {:>13}  {:>6}  {}",
+                row.r, row.alpha, row.sigma_um, "-", "-", "-", "-", "-", row.source
+            )),
+        }
+    }
+    if report.rows.iter().any(|r| r.fit.is_some()) {
+        line(
+            "valley: the α and σ of the candidates whose distance is within 10% (at least \
+             0.002) of the optimum's"
+                .to_string(),
+        );
     }
     let l = &report.lines;
     line(format!(
@@ -184,7 +225,7 @@ fn fit(samples: &Path) -> anyhow::Result<()> {
         line(format!("wrote {}", path.display()));
     }
     if let Some(device) = &report.device {
-        line(format!("candidates evaluated on {device}"));
+        line(format!("candidates counted on {device}"));
     }
     print_stdout(&text)
 }

@@ -562,7 +562,7 @@ fn fit_prints_the_table_and_writes_a_usable_kernel_file() {
         })
         .collect();
     std::fs::write(dir.path().join("target.csv"), csv).unwrap();
-    let samples = "neutral = \"neutral.png\"\noutput = \"kernel.toml\"\n\
+    let samples = "neutral = \"neutral.png\"\noutput = \"kernel.toml\"\nrange = 0.5\n\
         [[sample]]\nmap = \"blurred.png\"\nr = 1.0\naxis = \"u\"\n\
         [[sample]]\nhistogram = \"target.csv\"\nr = 1.0\naxis = \"u\"\n\
         [[point]]\nr = 0.8\nalpha = -1.5\nsigma_um = 8.0\n\

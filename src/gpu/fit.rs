@@ -1,145 +1,160 @@
-//! Batched evaluation of fitting candidates on the GPU (CPU reference
-//! [`crate::micro::fit::fit_params`]).
+//! Batched counting of kernel-fitting candidates on the GPU
+//! (`shaders/fit.wgsl`; CPU reference
+//! [`crate::micro::fit::count_histograms`]).
 //!
-//! Each candidate (α, σ) is one constant-kernel [`super::convolve`] pass of
-//! the resident neutral map along the sample's axis into a scratch map and
-//! one [`super::histogram`] of it seen stretched by r, into its own slot of
-//! a shared counts buffer. A batch of candidates is recorded into one
-//! command buffer (the scratch map is reused: passes run in order) and read
-//! back once; total-variation distances are taken on the CPU in f64. The
-//! search itself is [`crate::micro::fit::search`], shared with the CPU.
+//! The slopes of the resampled neutral map stay resident; per σ the CPU
+//! uploads their change per unit α ([`crate::micro::fit::Objective`]) and
+//! the GPU counts the normal histograms of up to [`BATCH`] values of α in
+//! one submission, read back once. Total-variation distances are taken on
+//! the CPU in f64, and the search is [`crate::micro::fit::search`], shared
+//! with the CPU.
 
-use std::num::NonZeroU64;
+use bytemuck::{Pod, Zeroable};
 
-use super::convolve::{ConvolveStage, Params, PassInfo};
-use super::histogram::{normalise, HistogramInfo, HistogramStage};
-use super::map::{GpuMap, MapInfo};
-use super::{buffers, encoder, Context};
-use crate::error::Result;
-use crate::micro::fit::{search, Axis, FitResult, HistogramSettings};
-use crate::micro::{DisplacementMap, KernelParams, NormalHistogram, PassParams};
+use super::{bind_group, buffers, encoder, Context};
+use crate::error::{Error, Result};
+use crate::micro::fit::{search, FitResult, Objective, Slopes};
+
+/// The shader source.
+pub const SHADER: &str = include_str!("../../shaders/fit.wgsl");
 
 /// Candidates per submission.
 pub const BATCH: usize = 64;
-/// Byte stride of per-candidate uniforms (the largest offset alignment
-/// WebGPU allows adapters to require).
-const STRIDE: u64 = 256;
+/// Texels per workgroup (`TILE` in the shader).
+const TILE: usize = 4096;
+/// Largest `bins × bins` the shader's workgroup histogram holds.
+pub const MAX_CELLS: usize = 4096;
 
-/// The fitting evaluator with the neutral map resident.
+/// Mirrors WGSL `FitInfo`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct FitInfo {
+    texels: u32,
+    bins: u32,
+    candidates: u32,
+    _pad0: u32,
+    range: f32,
+    _pad1: [f32; 3],
+}
+
+/// The counter with one sample's base slopes resident.
 pub struct GpuFit<'a> {
     ctx: &'a Context,
-    neutral: GpuMap,
-    scratch: GpuMap,
-    convolve: ConvolveStage,
-    histogram: HistogramStage,
+    pipeline: wgpu::ComputePipeline,
+    base: wgpu::Buffer,
+    texels: usize,
+}
+
+fn interleave(s: &Slopes) -> Vec<[f32; 2]> {
+    s.x.iter().zip(&s.y).map(|(&x, &y)| [x, y]).collect()
 }
 
 impl<'a> GpuFit<'a> {
-    /// Uploads `neutral` and compiles the stages.
-    pub fn new(ctx: &'a Context, neutral: &DisplacementMap) -> Result<GpuFit<'a>> {
-        ctx.check_map(neutral.width, neutral.height, 4)?;
+    /// Compiles the stage and uploads `base`; an error when the histogram
+    /// or the slope field does not fit the shader or the device.
+    pub fn new(ctx: &'a Context, base: &Slopes, bins: usize) -> Result<GpuFit<'a>> {
+        if bins * bins > MAX_CELLS {
+            return Err(Error::Gpu(format!(
+                "the GPU fit counts at most {MAX_CELLS} histogram cells ({bins}² asked)"
+            )));
+        }
+        let limit = ctx.device.limits().max_storage_buffer_binding_size as usize;
+        if 8 * base.len() > limit {
+            return Err(Error::Gpu(format!(
+                "a fit over {} texels needs {} MB storage buffers; the adapter allows {} MB",
+                base.len(),
+                (8 * base.len()) >> 20,
+                limit >> 20
+            )));
+        }
         Ok(GpuFit {
             ctx,
-            neutral: GpuMap::upload(ctx, neutral),
-            scratch: GpuMap::scratch(ctx, neutral),
-            convolve: ConvolveStage::new(ctx),
-            histogram: HistogramStage::new(ctx),
+            pipeline: super::compute_pipeline(ctx, "fit.wgsl", SHADER, "main"),
+            base: buffers::storage(ctx, "fit base slopes", &interleave(base)),
+            texels: base.len(),
         })
     }
 
-    /// Histograms of the neutral map convolved along `axis` with each
-    /// candidate and seen stretched by `r` (as
-    /// [`crate::micro::fit::candidate_histogram`]).
-    pub fn histograms(
+    /// Counts of `base + α·dir` for each α (as
+    /// [`crate::micro::fit::count_histograms`]).
+    pub fn count(
         &self,
-        axis: Axis,
-        r: f64,
-        candidates: &[KernelParams],
-        hist: HistogramSettings,
-    ) -> Result<Vec<NormalHistogram>> {
+        dir: &Slopes,
+        alphas: &[f32],
+        bins: usize,
+        range: f64,
+    ) -> Result<Vec<Vec<u32>>> {
         let ctx = self.ctx;
-        let meta = &self.neutral.meta;
-        let (w, h) = (meta.width, meta.height);
-        let bins = hist.bins.max(1);
         let cells = bins * bins;
-        let stretched = buffers::uniform(
-            ctx,
-            "stretched map info",
-            &MapInfo::of(meta, axis.stretch(r)),
-        );
-        let mut out = Vec::with_capacity(candidates.len());
-        for batch in candidates.chunks(BATCH) {
-            let mut uniforms = vec![0u8; 2 * STRIDE as usize * batch.len()];
-            for (c, p) in batch.iter().enumerate() {
-                let pass = PassInfo::constant(&PassParams {
-                    axis: axis.unit(),
-                    alpha: p.alpha as f32,
-                    sigma: (p.sigma_um / meta.texel_um) as f32,
-                });
-                let info = HistogramInfo::new(bins, hist.range, c * cells);
-                let at = 2 * STRIDE as usize * c;
-                uniforms[at..at + 32].copy_from_slice(bytemuck::bytes_of(&pass));
-                let at = at + STRIDE as usize;
-                uniforms[at..at + 32].copy_from_slice(bytemuck::bytes_of(&info));
-            }
-            let uniforms = buffers::init(
+        let dir = buffers::storage(ctx, "fit slope change", &interleave(dir));
+        let tiles = self.texels.div_ceil(TILE).max(1);
+        let gx = tiles.min(65_535);
+        let gy = tiles.div_ceil(gx);
+        let mut out = Vec::with_capacity(alphas.len());
+        for batch in alphas.chunks(BATCH) {
+            let info = buffers::uniform(
                 ctx,
-                "fit candidates",
-                &uniforms,
-                wgpu::BufferUsages::UNIFORM,
+                "fit info",
+                &FitInfo {
+                    texels: self.texels as u32,
+                    bins: bins as u32,
+                    candidates: batch.len() as u32,
+                    range: range as f32,
+                    ..FitInfo::default()
+                },
             );
+            let list = buffers::storage(ctx, "fit alphas", batch);
             let counts =
                 buffers::storage_zeroed(ctx, "fit counts", 4 * (cells * batch.len()) as u64);
-            let slot = |k: u64| {
-                wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer: &uniforms,
-                    offset: k * STRIDE,
-                    size: NonZeroU64::new(32),
-                })
-            };
+            let bind = bind_group(
+                ctx,
+                &self.pipeline.get_bind_group_layout(0),
+                &[
+                    info.as_entire_binding(),
+                    self.base.as_entire_binding(),
+                    dir.as_entire_binding(),
+                    list.as_entire_binding(),
+                    counts.as_entire_binding(),
+                ],
+            );
             let mut enc = encoder(ctx);
-            for c in 0..batch.len() as u64 {
-                let conv = self.convolve.bind(
-                    ctx,
-                    Params::Constant,
-                    &self.neutral,
-                    slot(2 * c),
-                    None,
-                    &self.scratch,
-                );
-                self.convolve
-                    .encode(&mut enc, Params::Constant, &[&conv], w, h);
-                let hist_bind = self.histogram.bind(
-                    ctx,
-                    stretched.as_entire_binding(),
-                    &self.scratch.heights,
-                    slot(2 * c + 1),
-                    &counts,
-                );
-                self.histogram.encode(&mut enc, &hist_bind, w, h);
+            {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("fit"),
+                    timestamp_writes: None,
+                });
+                pass.set_pipeline(&self.pipeline);
+                pass.set_bind_group(0, &bind, &[]);
+                pass.dispatch_workgroups(gx as u32, gy as u32, 1);
             }
             ctx.queue.submit([enc.finish()]);
             let all: Vec<u32> = buffers::read(ctx, &counts, cells * batch.len())?;
-            out.extend(all.chunks(cells).map(|c| normalise(c, bins, hist.range)));
+            out.extend(all.chunks(cells).map(<[u32]>::to_vec));
         }
         Ok(out)
     }
 
-    /// The fit of [`crate::micro::fit::fit_params`] with batched GPU
-    /// evaluation.
+    /// The search of [`crate::micro::fit::fit_params`] with GPU counting.
     pub fn fit_params(
         &self,
-        target: &NormalHistogram,
-        axis: Axis,
-        r: f64,
-        hist: HistogramSettings,
+        objective: &Objective,
+        progress: impl FnMut(f64),
     ) -> Result<FitResult> {
-        search(|batch| {
-            Ok(self
-                .histograms(axis, r, batch, hist)?
-                .iter()
-                .map(|h| h.distance(target))
-                .collect())
-        })
+        let hist = objective.hist;
+        search(
+            objective,
+            |_, dir, alphas| self.count(dir, alphas, hist.bins, hist.range),
+            progress,
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fit_info_matches_wgsl_layout() {
+        assert_eq!(std::mem::size_of::<FitInfo>(), 32);
     }
 }

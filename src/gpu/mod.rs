@@ -14,7 +14,8 @@
 //!   [`crate::micro::normals::normal_map`];
 //! * [`histogram`] (`shaders/histogram.wgsl`): 64 × 64 normal histogram with
 //!   atomics — [`crate::micro::NormalHistogram`];
-//! * [`fit`]: batched (α, σ) candidates for the kernel fit —
+//! * [`fit`] (`shaders/fit.wgsl`): normal histograms of batches of (α, σ)
+//!   candidates for the kernel fit —
 //!   [`crate::micro::fit`];
 //! * [`micro`]: the whole per-frame chain with the neutral map resident.
 //!
@@ -420,6 +421,7 @@ pub fn shader_sources() -> Vec<(&'static str, String)> {
         ("convolve.wgsl", convolve::source()),
         ("normals.wgsl", map::with_map_access(normals::SHADER)),
         ("histogram.wgsl", map::with_map_access(histogram::SHADER)),
+        ("fit.wgsl", fit::SHADER.to_string()),
         ("shadow.wgsl", crate::render::shadow::SHADER.to_string()),
         ("irradiance.wgsl", crate::render::irradiance::source()),
         (

@@ -147,6 +147,77 @@ pub fn convolve_pass(src: &DisplacementMap, params: &[PassParams]) -> Displaceme
     src.with_data(data)
 }
 
+/// The Gaussian half of a pass along the map's u (`along_u`) or v axis
+/// with σ texels at every texel: [`convolve_pass`] with α = 1 along
+/// `[1, 0]` or `[0, 1]`, bit for bit (the same weights and the same order
+/// of additions; the taps fall on texel centres, where the bilinear reads
+/// return texels exactly), but with the weights computed once and whole
+/// rows added at a time. The kernel fit blurs the neutral map once per σ
+/// of its grid with it.
+pub fn blur_along_axis(src: &DisplacementMap, along_u: bool, sigma: f32) -> DisplacementMap {
+    if sigma.is_nan() || sigma <= 0.0 {
+        return src.clone();
+    }
+    let n = (3.0 * sigma).ceil() as i32;
+    let taper = 3.0 * sigma - (n - 1) as f32;
+    let q = (-0.5 / (sigma * sigma)).exp();
+    let mut weights = Vec::with_capacity(n as usize);
+    let (mut g, mut step, mut norm) = (1.0f32, q, 1.0f32);
+    for k in 1..=n {
+        g *= step;
+        step *= q * q;
+        let w = if k == n { g * taper } else { g };
+        norm += 2.0 * w;
+        weights.push(w);
+    }
+    let (w, h) = (src.width, src.height);
+    let mut data = vec![0.0f32; w * h];
+    if along_u {
+        data.par_chunks_mut(w.max(1))
+            .enumerate()
+            .for_each(|(j, out)| {
+                // The row padded by n texels each side with the map's edge rule.
+                let pad: Vec<f32> = (-(n as isize)..(w as isize + n as isize))
+                    .map(|i| src.texel(i, j as isize))
+                    .collect();
+                let centre = &pad[n as usize..n as usize + w];
+                out.copy_from_slice(centre);
+                for (k, &wk) in weights.iter().enumerate() {
+                    let k = k + 1;
+                    let (left, right) = (&pad[n as usize - k..], &pad[n as usize + k..]);
+                    for ((o, a), b) in out.iter_mut().zip(left).zip(right) {
+                        *o += wk * (a + b);
+                    }
+                }
+                out.iter_mut().for_each(|o| *o /= norm);
+            });
+    } else {
+        data.par_chunks_mut(w.max(1))
+            .enumerate()
+            .for_each(|(j, out)| {
+                let row = |jj: isize| -> usize {
+                    // The row index the edge rule reads for row jj.
+                    let probe = match src.edge {
+                        super::map::Edge::Wrap => jj.rem_euclid(h as isize),
+                        super::map::Edge::Clamp => jj.clamp(0, h as isize - 1),
+                    };
+                    probe as usize * w
+                };
+                out.copy_from_slice(&src.data[j * w..j * w + w]);
+                for (k, &wk) in weights.iter().enumerate() {
+                    let k = k as isize + 1;
+                    let (a0, b0) = (row(j as isize - k), row(j as isize + k));
+                    let (above, below) = (&src.data[a0..a0 + w], &src.data[b0..b0 + w]);
+                    for ((o, a), b) in out.iter_mut().zip(above).zip(below) {
+                        *o += wk * (a + b);
+                    }
+                }
+                out.iter_mut().for_each(|o| *o /= norm);
+            });
+    }
+    src.with_data(data)
+}
+
 /// One texel of a pass.
 #[inline]
 pub fn convolve_texel(src: &DisplacementMap, i: usize, j: usize, p: &PassParams) -> f32 {

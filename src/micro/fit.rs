@@ -1,14 +1,29 @@
 //! Fitting kernel parameters to measured deformations (seed 000 eq. 7 and
 //! Fig. 11–12).
 //!
-//! [`fit_params`] finds the (α, σ) whose 1D convolution of the neutral map
-//! along the deformation axis, seen stretched by the ratio r along that axis
-//! (slopes along it divided by r, as the normals of the resampled map would
-//! be), gives the normal histogram closest in total variation to the target
-//! (eq. 7). The search covers α ∈ [−2, 1] in steps of 0.01 and
-//! σ ∈ [1, 100] µm in steps of 0.5 µm, coarse to fine: a grid of steps
-//! (0.25, 5 µm), then (0.05, 1 µm) around the best, then the final steps
-//! around that. α = 0 makes every σ equal, so it is tried once.
+//! **The objective.** A candidate (α, σ) convolves the neutral map `D` once
+//! along the sample's axis (`(1 − α)·D + α·G_σ∗D`, [`convolve_pass`]),
+//! resamples the result to the deformed shape — stretched by the ratio r
+//! along the axis, [`resample`] — and takes the 64 × 64 histogram of its
+//! normals; its score is the total variation to the target's histogram
+//! (eq. 7). [`candidate_histogram`] is that definition, texel for texel.
+//!
+//! **The search** ([`search`]) covers the seed's grid, α ∈ [−2, 1] in steps
+//! of 0.01 and σ ∈ [1, 100] µm in steps of 0.5 µm, using that the convolved
+//! map, its resampling and so its slopes are linear in α: per σ, one blur
+//! gives the slope field `s₀` of the resampled neutral map and the change
+//! `d_σ` per unit α, and every α of that σ is the field `s₀ + α·d_σ` (one
+//! blur per σ, [`Objective`]). First every σ of the grid is scored at every
+//! tenth α (α step 0.1: 5,971 candidates with α = 0 once, where every σ is
+//! the same); then, from each of the best [`STARTS`] local minima of that
+//! grid, a window of ±0.1 in α and ±2.5 µm in σ at the full resolution is
+//! moved to its best candidate until that is its centre. The optimum is the
+//! best candidate scored, ties to the first in (α, σ) order, and the
+//! valley — the range of α and σ over the scored candidates within
+//! [`valley_margin`] of it — says how well the sample constrains the kernel.
+//!
+//! **The histogram window** is chosen from the data by [`auto_range`] unless
+//! given: the same ±range for the target and every candidate.
 //!
 //! [`fit_model`] turns fitted (r, α, σ) points into a kernel model the way the
 //! seed does: α(r) as two lines through (1, 0) exactly — one fitted by least
@@ -17,10 +32,12 @@
 //! and another over the stretch points (a jump at r = 1 is allowed), floored
 //! at 1 µm.
 
-use super::convolve::{convolve_pass, PassParams};
+use rayon::prelude::*;
+
+use super::convolve::{blur_along_axis, convolve_pass, PassParams};
 use super::kernel::{KernelModel, KernelParams, PiecewiseLinear};
 use super::map::DisplacementMap;
-use super::normals::NormalHistogram;
+use super::normals::{normal_of, slope, NormalHistogram};
 use crate::error::{Error, Result};
 
 /// The axis of a sample's deformation (the map's u or v direction).
@@ -40,14 +57,6 @@ impl Axis {
             Axis::V => [0.0, 1.0],
         }
     }
-
-    /// Stretch factors along (x, y) for a ratio `r` along this axis.
-    pub fn stretch(self, r: f64) -> [f64; 2] {
-        match self {
-            Axis::U => [r, 1.0],
-            Axis::V => [1.0, r],
-        }
-    }
 }
 
 /// Histogram settings of the fit.
@@ -59,7 +68,7 @@ pub struct HistogramSettings {
     pub range: f64,
 }
 
-/// A fitted (α, σ) and its objective.
+/// A fitted (α, σ), its objective and its valley.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FitResult {
     /// Filter strength.
@@ -70,10 +79,120 @@ pub struct FitResult {
     pub distance: f64,
     /// Candidates evaluated.
     pub evaluations: usize,
+    /// Smallest and largest α of the scored candidates within
+    /// [`valley_margin`] of the optimum.
+    pub alpha_range: (f64, f64),
+    /// Smallest and largest σ (µm) of those candidates.
+    pub sigma_range_um: (f64, f64),
 }
 
-/// The neutral map convolved along `axis` with (α, σ µm), seen stretched by
-/// `r`: its normal histogram.
+/// Grid steps of α (0.01 from −2) and σ (0.5 µm from 1 µm).
+pub const ALPHA_STEPS: usize = 300;
+/// Grid steps of σ.
+pub const SIGMA_STEPS: usize = 198;
+/// Grid index of α = 0.
+const ALPHA_ZERO: usize = 200;
+/// Every this many α steps are scored at every σ in the first stage.
+const COARSE_ALPHA: usize = 10;
+/// Local minima of the first stage refined at full resolution.
+pub const STARTS: usize = 6;
+/// Half widths (α steps, σ steps) of a refinement window.
+const WINDOW: (usize, usize) = (10, 5);
+/// Candidates whose histograms are counted in one sweep over the texels.
+const GROUP: usize = 8;
+/// Texels per block of that sweep (kept in cache for the group).
+const CHUNK: usize = 2048;
+
+/// The candidate of grid indices `(a, s)`: α = −2 + 0.01·a, σ = 1 + 0.5·s µm.
+pub fn grid_params(a: usize, s: usize) -> KernelParams {
+    KernelParams {
+        alpha: -2.0 + 0.01 * a as f64,
+        sigma_um: 1.0 + 0.5 * s as f64,
+    }
+}
+
+/// The margin of the valley reported with a fit: total variation within
+/// 10% of the optimum's, and at least 0.002, of it.
+pub fn valley_margin(best: f64) -> f64 {
+    (0.1 * best).max(0.002)
+}
+
+/// `map` as it looks stretched by `r` along `axis`, at the same texel size:
+/// `round(n·r)` texels along the axis (n the map's), output texel `o` read
+/// at `(o + ½)/r − ½` by Catmull–Rom cubic interpolation along the axis
+/// (exact at texel centres, the map's edge handling beyond its border), the
+/// other axis unchanged. `r = 1` returns the map itself.
+pub fn resample(map: &DisplacementMap, axis: Axis, r: f64) -> DisplacementMap {
+    if r == 1.0 {
+        return map.clone();
+    }
+    let along = match axis {
+        Axis::U => map.width,
+        Axis::V => map.height,
+    };
+    let n_out = ((along as f64 * r).round() as usize).max(1);
+    let taps: Vec<(isize, [f64; 4])> = (0..n_out)
+        .map(|o| {
+            let x = (o as f64 + 0.5) / r - 0.5;
+            let x0 = x.floor();
+            let t = x - x0;
+            let (t2, t3) = (t * t, t * t * t);
+            let w = [
+                0.5 * (-t3 + 2.0 * t2 - t),
+                0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+                0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+                0.5 * (t3 - t2),
+            ];
+            (x0 as isize - 1, w)
+        })
+        .collect();
+    let (width, height) = match axis {
+        Axis::U => (n_out, map.height),
+        Axis::V => (map.width, n_out),
+    };
+    let mut data = vec![0.0f32; width * height];
+    data.par_chunks_mut(width).enumerate().for_each(|(j, row)| {
+        for (i, out) in row.iter_mut().enumerate() {
+            let (first, w) = match axis {
+                Axis::U => taps[i],
+                Axis::V => taps[j],
+            };
+            let mut sum = 0.0f64;
+            if first >= 0 && first as usize + 3 < along {
+                // All four taps inside: no edge handling.
+                let (at, stride) = match axis {
+                    Axis::U => (j * map.width + first as usize, 1),
+                    Axis::V => (first as usize * map.width + i, map.width),
+                };
+                for (k, wk) in w.iter().enumerate() {
+                    sum += wk * map.data[at + k * stride] as f64;
+                }
+            } else {
+                for (k, wk) in w.iter().enumerate() {
+                    let at = first + k as isize;
+                    let h = match axis {
+                        Axis::U => map.texel(at, j as isize),
+                        Axis::V => map.texel(i as isize, at),
+                    };
+                    sum += wk * h as f64;
+                }
+            }
+            *out = sum as f32;
+        }
+    });
+    DisplacementMap {
+        width,
+        height,
+        texel_um: map.texel_um,
+        height_unit_um: map.height_unit_um,
+        edge: map.edge,
+        data,
+    }
+}
+
+/// The neutral map convolved along `axis` with (α, σ µm) and resampled to
+/// the shape stretched by `r`: its normal histogram (the objective's
+/// definition; [`Objective`] computes the same faster).
 pub fn candidate_histogram(
     neutral: &DisplacementMap,
     axis: Axis,
@@ -81,16 +200,225 @@ pub fn candidate_histogram(
     params: KernelParams,
     hist: HistogramSettings,
 ) -> NormalHistogram {
-    let pass = PassParams {
-        axis: axis.unit(),
-        alpha: params.alpha as f32,
-        sigma: (params.sigma_um / neutral.texel_um) as f32,
-    };
-    let convolved = convolve_pass(neutral, &vec![pass; neutral.data.len()]);
-    NormalHistogram::of(&convolved, hist.bins, hist.range, axis.stretch(r))
+    let convolved = convolve_pass(
+        neutral,
+        &vec![pass(neutral, axis, params); neutral.data.len()],
+    );
+    NormalHistogram::of(
+        &resample(&convolved, axis, r),
+        hist.bins,
+        hist.range,
+        [1.0, 1.0],
+    )
 }
 
-/// Finds (α, σ) for a target histogram (see the module docs).
+fn pass(map: &DisplacementMap, axis: Axis, p: KernelParams) -> PassParams {
+    PassParams {
+        axis: axis.unit(),
+        alpha: p.alpha as f32,
+        sigma: (p.sigma_um / map.texel_um) as f32,
+    }
+}
+
+/// Fraction of texels whose normal may fall outside the data-driven window.
+pub const RANGE_QUANTILE: f64 = 0.995;
+
+/// The histogram half range from the data: the [`RANGE_QUANTILE`] quantile
+/// of `max(|n_x|, |n_y|)` over each map's normals, the largest over the
+/// maps, rounded up to 0.01 (and at least 0.01).
+pub fn auto_range(maps: &[&DisplacementMap]) -> f64 {
+    let mut range: f64 = 0.01;
+    for map in maps {
+        let mut extent: Vec<f32> = (0..map.width * map.height)
+            .into_par_iter()
+            .map(|idx| {
+                let n = normal_of(slope(map, idx % map.width, idx / map.width, [1.0, 1.0]));
+                n[0].abs().max(n[1].abs()) as f32
+            })
+            .collect();
+        if extent.is_empty() {
+            continue;
+        }
+        let k = ((extent.len() as f64 * RANGE_QUANTILE).ceil() as usize).clamp(1, extent.len());
+        let (_, q, _) = extent.select_nth_unstable_by(k - 1, f32::total_cmp);
+        range = range.max((*q as f64 * 100.0).ceil() / 100.0);
+    }
+    range
+}
+
+/// A slope field, `(∂h/∂x, ∂h/∂y)` per texel.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Slopes {
+    /// Along x (u).
+    pub x: Vec<f32>,
+    /// Along y (v).
+    pub y: Vec<f32>,
+}
+
+impl Slopes {
+    /// The central-difference slopes of `map` (as [`NormalHistogram::of`],
+    /// which reads the same texels: interior texels without edge handling).
+    pub fn of(map: &DisplacementMap) -> Slopes {
+        let (w, h) = (map.width, map.height);
+        let mut x = vec![0.0f32; w * h];
+        let mut y = vec![0.0f32; w * h];
+        let k = map.height_unit_um / (2.0 * map.texel_um);
+        x.par_chunks_mut(w.max(1))
+            .zip(y.par_chunks_mut(w.max(1)))
+            .enumerate()
+            .for_each(|(j, (xr, yr))| {
+                let inner_row = j > 0 && j + 1 < h;
+                for i in 0..w {
+                    let (sx, sy) = if inner_row && i > 0 && i + 1 < w {
+                        let d = &map.data;
+                        let c = j * w + i;
+                        (
+                            (d[c + 1] - d[c - 1]) as f64 * k,
+                            (d[c + w] - d[c - w]) as f64 * k,
+                        )
+                    } else {
+                        let s = slope(map, i, j, [1.0, 1.0]);
+                        (s[0], s[1])
+                    };
+                    xr[i] = sx as f32;
+                    yr[i] = sy as f32;
+                }
+            });
+        Slopes { x, y }
+    }
+
+    /// Texels.
+    pub fn len(&self) -> usize {
+        self.x.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+}
+
+/// Normal-histogram counts of the slope fields `base + α·dir` for each α
+/// (f32, the same arithmetic as `shaders/fit.wgsl`): each texel's normal
+/// `(−s_x, −s_y)/√(1 + |s|²)` falls into cell `⌊(c + range)·bins/(2·range)⌋`
+/// per component, clamped to the edge cells (a NaN to the first). Candidates are counted
+/// [`GROUP`] at a time in parallel; counts are integers, so the result
+/// does not depend on the thread count.
+pub fn count_histograms(
+    base: &Slopes,
+    dir: &Slopes,
+    alphas: &[f32],
+    bins: usize,
+    range: f64,
+) -> Vec<Vec<u32>> {
+    let bins = bins.max(1);
+    let cells = bins * bins;
+    let scale = bins as f32 / (2.0 * range as f32);
+    let offset = range as f32;
+    let top = (bins - 1) as f32;
+    alphas
+        .par_chunks(GROUP)
+        .flat_map_iter(|group| {
+            // Two interleaved copies per candidate, so that runs of texels in
+            // one cell do not wait on each other's increments.
+            let mut counts = vec![vec![0u32; 2 * cells]; group.len()];
+            let mut index = vec![0u32; CHUNK];
+            for start in (0..base.len()).step_by(CHUNK) {
+                let end = (start + CHUNK).min(base.len());
+                let (bx, by) = (&base.x[start..end], &base.y[start..end]);
+                let (dx, dy) = (&dir.x[start..end], &dir.y[start..end]);
+                for (c, &a) in counts.iter_mut().zip(group) {
+                    // Cell indices first (a loop the compiler vectorises),
+                    // then the increments.
+                    for ((((k, &bx), &by), &dx), &dy) in
+                        index.iter_mut().zip(bx).zip(by).zip(dx).zip(dy)
+                    {
+                        let sx = bx + a * dx;
+                        let sy = by + a * dy;
+                        let inv = 1.0 / (1.0 + sx * sx + sy * sy).sqrt();
+                        // In [0, bins − 1] (a NaN to 0), so the conversion
+                        // through i32 is exact and vectorises.
+                        let cx = ((-sx * inv + offset) * scale).max(0.0).min(top) as i32;
+                        let cy = ((-sy * inv + offset) * scale).max(0.0).min(top) as i32;
+                        *k = (cy * bins as i32 + cx) as u32;
+                    }
+                    let (even, odd) = c.split_at_mut(cells);
+                    let mut pairs = index[..end - start].chunks_exact(2);
+                    for pair in &mut pairs {
+                        even[pair[0] as usize] += 1;
+                        odd[pair[1] as usize] += 1;
+                    }
+                    for &k in pairs.remainder() {
+                        even[k as usize] += 1;
+                    }
+                }
+            }
+            counts.into_iter().map(move |mut c| {
+                let (even, odd) = c.split_at_mut(cells);
+                even.iter_mut().zip(odd.iter()).for_each(|(e, o)| *e += o);
+                c.truncate(cells);
+                c
+            })
+        })
+        .collect()
+}
+
+/// One sample's fitting problem, prepared for [`search`]: the slopes of
+/// the resampled neutral map and, per σ, their change per unit α.
+pub struct Objective<'a> {
+    neutral: &'a DisplacementMap,
+    axis: Axis,
+    r: f64,
+    /// Histogram window of target and candidates.
+    pub hist: HistogramSettings,
+    target: &'a NormalHistogram,
+    /// Slopes of the resampled neutral map (α = 0).
+    pub base: Slopes,
+}
+
+impl<'a> Objective<'a> {
+    /// The problem of fitting `target` (a histogram with `hist`'s window)
+    /// from `neutral` deformed along `axis` by `r`.
+    pub fn new(
+        neutral: &'a DisplacementMap,
+        target: &'a NormalHistogram,
+        axis: Axis,
+        r: f64,
+        hist: HistogramSettings,
+    ) -> Objective<'a> {
+        Objective {
+            neutral,
+            axis,
+            r,
+            hist,
+            target,
+            base: Slopes::of(&resample(neutral, axis, r)),
+        }
+    }
+
+    /// The change of the candidate slopes per unit α at σ grid index `s`:
+    /// the slopes of the resampled `G_σ∗D` minus [`Objective::base`].
+    pub fn direction(&self, s: usize) -> Slopes {
+        let sigma = pass(self.neutral, self.axis, grid_params(0, s)).sigma;
+        let blurred = blur_along_axis(self.neutral, self.axis == Axis::U, sigma);
+        let mut d = Slopes::of(&resample(&blurred, self.axis, self.r));
+        d.x.iter_mut().zip(&self.base.x).for_each(|(d, b)| *d -= b);
+        d.y.iter_mut().zip(&self.base.y).for_each(|(d, b)| *d -= b);
+        d
+    }
+
+    /// Total variation between counts (normalised) and the target.
+    pub fn distance(&self, counts: &[u32]) -> f64 {
+        let total: f64 = counts.iter().map(|&c| c as f64).sum::<f64>().max(1.0);
+        counts
+            .iter()
+            .zip(&self.target.cells)
+            .map(|(&c, t)| (c as f64 / total - t).abs())
+            .sum()
+    }
+}
+
+/// Finds (α, σ) for a target histogram on the CPU (see the module docs).
 pub fn fit_params(
     neutral: &DisplacementMap,
     target: &NormalHistogram,
@@ -98,78 +426,167 @@ pub fn fit_params(
     r: f64,
     hist: HistogramSettings,
 ) -> FitResult {
-    let evaluate = |batch: &[KernelParams]| -> Result<Vec<f64>> {
-        Ok(batch
-            .iter()
-            .map(|&p| candidate_histogram(neutral, axis, r, p, hist).distance(target))
-            .collect())
-    };
-    search(evaluate).expect("the CPU evaluation does not fail")
+    let objective = Objective::new(neutral, target, axis, r, hist);
+    search(
+        &objective,
+        |base, dir, alphas| Ok(count_histograms(base, dir, alphas, hist.bins, hist.range)),
+        |_| {},
+    )
+    .expect("the CPU evaluation does not fail")
 }
 
-/// The candidate of grid indices `(a, s)`: α = −2 + 0.01·a, σ = 1 + 0.5·s µm.
-fn grid_params((a, s): (i64, i64)) -> KernelParams {
-    KernelParams {
-        alpha: -2.0 + 0.01 * a as f64,
-        sigma_um: 1.0 + 0.5 * s as f64,
-    }
-}
-
-/// The coarse-to-fine search of [`fit_params`] with any evaluator of the
-/// objective: `evaluate` gets each stage's new candidates as one batch and
-/// returns their distances in order (the GPU evaluates a batch in one
-/// submission). Ties keep the first candidate in (α, σ) order, so equal
-/// objectives give the same optimum on every evaluator.
-pub fn search(mut evaluate: impl FnMut(&[KernelParams]) -> Result<Vec<f64>>) -> Result<FitResult> {
-    let mut cache: std::collections::HashMap<(i64, i64), f64> = std::collections::HashMap::new();
+/// The search of the module docs with any counter of candidate histograms:
+/// `count(base, dir, alphas)` returns the counts of `base + α·dir` for each
+/// α in order (the GPU counts a batch in one submission). `progress` gets
+/// the fraction of the first stage done (the second takes about a third
+/// as long). Ties keep the first candidate in (α, σ) order, so equal
+/// objectives give the same optimum with every counter.
+pub fn search(
+    objective: &Objective,
+    mut count: impl FnMut(&Slopes, &Slopes, &[f32]) -> Result<Vec<Vec<u32>>>,
+    mut progress: impl FnMut(f64),
+) -> Result<FitResult> {
+    use std::collections::{BTreeMap, HashMap};
     // α = 0 makes every σ equal: one key for all.
-    let key = |a: i64, s: i64| if a == 200 { (200, 0) } else { (a, s) };
-    let (a_max, s_max) = (300i64, 198i64);
-    let mut best = (f64::INFINITY, 200i64, 0i64);
-    // (α step, σ step, half-width of the window in steps) per stage.
-    for (da, ds, window) in [
-        (25i64, 10i64, None),
-        (5, 2, Some((25i64, 10i64))),
-        (1, 1, Some((5, 2))),
-    ] {
-        let (a_range, s_range) = match window {
-            None => ((0, a_max), (0, s_max)),
-            Some((wa, ws)) => (
-                ((best.1 - wa).max(0), (best.1 + wa).min(a_max)),
-                ((best.2 - ws).max(0), (best.2 + ws).min(s_max)),
-            ),
-        };
-        let grid: Vec<(i64, i64)> = (a_range.0..=a_range.1)
-            .step_by(da as usize)
-            .flat_map(|a| {
-                (s_range.0..=s_range.1)
-                    .step_by(ds as usize)
-                    .map(move |s| (a, s))
-            })
-            .collect();
-        let mut fresh: Vec<(i64, i64)> = Vec::new();
-        for &(a, s) in &grid {
-            let k = key(a, s);
-            if !cache.contains_key(&k) && !fresh.contains(&k) {
-                fresh.push(k);
+    let key = |a: usize, s: usize| if a == ALPHA_ZERO { (a, 0) } else { (a, s) };
+    let mut scores: HashMap<(usize, usize), f64> = HashMap::new();
+    let mut directions: BTreeMap<usize, Slopes> = BTreeMap::new();
+    let mut evaluate = |s: usize,
+                        alphas: &mut dyn Iterator<Item = usize>,
+                        scores: &mut HashMap<(usize, usize), f64>|
+     -> Result<()> {
+        let mut fresh: Vec<usize> = Vec::new();
+        for a in alphas {
+            if !scores.contains_key(&key(a, s)) && !fresh.contains(&a) {
+                fresh.push(a);
             }
         }
-        let params: Vec<KernelParams> = fresh.iter().map(|&k| grid_params(k)).collect();
-        let distances = evaluate(&params)?;
-        cache.extend(fresh.into_iter().zip(distances));
-        for &(a, s) in &grid {
-            let d = cache[&key(a, s)];
-            if d < best.0 {
-                best = (d, a, s);
+        if fresh.is_empty() {
+            return Ok(());
+        }
+        if !directions.contains_key(&s) {
+            if directions.len() >= 4 * WINDOW.1 {
+                directions.clear();
+            }
+            directions.insert(s, objective.direction(s));
+        }
+        let alphas: Vec<f32> = fresh
+            .iter()
+            .map(|&a| grid_params(a, s).alpha as f32)
+            .collect();
+        let counts = count(&objective.base, &directions[&s], &alphas)?;
+        for (a, c) in fresh.into_iter().zip(counts) {
+            scores.insert(key(a, s), objective.distance(&c));
+        }
+        Ok(())
+    };
+    // Stage 1: every σ, every tenth α.
+    let coarse = |s| {
+        (0..=ALPHA_STEPS)
+            .step_by(COARSE_ALPHA)
+            .map(move |a| key(a, s).0)
+    };
+    for s in 0..=SIGMA_STEPS {
+        evaluate(s, &mut coarse(s), &mut scores)?;
+        progress((s + 1) as f64 / (SIGMA_STEPS + 1) as f64);
+    }
+    let score = |scores: &HashMap<(usize, usize), f64>, a: usize, s: usize| scores[&key(a, s)];
+    // Its local minima (no neighbour strictly better), best first.
+    let (na, ns) = (ALPHA_STEPS / COARSE_ALPHA, SIGMA_STEPS);
+    let mut minima: Vec<(f64, usize, usize)> = Vec::new();
+    for ca in 0..=na {
+        for s in 0..=ns {
+            let v = score(&scores, ca * COARSE_ALPHA, s);
+            let mut lowest = true;
+            for (da, ds) in [
+                (-1, -1),
+                (-1, 0),
+                (-1, 1),
+                (0, -1),
+                (0, 1),
+                (1, -1),
+                (1, 0),
+                (1, 1),
+            ] {
+                let (qa, qs) = (ca as i64 + da, s as i64 + ds);
+                if qa < 0 || qs < 0 || qa > na as i64 || qs > ns as i64 {
+                    continue;
+                }
+                if score(&scores, qa as usize * COARSE_ALPHA, qs as usize) < v {
+                    lowest = false;
+                    break;
+                }
+            }
+            if lowest {
+                minima.push((v, ca * COARSE_ALPHA, s));
             }
         }
     }
-    let p = grid_params((best.1, best.2));
+    minima.sort_by(|x, y| x.0.total_cmp(&y.0).then((x.1, x.2).cmp(&(y.1, y.2))));
+    // Stage 2: a full-resolution window from each of the best minima, moved
+    // to its best candidate until that is its centre.
+    let mut starts: Vec<(usize, usize)> = Vec::new();
+    for &(_, a, s) in &minima {
+        if starts.len() == STARTS {
+            break;
+        }
+        // Minima along the α = 0 line are one candidate.
+        if !starts.iter().any(|&(sa, ss)| key(sa, ss) == key(a, s)) {
+            starts.push((a, s));
+        }
+    }
+    for (mut a, mut s) in starts {
+        for _ in 0..=ALPHA_STEPS + SIGMA_STEPS {
+            let a_win = a.saturating_sub(WINDOW.0)..=(a + WINDOW.0).min(ALPHA_STEPS);
+            let s_win = s.saturating_sub(WINDOW.1)..=(s + WINDOW.1).min(SIGMA_STEPS);
+            for ws in s_win.clone() {
+                evaluate(ws, &mut a_win.clone(), &mut scores)?;
+            }
+            let mut best = (score(&scores, a, s), a, s);
+            for wa in a_win.clone() {
+                for ws in s_win.clone() {
+                    let v = score(&scores, wa, ws);
+                    if v < best.0 || (v == best.0 && (wa, ws) < (best.1, best.2)) {
+                        best = (v, wa, ws);
+                    }
+                }
+            }
+            if (best.1, best.2) == (a, s) {
+                break;
+            }
+            (a, s) = (best.1, best.2);
+        }
+    }
+    // The optimum over everything scored, ties to the first in (α, σ) order.
+    let mut all: Vec<((usize, usize), f64)> = scores.iter().map(|(&k, &v)| (k, v)).collect();
+    all.sort_by(|x, y| x.1.total_cmp(&y.1).then(x.0.cmp(&y.0)));
+    let ((ba, bs), distance) = all[0];
+    let p = grid_params(ba, bs);
+    let margin = valley_margin(distance);
+    let (mut alpha_range, mut sigma_range) = ((p.alpha, p.alpha), (p.sigma_um, p.sigma_um));
+    for &((a, s), v) in &all {
+        if v > distance + margin {
+            break;
+        }
+        let q = grid_params(a, s);
+        alpha_range = (alpha_range.0.min(q.alpha), alpha_range.1.max(q.alpha));
+        let (lo, hi) = if a == ALPHA_ZERO {
+            (
+                grid_params(0, 0).sigma_um,
+                grid_params(0, SIGMA_STEPS).sigma_um,
+            )
+        } else {
+            (q.sigma_um, q.sigma_um)
+        };
+        sigma_range = (sigma_range.0.min(lo), sigma_range.1.max(hi));
+    }
     Ok(FitResult {
         alpha: p.alpha,
         sigma_um: p.sigma_um,
-        distance: best.0,
-        evaluations: cache.len(),
+        distance,
+        evaluations: scores.len(),
+        alpha_range,
+        sigma_range_um: sigma_range,
     })
 }
 

@@ -607,8 +607,21 @@ pub struct FitRow {
     pub alpha: f64,
     /// σ (µm).
     pub sigma_um: f64,
-    /// Histogram distance at the optimum (fitted samples only).
-    pub distance: Option<f64>,
+    /// The search's outcome (fitted samples only).
+    pub fit: Option<SampleFit>,
+}
+
+/// What the search found for one sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SampleFit {
+    /// Axis of the sample.
+    pub axis: crate::micro::fit::Axis,
+    /// Histogram half range used for target and candidates.
+    pub range: f64,
+    /// The optimum, its distance and valley.
+    pub result: crate::micro::fit::FitResult,
+    /// Seconds the search took.
+    pub seconds: f64,
 }
 
 /// What `skinpatch fit` found.
@@ -622,30 +635,44 @@ pub struct FitReport {
     pub lines: crate::micro::fit::ModelLines,
     /// The kernel file written, if the samples file names one.
     pub written: Option<PathBuf>,
-    /// Where the candidates were evaluated (`None` without map samples).
+    /// Where the candidates were counted (`None` without map samples).
     pub device: Option<String>,
 }
 
+/// Whether the fit counts on the GPU: a hardware adapter only (a software
+/// one such as lavapipe counts slower than the CPU path), unless
+/// `SKINPATCH_REQUIRE_GPU=1` asks for the GPU.
+fn fit_on_gpu(ctx: &crate::gpu::Context) -> bool {
+    ctx.info.device_type != wgpu::DeviceType::Cpu || crate::gpu::gpu_required()
+}
+
 /// Runs a `skinpatch fit` samples file (see [`crate::scenario::FitSamples`]).
-pub fn fit(path: &std::path::Path) -> Result<FitReport> {
-    use crate::micro::fit::{fit_model, fit_params, Axis, FittedPoint, HistogramSettings};
+/// `progress(sample, samples, fraction)` follows each sample's search.
+pub fn fit(
+    path: &std::path::Path,
+    mut progress: impl FnMut(usize, usize, f64),
+) -> Result<FitReport> {
+    use crate::micro::fit::{fit_model, Axis, FittedPoint, HistogramSettings, Objective};
     use crate::micro::io::{read_map, MapDefaults, TexelSize};
     use crate::micro::NormalHistogram;
     let samples: crate::scenario::FitSamples = crate::scenario::read_toml_file(path)?;
     let base = path.parent().unwrap_or(std::path::Path::new("."));
-    let hist = HistogramSettings {
-        bins: samples
-            .bins
-            .unwrap_or(crate::micro::normals::HISTOGRAM_BINS),
-        range: samples
-            .range
-            .unwrap_or(crate::micro::normals::HISTOGRAM_RANGE),
-    };
-    if hist.bins < 2 || hist.range.is_nan() || hist.range <= 0.0 {
+    let bins = samples
+        .bins
+        .unwrap_or(crate::micro::normals::HISTOGRAM_BINS);
+    if !(2..=1024).contains(&bins) {
         return Err(Error::parameter(
-            "bins, range",
-            "need bins ≥ 2 and range > 0",
+            "bins",
+            format!("must be in 2..=1024, got {bins}"),
         ));
+    }
+    if let Some(range) = samples.range {
+        if !(range.is_finite() && range > 0.0 && range <= 1.0) {
+            return Err(Error::parameter(
+                "range",
+                format!("must be in (0, 1] (a normal's tangent component), got {range}"),
+            ));
+        }
     }
     let defaults = MapDefaults {
         texel: TexelSize::Um(samples.texel_um.unwrap_or(1.0)),
@@ -660,15 +687,12 @@ pub fn fit(path: &std::path::Path) -> Result<FitReport> {
             .as_ref()
             .ok_or_else(|| Error::parameter("neutral", "is required to fit [[sample]] maps"))?;
         let neutral = read_map(&base.join(neutral_path), &defaults)?;
-        let ctx = crate::gpu::acquire()?;
-        let gpu_fit = match &ctx {
-            Some(c) => crate::gpu::or_cpu(crate::gpu::fit::GpuFit::new(c, &neutral))?,
-            None => None,
-        };
-        device = Some(match (&ctx, &gpu_fit) {
-            (Some(c), Some(_)) => format!("GPU: {}", c.describe()),
-            _ => "CPU reference (no GPU adapter)".to_string(),
+        let ctx = crate::gpu::acquire()?.filter(fit_on_gpu);
+        device = Some(match &ctx {
+            Some(c) => format!("GPU: {}", c.describe()),
+            None => "CPU".to_string(),
         });
+        let total = samples.sample.len();
         for (k, s) in samples.sample.iter().enumerate() {
             let axis = match s.axis.as_str() {
                 "u" => Axis::U,
@@ -680,22 +704,38 @@ pub fn fit(path: &std::path::Path) -> Result<FitReport> {
                     ))
                 }
             };
-            if !(s.r.is_finite() && s.r > 0.0) {
+            if !(s.r.is_finite() && s.r >= 0.1 && s.r <= 10.0) {
                 return Err(Error::parameter(
                     format!("sample[{k}].r"),
-                    format!("must be > 0, got {}", s.r),
+                    format!("must be in [0.1, 10], got {}", s.r),
                 ));
             }
-            let (target, source) = match (&s.map, &s.histogram) {
+            let (target, range, source) = match (&s.map, &s.histogram) {
                 (Some(map), None) => {
                     let deformed = read_map(&base.join(map), &defaults)?;
-                    let h = NormalHistogram::of(&deformed, hist.bins, hist.range, [1.0, 1.0]);
-                    (h, map.display().to_string())
+                    let range = samples.range.unwrap_or_else(|| {
+                        crate::micro::fit::auto_range(&[
+                            &crate::micro::fit::resample(&neutral, axis, s.r),
+                            &deformed,
+                        ])
+                    });
+                    let h = NormalHistogram::of(&deformed, bins, range, [1.0, 1.0]);
+                    (h, range, map.display().to_string())
                 }
-                (None, Some(file)) => (
-                    read_histogram(&base.join(file), hist)?,
-                    file.display().to_string(),
-                ),
+                (None, Some(file)) => {
+                    let range = samples.range.ok_or_else(|| {
+                        Error::parameter(
+                            format!("sample[{k}].histogram"),
+                            "needs `range` in the samples file: the half range its cells cover",
+                        )
+                    })?;
+                    let hist = HistogramSettings { bins, range };
+                    (
+                        read_histogram(&base.join(file), hist)?,
+                        range,
+                        file.display().to_string(),
+                    )
+                }
                 _ => {
                     return Err(Error::parameter(
                         format!("sample[{k}]"),
@@ -703,21 +743,46 @@ pub fn fit(path: &std::path::Path) -> Result<FitReport> {
                     ))
                 }
             };
-            let result = match &gpu_fit {
-                Some(f) => f.fit_params(&target, axis, s.r, hist)?,
-                None => fit_params(&neutral, &target, axis, s.r, hist),
+            let hist = HistogramSettings { bins, range };
+            let objective = Objective::new(&neutral, &target, axis, s.r, hist);
+            let start = std::time::Instant::now();
+            let on_gpu = match &ctx {
+                Some(c) => {
+                    crate::gpu::or_cpu(crate::gpu::fit::GpuFit::new(c, &objective.base, bins))?
+                }
+                None => None,
             };
+            let result = match &on_gpu {
+                Some(f) => f.fit_params(&objective, |x| progress(k, total, x))?,
+                None => crate::micro::fit::search(
+                    &objective,
+                    |b, d, alphas| {
+                        Ok(crate::micro::fit::count_histograms(
+                            b, d, alphas, bins, range,
+                        ))
+                    },
+                    |x| progress(k, total, x),
+                )?,
+            };
+            let seconds = start.elapsed().as_secs_f64();
             log::info!(
-                "fitted {source}: α {:.2}, σ {:.1} µm",
+                "fitted {source}: α {:.2}, σ {:.1} µm, TV {:.4} ({} candidates, {seconds:.1} s)",
                 result.alpha,
-                result.sigma_um
+                result.sigma_um,
+                result.distance,
+                result.evaluations
             );
             rows.push(FitRow {
                 source,
                 r: s.r,
                 alpha: result.alpha,
                 sigma_um: result.sigma_um,
-                distance: Some(result.distance),
+                fit: Some(SampleFit {
+                    axis,
+                    range,
+                    result,
+                    seconds,
+                }),
             });
         }
     }
@@ -727,7 +792,7 @@ pub fn fit(path: &std::path::Path) -> Result<FitReport> {
             r: p.r,
             alpha: p.alpha,
             sigma_um: p.sigma_um,
-            distance: None,
+            fit: None,
         });
     }
     let points: Vec<FittedPoint> = rows
@@ -745,8 +810,38 @@ pub fn fit(path: &std::path::Path) -> Result<FitReport> {
             let section = crate::scenario::KernelSection::of(&model);
             let body =
                 toml::to_string(&section).map_err(|e| Error::io(&out, std::io::Error::other(e)))?;
+            let mut fitted = String::new();
+            for row in &rows {
+                match &row.fit {
+                    Some(f) => {
+                        let v = &f.result;
+                        fitted += &format!(
+                            "#   {}: r {}, axis {:?}, bins {bins}, range {}: α {:.2}, σ {:.1} µm, \
+                             TV {:.4}; within {:.4}: α {:.2}…{:.2}, σ {:.1}…{:.1} µm\n",
+                            row.source,
+                            row.r,
+                            f.axis,
+                            f.range,
+                            v.alpha,
+                            v.sigma_um,
+                            v.distance,
+                            crate::micro::fit::valley_margin(v.distance),
+                            v.alpha_range.0,
+                            v.alpha_range.1,
+                            v.sigma_range_um.0,
+                            v.sigma_range_um.1
+                        )
+                    }
+                    None => {
+                        fitted += &format!(
+                            "#   point: r {}, α {}, σ {} µm\n",
+                            row.r, row.alpha, row.sigma_um
+                        )
+                    }
+                }
+            }
             let text = format!(
-                "# Kernel model fitted by `skinpatch fit` from {}.\n\
+                "# Kernel model fitted by `skinpatch fit` from {}:\n{fitted}\
                  # Use it with [microstructure] kernel_file = \"…\".\n{body}",
                 path.display()
             );
