@@ -213,9 +213,18 @@ fn fit(samples: &Path) -> anyhow::Result<()> {
         );
     }
     let l = &report.lines;
+    let knots: Vec<String> = report
+        .model
+        .alpha
+        .points
+        .iter()
+        .map(|(r, a)| format!("({r:.3}, {a:.3})"))
+        .collect();
     line(format!(
-        "model: α = {:.3}·(r − 1) for r < 1, {:.3}·(r − 1) for r ≥ 1, clamped to [−2, 1]",
-        l.alpha_compression_slope, l.alpha_stretch_slope
+        "model: α = {:.3}·(r − 1) next to r = 1 below, {:.3}·(r − 1) above; through (r, α) = {}",
+        l.alpha_compression_slope,
+        l.alpha_stretch_slope,
+        knots.join(", ")
     ));
     line(format!(
         "       σ = {:.2}·r {:+.2} µm for r < 1, {:.2}·r {:+.2} µm for r ≥ 1 (at least 1 µm)",

@@ -26,9 +26,11 @@
 //! given: the same ±range for the target and every candidate.
 //!
 //! [`fit_model`] turns fitted (r, α, σ) points into a kernel model the way the
-//! seed does: α(r) as two lines through (1, 0) exactly — one fitted by least
-//! squares to the compression points, one to the stretch points — clamped
-//! to [−2, 1]; σ(r) as one least-squares line over the compression points
+//! seed does: α(r) as connected line segments through (1, 0) exactly —
+//! by default one per side, more where the samples file breaks the range of
+//! r (the seed partitions it by inspecting the data; its eq. 8 has a break
+//! at r ≈ 0.87) — fitted by least squares and clamped to [−2, 1]; σ(r) as
+//! one least-squares line over the compression points
 //! and another over the stretch points (a jump at r = 1 is allowed), floored
 //! at 1 µm.
 
@@ -601,13 +603,13 @@ pub struct FittedPoint {
     pub sigma_um: f64,
 }
 
-/// The lines of a fitted model, for reports: α = slope·(r − 1) on each side,
-/// σ = a·r + b on each side.
+/// The lines of a fitted model, for reports: α's slope on each side of
+/// r = 1 (its segments adjacent to (1, 0)), σ = a·r + b on each side.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ModelLines {
-    /// α slope for r < 1.
+    /// α slope just below r = 1.
     pub alpha_compression_slope: f64,
-    /// α slope for r > 1.
+    /// α slope just above r = 1.
     pub alpha_stretch_slope: f64,
     /// σ = a·r + b for r < 1 (µm).
     pub sigma_compression: (f64, f64),
@@ -615,12 +617,108 @@ pub struct ModelLines {
     pub sigma_stretch: (f64, f64),
 }
 
-/// Least-squares slope of y = k·(r − 1).
-fn slope_through_one(points: &[(f64, f64)]) -> Option<f64> {
-    let (num, den) = points.iter().fold((0.0, 0.0), |(n, d), &(r, y)| {
-        (n + (r - 1.0) * y, d + (r - 1.0) * (r - 1.0))
-    });
-    (den > 0.0).then(|| num / den)
+/// The smallest σ of a fitted model (µm).
+const SIGMA_FLOOR_UM: f64 = 1.0;
+
+/// α at the clamps of the model.
+const ALPHA_LIMITS: (f64, f64) = (-2.0, 1.0);
+
+/// The continuous piecewise-linear α(r) through (1, 0) with knots at `ends`,
+/// at 1 and at `breaks`, fitted by least squares to `points` and clamped to
+/// [−2, 1]. A point at a clamp value (a saturated sample) counts only while
+/// the unclamped model is inside the clamp there: beyond it the clamped
+/// model meets it exactly. The knot values are the unknowns (hat
+/// functions); the value at 1 is 0.
+fn fit_alpha(points: &[(f64, f64)], ends: (f64, f64), breaks: &[f64]) -> Result<PiecewiseLinear> {
+    let mut knots: Vec<f64> = vec![ends.0, 1.0, ends.1];
+    knots.extend_from_slice(breaks);
+    knots.sort_by(f64::total_cmp);
+    knots.dedup();
+    let free: Vec<usize> = (0..knots.len()).filter(|&k| knots[k] != 1.0).collect();
+    // Hat-function weights of point r on each free knot.
+    let row = |r: f64| -> Vec<f64> {
+        let mut w = vec![0.0; knots.len()];
+        let k = knots.partition_point(|&t| t <= r).clamp(1, knots.len() - 1);
+        let (t0, t1) = (knots[k - 1], knots[k]);
+        let f = (r - t0) / (t1 - t0);
+        w[k - 1] = 1.0 - f;
+        w[k] = f;
+        free.iter().map(|&j| w[j]).collect()
+    };
+    for pair in knots.windows(2) {
+        if !points.iter().any(|&(r, _)| r >= pair[0] && r <= pair[1]) {
+            return Err(Error::parameter(
+                "alpha_breaks",
+                format!(
+                    "the α segment from r = {} to {} has no sample; move or drop a break",
+                    pair[0], pair[1]
+                ),
+            ));
+        }
+    }
+    let saturated = |a: f64| a <= ALPHA_LIMITS.0 + 1e-9 || a >= ALPHA_LIMITS.1 - 1e-9;
+    let mut values = vec![0.0; free.len()];
+    let mut left_out: Vec<bool> = vec![false; points.len()];
+    for _ in 0..10 {
+        let used: Vec<&(f64, f64)> = points
+            .iter()
+            .zip(&left_out)
+            .filter(|(_, &out)| !out)
+            .map(|(p, _)| p)
+            .collect();
+        let a = nalgebra::DMatrix::from_fn(used.len(), free.len(), |i, j| row(used[i].0)[j]);
+        let b = nalgebra::DVector::from_iterator(used.len(), used.iter().map(|p| p.1));
+        let solution = a
+            .svd(true, true)
+            .solve(&b, 1e-12)
+            .map_err(|e| Error::parameter("samples", format!("α fit failed: {e}")))?;
+        values = solution.iter().copied().collect();
+        let model = |r: f64| row(r).iter().zip(&values).map(|(w, v)| w * v).sum::<f64>();
+        let next: Vec<bool> = points
+            .iter()
+            .map(|&(r, a)| {
+                saturated(a)
+                    && ((a < 0.0 && model(r) <= ALPHA_LIMITS.0)
+                        || (a > 0.0 && model(r) >= ALPHA_LIMITS.1))
+            })
+            .collect();
+        if next == left_out {
+            break;
+        }
+        left_out = next;
+    }
+    let mut table: Vec<(f64, f64)> = Vec::new();
+    let mut value_at = free.iter().zip(&values);
+    let mut knot_values: Vec<(f64, f64)> = knots
+        .iter()
+        .map(|&t| {
+            if t == 1.0 {
+                (t, 0.0)
+            } else {
+                let (_, &v) = value_at.next().expect("one value per free knot");
+                (t, v)
+            }
+        })
+        .collect();
+    // Corners where a segment crosses a clamp, then the clamped values.
+    for pair in knot_values.windows(2) {
+        let ((r0, v0), (r1, v1)) = (pair[0], pair[1]);
+        table.push((r0, v0));
+        for limit in [ALPHA_LIMITS.0, ALPHA_LIMITS.1] {
+            if (v0 - limit) * (v1 - limit) < 0.0 {
+                table.push((r0 + (limit - v0) / (v1 - v0) * (r1 - r0), limit));
+            }
+        }
+    }
+    table.push(knot_values.pop().expect("three knots at least"));
+    table.sort_by(|x, y| x.0.total_cmp(&y.0));
+    table.dedup_by(|x, y| x.0 == y.0);
+    Ok(PiecewiseLinear {
+        points: table
+            .into_iter()
+            .map(|(r, v)| (r, v.clamp(ALPHA_LIMITS.0, ALPHA_LIMITS.1)))
+            .collect(),
+    })
 }
 
 /// Least-squares line y = a·r + b (a constant for a single point).
@@ -643,9 +741,14 @@ fn line(points: &[(f64, f64)]) -> Option<(f64, f64)> {
     Some((a, my - a * mr))
 }
 
-/// Fits a kernel model to points (see the module docs). Needs at least one
-/// point with r < 1 and one with r > 1.
-pub fn fit_model(points: &[FittedPoint]) -> Result<(KernelModel, ModelLines)> {
+/// Fits a kernel model to points (see the module docs); `alpha_breaks` are
+/// extra knots of α(r) (the seed partitions r by inspecting the data; none
+/// gives one line per side). Needs at least one point with r < 1 and one
+/// with r > 1.
+pub fn fit_model(
+    points: &[FittedPoint],
+    alpha_breaks: &[f64],
+) -> Result<(KernelModel, ModelLines)> {
     let side = |compression: bool, f: fn(&FittedPoint) -> f64| -> Vec<(f64, f64)> {
         points
             .iter()
@@ -657,8 +760,6 @@ pub fn fit_model(points: &[FittedPoint]) -> Result<(KernelModel, ModelLines)> {
         key: "samples".into(),
         reason: "fitting a model needs samples with r < 1 and with r > 1".into(),
     };
-    let kc = slope_through_one(&side(true, |p| p.alpha)).ok_or_else(need)?;
-    let ks = slope_through_one(&side(false, |p| p.alpha)).ok_or_else(need)?;
     let sc = line(&side(true, |p| p.sigma_um)).ok_or_else(need)?;
     let ss = line(&side(false, |p| p.sigma_um)).ok_or_else(need)?;
     let r_min = points
@@ -671,29 +772,40 @@ pub fn fit_model(points: &[FittedPoint]) -> Result<(KernelModel, ModelLines)> {
         .map(|p| p.r)
         .fold(f64::NEG_INFINITY, f64::max)
         .max(1.5);
-    // α: where each line reaches its clamp (if inside the range), then ends.
-    let mut alpha = vec![(1.0, 0.0)];
-    let mut push_side = |k: f64, end: f64| {
-        let clamp_at = |v: f64| 1.0 + v / k;
-        let limit = if (k > 0.0) == (end > 1.0) { 1.0 } else { -2.0 };
-        let corner = if k != 0.0 { clamp_at(limit) } else { f64::NAN };
-        if corner.is_finite()
-            && (corner - 1.0) * (end - 1.0) > 0.0
-            && (corner - 1.0).abs() < (end - 1.0).abs()
-        {
-            alpha.push((corner, limit));
-        } else {
-            alpha.push((end, (k * (end - 1.0)).clamp(-2.0, 1.0)));
+    for (k, &b) in alpha_breaks.iter().enumerate() {
+        if !(b.is_finite() && b > r_min && b < r_max && b != 1.0) {
+            return Err(Error::parameter(
+                format!("alpha_breaks[{k}]"),
+                format!("must lie in ({r_min}, {r_max}) and differ from 1, got {b}"),
+            ));
         }
+    }
+    let samples: Vec<(f64, f64)> = points.iter().map(|p| (p.r, p.alpha)).collect();
+    let alpha = fit_alpha(&samples, (r_min, r_max), alpha_breaks)?;
+    let slope_at_one = |below: bool| {
+        let p = &alpha.points;
+        let k = p.partition_point(|q| q.0 < 1.0);
+        let (a, b) = if below {
+            (p[k - 1], p[k])
+        } else {
+            (p[k], p[k + 1])
+        };
+        (b.1 - a.1) / (b.0 - a.0)
     };
-    push_side(kc, r_min);
-    push_side(ks, r_max);
-    alpha.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let sigma_table = |(a, b): (f64, f64), lo: f64, hi: f64| PiecewiseLinear {
-        points: vec![(lo, (a * lo + b).max(1.0)), (hi, (a * hi + b).max(1.0))],
+    let (kc, ks) = (slope_at_one(true), slope_at_one(false));
+    // σ = a·r + b floored at 1 µm, with a corner where the line crosses
+    // the floor (flooring only the ends would bend the line).
+    let sigma_table = |(a, b): (f64, f64), lo: f64, hi: f64| {
+        let (at_lo, at_hi) = (a * lo + b, a * hi + b);
+        let mut points = vec![(lo, at_lo.max(SIGMA_FLOOR_UM))];
+        if (at_lo - SIGMA_FLOOR_UM) * (at_hi - SIGMA_FLOOR_UM) < 0.0 {
+            points.push(((SIGMA_FLOOR_UM - b) / a, SIGMA_FLOOR_UM));
+        }
+        points.push((hi, at_hi.max(SIGMA_FLOOR_UM)));
+        PiecewiseLinear { points }
     };
     let model = KernelModel {
-        alpha: PiecewiseLinear { points: alpha },
+        alpha,
         sigma_compression_um: sigma_table(sc, r_min, 1.0),
         sigma_stretch_um: sigma_table(ss, 1.0, r_max),
     };

@@ -803,7 +803,7 @@ pub fn fit(
             sigma_um: r.sigma_um,
         })
         .collect();
-    let (model, lines) = fit_model(&points)?;
+    let (model, lines) = fit_model(&points, &samples.alpha_breaks)?;
     let written = match &samples.output {
         Some(out) => {
             let out = base.join(out);

@@ -319,6 +319,10 @@ pub struct FitSamples {
     pub range: Option<f64>,
     /// Where to write the fitted model, relative to this file.
     pub output: Option<PathBuf>,
+    /// Extra knots of the fitted α(r) (stretch ratios ≠ 1): the α model is
+    /// connected line segments between them, through (1, 0).
+    #[serde(default)]
+    pub alpha_breaks: Vec<f64>,
     /// Deformed maps to fit.
     #[serde(default)]
     pub sample: Vec<FitSample>,
