@@ -527,21 +527,30 @@ fn fitting_sweep_recovers_every_target() {
     assert!(worst.0 <= 0.01 + 1e-9 && worst.1 <= 0.5 + 1e-9, "{table}");
 }
 
-/// The seed's Fig. 11 points give a model through (1, 0) that blurs when
-/// stretched and sharpens when compressed.
-#[test]
-fn fitting_the_seed_points_gives_a_neutral_model() {
-    use skinpatch::micro::fit::{fit_model, FittedPoint};
-    let r = [0.73, 0.79, 0.88, 0.94, 1.08, 1.15, 1.22, 1.28];
-    let alpha = [-2.0, -1.76, -0.2, -0.02, 0.54, 0.27, 1.0, 1.0];
-    let sigma = [6.5, 6.5, 13.0, 22.0, 14.5, 19.0, 17.0, 24.0];
-    let points: Vec<FittedPoint> = (0..8)
-        .map(|k| FittedPoint {
+/// The seed's Fig. 11 table (forehead): r, α, σ (µm).
+const SEED_TABLE: ([f64; 8], [f64; 8], [f64; 8]) = (
+    [0.73, 0.79, 0.88, 0.94, 1.08, 1.15, 1.22, 1.28],
+    [-2.0, -1.76, -0.2, -0.02, 0.54, 0.27, 1.0, 1.0],
+    [6.5, 6.5, 13.0, 22.0, 14.5, 19.0, 17.0, 24.0],
+);
+
+fn seed_table() -> Vec<skinpatch::micro::fit::FittedPoint> {
+    let (r, alpha, sigma) = SEED_TABLE;
+    (0..8)
+        .map(|k| skinpatch::micro::fit::FittedPoint {
             r: r[k],
             alpha: alpha[k],
             sigma_um: sigma[k],
         })
-        .collect();
+        .collect()
+}
+
+/// The seed's Fig. 11 points give a model through (1, 0) that blurs when
+/// stretched and sharpens when compressed.
+#[test]
+fn fitting_the_seed_points_gives_a_neutral_model() {
+    use skinpatch::micro::fit::fit_model;
+    let points = seed_table();
     let (model, lines) = fit_model(&points, &[]).unwrap();
     assert_eq!(model.params(1.0).alpha, 0.0);
     assert!(
@@ -568,17 +577,9 @@ fn fitting_the_seed_points_gives_a_neutral_model() {
 /// seed's lines were drawn by hand, these are least squares).
 #[test]
 fn the_seed_table_gives_the_seed_model() {
-    use skinpatch::micro::fit::{fit_model, FittedPoint};
-    let r = [0.73, 0.79, 0.88, 0.94, 1.08, 1.15, 1.22, 1.28];
-    let alpha = [-2.0, -1.76, -0.2, -0.02, 0.54, 0.27, 1.0, 1.0];
-    let sigma = [6.5, 6.5, 13.0, 22.0, 14.5, 19.0, 17.0, 24.0];
-    let points: Vec<FittedPoint> = (0..8)
-        .map(|k| FittedPoint {
-            r: r[k],
-            alpha: alpha[k],
-            sigma_um: sigma[k],
-        })
-        .collect();
+    use skinpatch::micro::fit::fit_model;
+    let (r, alpha, sigma) = SEED_TABLE;
+    let points = seed_table();
     let (model, lines) = fit_model(&points, &[0.87]).unwrap();
     let eq8 = |r: f64| (15.4 * r - 13.8).min(3.09 * (r - 1.0)).clamp(-2.0, 1.0);
     let eq9 = |r: f64| {

@@ -567,8 +567,9 @@ impl Simulation {
     /// offered to `update` once more with `true`: it may refine the
     /// constraints (re-project contact planes) and return `true`; the
     /// convergence test then applies to the refined problem (at most
-    /// [`MAX_REFINEMENTS`] refinements per solve). Each Newton step moves the constrained directions onto
-    /// their targets and solves the free ones with that move's coupling
+    /// [`MAX_REFINEMENTS`] refinements per solve). Each Newton step moves
+    /// the constrained directions onto their targets and solves the free
+    /// ones with that move's coupling
     /// (`S K S y = S (r − K d)`), so a target that moves every iteration —
     /// a contact node re-projected onto a curved probe — costs no extra solve.
     pub fn solve_with<U>(&mut self, context: &str, mut update: U) -> Result<NewtonStats>

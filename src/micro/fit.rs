@@ -483,13 +483,8 @@ pub fn search(
         Ok(())
     };
     // Stage 1: every σ, every tenth α.
-    let coarse = |s| {
-        (0..=ALPHA_STEPS)
-            .step_by(COARSE_ALPHA)
-            .map(move |a| key(a, s).0)
-    };
     for s in 0..=SIGMA_STEPS {
-        evaluate(s, &mut coarse(s), &mut scores)?;
+        evaluate(s, &mut (0..=ALPHA_STEPS).step_by(COARSE_ALPHA), &mut scores)?;
         progress((s + 1) as f64 / (SIGMA_STEPS + 1) as f64);
     }
     let score = |scores: &HashMap<(usize, usize), f64>, a: usize, s: usize| scores[&key(a, s)];

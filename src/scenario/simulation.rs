@@ -108,9 +108,9 @@ pub struct ProbeSection {
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct SolverSection {
-    /// Linear solver for Newton steps: `cg` (block-Jacobi PCG, default),
-    /// `two-level` (PCG with block Jacobi plus a coarse rigid-mode
-    /// correction), `factored-cg` (PCG with a reused Cholesky factor) or
+    /// Linear solver for Newton steps: `two-level` (PCG with block Jacobi
+    /// plus a coarse rigid-mode correction, default), `cg` (block-Jacobi
+    /// PCG), `factored-cg` (PCG with a reused Cholesky factor) or
     /// `direct` (sparse Cholesky).
     pub linear: String,
     /// Relative residual at which a frame is in equilibrium. Default 1e-6.
