@@ -153,35 +153,37 @@ pub fn resample(map: &DisplacementMap, axis: Axis, r: f64) -> DisplacementMap {
         Axis::V => (map.width, n_out),
     };
     let mut data = vec![0.0f32; width * height];
-    data.par_chunks_mut(width).enumerate().for_each(|(j, row)| {
-        for (i, out) in row.iter_mut().enumerate() {
-            let (first, w) = match axis {
-                Axis::U => taps[i],
-                Axis::V => taps[j],
-            };
-            let mut sum = 0.0f64;
-            if first >= 0 && first as usize + 3 < along {
-                // All four taps inside: no edge handling.
-                let (at, stride) = match axis {
-                    Axis::U => (j * map.width + first as usize, 1),
-                    Axis::V => (first as usize * map.width + i, map.width),
+    data.par_chunks_mut(width.max(1))
+        .enumerate()
+        .for_each(|(j, row)| {
+            for (i, out) in row.iter_mut().enumerate() {
+                let (first, w) = match axis {
+                    Axis::U => taps[i],
+                    Axis::V => taps[j],
                 };
-                for (k, wk) in w.iter().enumerate() {
-                    sum += wk * map.data[at + k * stride] as f64;
-                }
-            } else {
-                for (k, wk) in w.iter().enumerate() {
-                    let at = first + k as isize;
-                    let h = match axis {
-                        Axis::U => map.texel(at, j as isize),
-                        Axis::V => map.texel(i as isize, at),
+                let mut sum = 0.0f64;
+                if first >= 0 && first as usize + 3 < along {
+                    // All four taps inside: no edge handling.
+                    let (at, stride) = match axis {
+                        Axis::U => (j * map.width + first as usize, 1),
+                        Axis::V => (first as usize * map.width + i, map.width),
                     };
-                    sum += wk * h as f64;
+                    for (k, wk) in w.iter().enumerate() {
+                        sum += wk * map.data[at + k * stride] as f64;
+                    }
+                } else {
+                    for (k, wk) in w.iter().enumerate() {
+                        let at = first + k as isize;
+                        let h = match axis {
+                            Axis::U => map.texel(at, j as isize),
+                            Axis::V => map.texel(i as isize, at),
+                        };
+                        sum += wk * h as f64;
+                    }
                 }
+                *out = sum as f32;
             }
-            *out = sum as f32;
-        }
-    });
+        });
     DisplacementMap {
         width,
         height,
