@@ -586,8 +586,14 @@ fn fit_prints_the_table_and_writes_a_usable_kernel_file() {
         "{out}"
     );
     assert!(out.contains("model: α ="), "{out}");
-    // The kernel file drives a scenario.
+    // The kernel file records every sample's fit and histogram window.
     let kernel = dir.path().join("kernel.toml");
+    let header = std::fs::read_to_string(&kernel).unwrap();
+    assert!(
+        header.contains("#   blurred.png: r 1, axis U, bins 64, range 0.5: α "),
+        "{header}"
+    );
+    // The kernel file drives a scenario.
     let (_, o) = run_press_small_with(
         dir.path(),
         &format!(
@@ -604,6 +610,18 @@ fn fit_prints_the_table_and_writes_a_usable_kernel_file() {
     .unwrap();
     let o = skinpatch(&["fit", dir.path().join("both.toml").to_str().unwrap()]);
     assert!(text(&o.stderr).contains("sample[0]"), "{}", text(&o.stderr));
+    // A histogram target needs the range its cells cover.
+    std::fs::write(
+        dir.path().join("no_range.toml"),
+        "neutral = \"neutral.png\"\n[[sample]]\nhistogram = \"target.csv\"\nr = 1.0\naxis = \"u\"\n",
+    )
+    .unwrap();
+    let o = skinpatch(&["fit", dir.path().join("no_range.toml").to_str().unwrap()]);
+    let err = text(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("sample[0].histogram") && err.contains("range"),
+        "{err}"
+    );
     // A broken samples file names itself and the line.
     std::fs::write(
         dir.path().join("bad.toml"),
