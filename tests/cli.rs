@@ -120,17 +120,48 @@ fn runs_are_deterministic() {
 }
 
 /// Reads the file with the Python package meshio when it is installed
-/// (`.ci/run` installs it and sets SKINPATCH_REQUIRE_MESHIO=1).
+/// (`.ci/run` installs it and sets SKINPATCH_REQUIRE_MESHIO=1): the counts,
+/// integer cells, and a conversion to Gmsh (`.msh`, the arrays with 1, 3 or
+/// 9 components that format carries) and back with the same cells and the
+/// same point and cell data.
 fn meshio_agrees(path: &Path, points: usize, tets: usize) {
     let script = format!(
-        "import meshio; m = meshio.read({:?}); \
-         print(len(m.points), sum(len(c.data) for c in m.cells if c.type == 'tetra'))",
-        path.to_str().unwrap()
+        r#"
+import meshio, numpy as np, os, tempfile
+m = meshio.read({path:?})
+tetra = [c.data for c in m.cells if c.type == "tetra"]
+assert len(tetra) == 1 and np.issubdtype(tetra[0].dtype, np.integer), [c.data.dtype for c in m.cells]
+keep = lambda v: v.ndim == 1 or v.shape[1] in (1, 3, 9)
+point_data = {{k: v for k, v in m.point_data.items() if keep(v)}}
+cell_data = {{k: v for k, v in m.cell_data.items() if keep(v[0])}}
+out = meshio.Mesh(m.points, [("tetra", tetra[0])], point_data=point_data, cell_data=cell_data)
+msh = os.path.join(tempfile.mkdtemp(), "frame.msh")
+meshio.write(msh, out, file_format="gmsh22", binary=True)
+back = meshio.read(msh)
+assert np.array_equal(back.cells_dict["tetra"], tetra[0])
+assert np.array_equal(back.points, m.points)
+for k, v in point_data.items():
+    assert np.array_equal(back.point_data[k].reshape(v.shape), v, equal_nan=True), k
+for k, v in cell_data.items():
+    assert np.array_equal(back.cell_data[k][0].reshape(v[0].shape), v[0], equal_nan=True), k
+print(len(m.points), len(tetra[0]), len(point_data), len(cell_data))
+"#,
+        path = path.to_str().unwrap()
     );
     let required = std::env::var("SKINPATCH_REQUIRE_MESHIO").is_ok_and(|v| v == "1");
     match Command::new("python3").args(["-c", &script]).output() {
         Ok(o) if o.status.success() => {
-            assert_eq!(text(&o.stdout).trim(), format!("{points} {tets}"));
+            let out = text(&o.stdout);
+            let counts: Vec<usize> = out.split_whitespace().map(|v| v.parse().unwrap()).collect();
+            assert_eq!(counts[..2], [points, tets], "{out}");
+            assert!(counts[2] >= 3 && counts[3] >= 10, "arrays converted: {out}");
+        }
+        Ok(o) if required || text(&o.stderr).contains("AssertionError") => {
+            panic!(
+                "meshio disagrees on {}: {}",
+                path.display(),
+                text(&o.stderr)
+            )
         }
         other => assert!(
             !required,
@@ -455,8 +486,30 @@ fn strain_maps_metrics_and_fields() {
         .iter()
         .zip(&biot)
         .all(|(l, b)| (l - 1.0 - b).abs() < 1e-15));
-    assert_eq!(field("principal_axes_rest").0, 9);
+    // One unit 3-vector per principal direction, orthogonal to each other.
+    let axes: Vec<Vec<f64>> = (1..=3)
+        .map(|k| {
+            let (components, v) = field(&format!("principal_axis_{k}_deformed"));
+            assert_eq!(components, 3);
+            v
+        })
+        .collect();
+    for t in 0..mesh.num_tets() {
+        let a = |k: usize| nalgebra::Vector3::from_column_slice(&axes[k][3 * t..3 * t + 3]);
+        assert!((a(0).norm() - 1.0).abs() < 1e-9 && a(0).dot(&a(1)).abs() < 1e-9);
+        assert!((a(0).cross(&a(1)) - a(2)).norm() < 1e-9, "tet {t}");
+    }
+    assert_eq!(field("principal_axis_1_rest").0, 3);
     assert_eq!(field("surface_axis_s").0, 3);
+    // Component names for ParaView, cells as Int64 (what VTK writes).
+    let xml = std::fs::read_to_string(out.join("frames/frame_0006.vtu")).unwrap();
+    for needle in [
+        r#"Name="principal_stretch" NumberOfComponents="3" ComponentName0="λ1""#,
+        r#"Name="surface_stretch" NumberOfComponents="2" ComponentName0="r_s" ComponentName1="r_t""#,
+        r#"<DataArray type="Int64" Name="connectivity""#,
+    ] {
+        assert!(xml.contains(needle), "{needle}");
+    }
 }
 
 /// `[microstructure]` writes the neutral map and, every `frame_stride`

@@ -147,6 +147,9 @@ impl<W: Truncate> MetricsWriter<W> {
     }
 }
 
+/// Component names of a 3-vector.
+const XYZ: [&str; 3] = ["X", "Y", "Z"];
+
 /// The deformed mesh of one frame at positions `x`.
 ///
 /// Point data: `displacement_mm`; on top-surface vertices (NaN elsewhere)
@@ -154,9 +157,10 @@ impl<W: Truncate> MetricsWriter<W> {
 /// `surface_axis_s`, `surface_axis_t` on the deformed surface. Cell data:
 /// `region`, `principal_stretch` (λ1 ≥ λ2 ≥ λ3, sign-corrected),
 /// `principal_biot_strain` (λ − 1), `principal_green_strain` ((λ² − 1)/2),
-/// `volume_ratio` (J), and the principal directions as 3×3 tensors whose
-/// columns match the stretches, `principal_axes_rest` and
-/// `principal_axes_deformed` (components in column order).
+/// `volume_ratio` (J), and the unit principal direction of each stretch
+/// as a 3-vector, `principal_axis_K_rest` and `principal_axis_K_deformed`
+/// (K = 1, 2, 3, matching λK). The points are the deformed positions.
+/// Multi-component arrays carry component names (X, Y, Z for vectors).
 pub fn frame_grid(
     mesh: &TetMesh,
     x: &[Vec3],
@@ -174,18 +178,19 @@ pub fn frame_grid(
         Vec::with_capacity(3 * n),
         Vec::with_capacity(3 * n),
     );
-    let (mut ratio, mut rest_axes, mut deformed_axes) = (
-        Vec::with_capacity(n),
-        Vec::with_capacity(9 * n),
-        Vec::with_capacity(9 * n),
-    );
+    let mut ratio = Vec::with_capacity(n);
+    // Per stretch K, its direction in the rest and the deformed frame.
+    let mut rest_axes: [Vec<f64>; 3] = std::array::from_fn(|_| Vec::with_capacity(3 * n));
+    let mut deformed_axes: [Vec<f64>; 3] = std::array::from_fn(|_| Vec::with_capacity(3 * n));
     for s in &strains.tets {
         stretch.extend_from_slice(s.stretch.as_slice());
         biot.extend_from_slice(s.biot().as_slice());
         green.extend_from_slice(s.green().as_slice());
         ratio.push(s.volume_ratio());
-        rest_axes.extend_from_slice(s.rest_axes.as_slice());
-        deformed_axes.extend_from_slice(s.deformed_axes.as_slice());
+        for k in 0..3 {
+            rest_axes[k].extend(s.rest_axes.column(k).iter());
+            deformed_axes[k].extend(s.deformed_axes.column(k).iter());
+        }
     }
     let nv = mesh.num_vertices();
     let mut surface_stretch = vec![f64::NAN; 2 * nv];
@@ -203,20 +208,27 @@ pub fn frame_grid(
         points: x.to_vec(),
         tets: mesh.tets.clone(),
         point_data: vec![
-            Field::f64("displacement_mm", 3, displacement),
-            Field::f64("surface_stretch", 2, surface_stretch),
-            Field::f64("surface_axis_s", 3, axis_s),
-            Field::f64("surface_axis_t", 3, axis_t),
+            Field::f64("displacement_mm", 3, displacement).named(&XYZ),
+            Field::f64("surface_stretch", 2, surface_stretch).named(&["r_s", "r_t"]),
+            Field::f64("surface_axis_s", 3, axis_s).named(&XYZ),
+            Field::f64("surface_axis_t", 3, axis_t).named(&XYZ),
         ],
-        cell_data: vec![
-            Field::i32("region", 1, mesh.tet_region.clone()),
-            Field::f64("principal_stretch", 3, stretch),
-            Field::f64("principal_biot_strain", 3, biot),
-            Field::f64("principal_green_strain", 3, green),
-            Field::f64("volume_ratio", 1, ratio),
-            Field::f64("principal_axes_rest", 9, rest_axes),
-            Field::f64("principal_axes_deformed", 9, deformed_axes),
-        ],
+        cell_data: {
+            let mut cells = vec![
+                Field::i32("region", 1, mesh.tet_region.clone()),
+                Field::f64("principal_stretch", 3, stretch).named(&["λ1", "λ2", "λ3"]),
+                Field::f64("principal_biot_strain", 3, biot).named(&["ε1", "ε2", "ε3"]),
+                Field::f64("principal_green_strain", 3, green).named(&["E1", "E2", "E3"]),
+                Field::f64("volume_ratio", 1, ratio),
+            ];
+            for (frame, axes) in [("rest", rest_axes), ("deformed", deformed_axes)] {
+                for (k, values) in axes.into_iter().enumerate() {
+                    let name = format!("principal_axis_{}_{frame}", k + 1);
+                    cells.push(Field::f64(&name, 3, values).named(&XYZ));
+                }
+            }
+            cells
+        },
     }
 }
 

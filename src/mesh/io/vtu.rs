@@ -1,4 +1,4 @@
-//! VTK XML unstructured grids (`.vtu`) through `vtkio`.
+//! VTK XML unstructured grids (`.vtu`): written here, read through `vtkio`.
 //!
 //! Files are written with inline base64 ("binary") arrays, which ParaView and
 //! the Python package meshio read. The writer takes any points, tets and
@@ -8,10 +8,7 @@
 
 use std::path::Path;
 
-use vtkio::model::{
-    Attribute, Attributes, ByteOrder, CellType, Cells, DataArray, DataSet, ElementType, IOBuffer,
-    UnstructuredGridPiece, Version, VertexNumbers, Vtk,
-};
+use vtkio::model::{Attribute, CellType, DataSet, IOBuffer, VertexNumbers, Vtk};
 
 use super::write_atomically;
 use crate::error::{Error, Result};
@@ -44,6 +41,9 @@ pub struct Field {
     pub components: usize,
     /// `components × count` values, entry-major.
     pub values: Values,
+    /// Names of the components (written as `ComponentName0…`; empty: none,
+    /// and ParaView shows X, Y, Z or 0, 1, 2). Not read back.
+    pub component_names: Vec<String>,
 }
 
 impl Field {
@@ -53,6 +53,7 @@ impl Field {
             name: name.into(),
             components,
             values: Values::F64(values),
+            component_names: Vec::new(),
         }
     }
 
@@ -62,7 +63,15 @@ impl Field {
             name: name.into(),
             components,
             values: Values::I32(values),
+            component_names: Vec::new(),
         }
+    }
+
+    /// The same field with named components (one name per component).
+    pub fn named(mut self, names: &[&str]) -> Field {
+        debug_assert_eq!(names.len(), self.components);
+        self.component_names = names.iter().map(|n| n.to_string()).collect();
+        self
     }
 }
 
@@ -93,7 +102,10 @@ impl Grid {
         Grid {
             points: mesh.positions.clone(),
             tets: mesh.tets.clone(),
-            point_data: vec![Field::i32("on_top", 1, on_top), Field::f64("uv", 2, uv)],
+            point_data: vec![
+                Field::i32("on_top", 1, on_top),
+                Field::f64("uv", 2, uv).named(&["u", "v"]),
+            ],
             cell_data: vec![
                 Field::i32("region", 1, mesh.tet_region.clone()),
                 Field::f64(
@@ -128,48 +140,131 @@ impl Grid {
     }
 }
 
-fn attribute(f: &Field) -> Attribute {
-    let data = match &f.values {
-        Values::F64(v) => IOBuffer::F64(v.clone()),
-        Values::I32(v) => IOBuffer::I32(v.clone()),
-    };
-    Attribute::DataArray(DataArray {
-        name: f.name.clone(),
-        elem: ElementType::Generic(f.components as u32),
-        data,
-    })
+/// Escapes a name for an XML attribute value.
+fn xml_attr(text: &str) -> String {
+    text.replace('&', "&amp;")
+        .replace('"', "&quot;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
 }
 
-/// Writes a `.vtu` file atomically (temporary file, then rename).
+/// One `<DataArray>` in the VTK XML "binary" format: base64 of a UInt64
+/// byte count followed by the little-endian values.
+fn data_array(
+    out: &mut String,
+    type_name: &str,
+    name: &str,
+    components: usize,
+    names: &[String],
+    bytes: &[u8],
+) {
+    use base64::Engine;
+    use std::fmt::Write;
+    let _ = write!(
+        out,
+        r#"<DataArray type="{type_name}" Name="{}""#,
+        xml_attr(name)
+    );
+    if components != 1 {
+        let _ = write!(out, r#" NumberOfComponents="{components}""#);
+    }
+    for (k, n) in names.iter().enumerate() {
+        let _ = write!(out, r#" ComponentName{k}="{}""#, xml_attr(n));
+    }
+    let mut payload = Vec::with_capacity(8 + bytes.len());
+    payload.extend_from_slice(&(bytes.len() as u64).to_le_bytes());
+    payload.extend_from_slice(bytes);
+    out.push_str(r#" format="binary">"#);
+    out.push_str(&base64::engine::general_purpose::STANDARD.encode(&payload));
+    out.push_str("</DataArray>\n");
+}
+
+fn field_array(out: &mut String, f: &Field) {
+    match &f.values {
+        Values::F64(v) => data_array(
+            out,
+            "Float64",
+            &f.name,
+            f.components,
+            &f.component_names,
+            &le_bytes(v, |x| x.to_le_bytes()),
+        ),
+        Values::I32(v) => data_array(
+            out,
+            "Int32",
+            &f.name,
+            f.components,
+            &f.component_names,
+            &le_bytes(v, |x| x.to_le_bytes()),
+        ),
+    }
+}
+
+fn le_bytes<T: Copy, const N: usize>(values: &[T], f: impl Fn(T) -> [u8; N]) -> Vec<u8> {
+    values.iter().flat_map(|&v| f(v)).collect()
+}
+
+/// Writes a `.vtu` file atomically (temporary file, then rename): VTK XML,
+/// inline base64 binary arrays with UInt64 headers, connectivity and
+/// offsets as Int64 (as VTK writes them; meshio reads unsigned ones back as
+/// floats), cell types UInt8, component names where the fields have them.
 pub fn write_vtu(path: &Path, grid: &Grid) -> Result<()> {
     grid.check()?;
+    let mut out = String::new();
+    out.push_str(
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" \
+         byte_order=\"LittleEndian\" header_type=\"UInt64\">\n<UnstructuredGrid>\n",
+    );
+    out.push_str(&format!(
+        "<Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">\n<PointData>\n",
+        grid.points.len(),
+        grid.tets.len()
+    ));
+    grid.point_data
+        .iter()
+        .for_each(|f| field_array(&mut out, f));
+    out.push_str("</PointData>\n<CellData>\n");
+    grid.cell_data.iter().for_each(|f| field_array(&mut out, f));
+    out.push_str("</CellData>\n<Points>\n");
     let points: Vec<f64> = grid.points.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
-    let connectivity = grid.tets.iter().flat_map(|t| t.map(|v| v as u64)).collect();
-    let offsets = (1..=grid.tets.len() as u64).map(|k| 4 * k).collect();
-    let vtk = Vtk {
-        version: Version::new(),
-        title: String::new(),
-        byte_order: ByteOrder::LittleEndian,
-        file_path: None,
-        data: DataSet::inline(UnstructuredGridPiece {
-            points: IOBuffer::F64(points),
-            cells: Cells {
-                cell_verts: VertexNumbers::XML {
-                    connectivity,
-                    offsets,
-                },
-                types: vec![CellType::Tetra; grid.tets.len()],
-            },
-            data: Attributes {
-                point: grid.point_data.iter().map(attribute).collect(),
-                cell: grid.cell_data.iter().map(attribute).collect(),
-            },
-        }),
-    };
-    let mut bytes = Vec::new();
-    vtk.write_xml(&mut bytes)
-        .map_err(|e| Error::malformed(path, format!("VTU encoding failed: {e}")))?;
-    write_atomically(path, &bytes)
+    data_array(
+        &mut out,
+        "Float64",
+        "Points",
+        3,
+        &[],
+        &le_bytes(&points, |x| x.to_le_bytes()),
+    );
+    out.push_str("</Points>\n<Cells>\n");
+    let connectivity: Vec<i64> = grid.tets.iter().flat_map(|t| t.map(|v| v as i64)).collect();
+    let offsets: Vec<i64> = (1..=grid.tets.len() as i64).map(|k| 4 * k).collect();
+    data_array(
+        &mut out,
+        "Int64",
+        "connectivity",
+        1,
+        &[],
+        &le_bytes(&connectivity, |x| x.to_le_bytes()),
+    );
+    data_array(
+        &mut out,
+        "Int64",
+        "offsets",
+        1,
+        &[],
+        &le_bytes(&offsets, |x| x.to_le_bytes()),
+    );
+    // VTK_TETRA.
+    data_array(
+        &mut out,
+        "UInt8",
+        "types",
+        1,
+        &[],
+        &vec![10u8; grid.tets.len()],
+    );
+    out.push_str("</Cells>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
+    write_atomically(path, out.as_bytes())
 }
 
 /// Reads a `.vtu` file written by [`write_vtu`] (or any single-piece
@@ -236,6 +331,7 @@ pub fn read_vtu(path: &Path) -> Result<Grid> {
                         name: d.name.clone(),
                         components,
                         values,
+                        component_names: Vec::new(),
                     })
                 }
                 Attribute::Field { name, .. } => Err(bad(format!("unexpected field data {name}"))),
