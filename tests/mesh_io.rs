@@ -150,6 +150,48 @@ fn vtu_reads_back_with_same_counts_and_data() {
     );
 }
 
+/// Every storage format reads back: compressed or not, Float64 exactly,
+/// Float32 to the nearest f32; compression is lossless and smaller.
+#[test]
+fn vtu_formats_read_back() {
+    let mesh = generate(&small_patch(None)).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let grid = io::Grid::from_mesh(&mesh);
+    let mut sizes = Vec::new();
+    for compress in [true, false] {
+        for f32 in [false, true] {
+            let path = dir.path().join(format!("m_{compress}_{f32}.vtu"));
+            io::write_vtu_as(&path, &grid, io::VtuFormat { compress, f32 }).unwrap();
+            sizes.push(std::fs::metadata(&path).unwrap().len());
+            let back = io::read_vtu(&path).unwrap();
+            assert_eq!(back.tets, mesh.tets);
+            let round = |v: f64| if f32 { v as f32 as f64 } else { v };
+            for (b, p) in back.points.iter().zip(&mesh.positions) {
+                assert_eq!(*b, p.map(round), "compress {compress}, f32 {f32}");
+            }
+            let volume = back
+                .cell_data
+                .iter()
+                .find(|f| f.name == "volume_mm3")
+                .unwrap();
+            let Values::F64(v) = &volume.values else {
+                panic!("float volumes")
+            };
+            assert!(v
+                .iter()
+                .zip(0..)
+                .all(|(&x, t)| x == round(mesh.tet_volume(t))));
+            let region = back.cell_data.iter().find(|f| f.name == "region").unwrap();
+            assert_eq!(region.values, Values::I32(mesh.tet_region.clone()));
+        }
+    }
+    // [zlib f64, zlib f32, none f64, none f32]
+    assert!(
+        sizes[0] < sizes[2] && sizes[1] < sizes[3] && sizes[3] < sizes[2],
+        "{sizes:?}"
+    );
+}
+
 #[test]
 fn vtu_rejects_mismatched_arrays() {
     let mesh = generate(&small_patch(None)).unwrap();

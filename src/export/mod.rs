@@ -232,10 +232,15 @@ pub fn frame_grid(
     }
 }
 
-/// Writes `frames/frame_NNNN.vtu` under `dir`; returns its path.
-pub fn write_frame(dir: &Path, frame: usize, grid: &Grid) -> Result<PathBuf> {
+/// Writes `frames/frame_NNNN.vtu` under `dir` in `format`; returns its path.
+pub fn write_frame(
+    dir: &Path,
+    frame: usize,
+    grid: &Grid,
+    format: io::VtuFormat,
+) -> Result<PathBuf> {
     let path = dir.join("frames").join(format!("frame_{frame:04}.vtu"));
-    io::write_vtu(&path, grid)?;
+    io::write_vtu_as(&path, grid, format)?;
     Ok(path)
 }
 

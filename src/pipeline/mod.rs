@@ -135,7 +135,7 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Res
     let mut written = Vec::new();
     if setup.write_mesh_vtu {
         let path = dir.join("mesh.vtu");
-        io::write_vtu(&path, &io::Grid::from_mesh(&setup.mesh))?;
+        io::write_vtu_as(&path, &io::Grid::from_mesh(&setup.mesh), setup.vtu_format)?;
         written.push(path);
     }
     if setup.write_mesh_tetgen {
@@ -167,7 +167,10 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Res
         if setup.write_frames {
             let strains = ElementStrains::compute(mesh, &sim.x);
             let grid = export::frame_grid(mesh, &sim.x, &strains, &field);
-            collection.push((m.time_s, export::write_frame(dir, m.frame, &grid)?));
+            collection.push((
+                m.time_s,
+                export::write_frame(dir, m.frame, &grid, setup.vtu_format)?,
+            ));
             // Rewritten (atomically) after every frame, so a killed run's
             // frames open in ParaView too.
             export::write_collection(dir, &collection)?;

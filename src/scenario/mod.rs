@@ -94,6 +94,11 @@ pub struct OutputSection {
     pub strain_image_px: usize,
     /// Stretch ratios `1 ± strain_image_range` saturate the colour map. Default 0.25.
     pub strain_image_range: f64,
+    /// Float arrays and points of the VTU files: `f64` (default) or `f32`
+    /// (7 significant digits, half the size before compression).
+    pub vtu_precision: String,
+    /// Storage of the VTU arrays: `zlib` (default, lossless) or `none`.
+    pub vtu_compression: String,
 }
 
 impl Default for OutputSection {
@@ -106,6 +111,8 @@ impl Default for OutputSection {
             strain_images: false,
             strain_image_px: 512,
             strain_image_range: 0.25,
+            vtu_precision: "f64".into(),
+            vtu_compression: "zlib".into(),
         }
     }
 }
@@ -127,6 +134,8 @@ pub struct Setup {
     pub write_mesh_tetgen: bool,
     /// Write one VTU per frame.
     pub write_frames: bool,
+    /// How the VTU files store their arrays.
+    pub vtu_format: crate::mesh::io::VtuFormat,
     /// Strain maps per frame, if asked for.
     pub strain_images: Option<StrainImageSettings>,
     /// The microstructure stage, if the scenario has one.
@@ -150,6 +159,31 @@ pub struct StrainImageSettings {
 }
 
 impl OutputSection {
+    /// The VTU format of `vtu_precision` and `vtu_compression`.
+    fn vtu_format(&self) -> Result<crate::mesh::io::VtuFormat> {
+        let f32 = match self.vtu_precision.as_str() {
+            "f64" => false,
+            "f32" => true,
+            other => {
+                return Err(Error::parameter(
+                    "output.vtu_precision",
+                    format!("must be \"f64\" or \"f32\", got \"{other}\""),
+                ))
+            }
+        };
+        let compress = match self.vtu_compression.as_str() {
+            "zlib" => true,
+            "none" => false,
+            other => {
+                return Err(Error::parameter(
+                    "output.vtu_compression",
+                    format!("must be \"zlib\" or \"none\", got \"{other}\""),
+                ))
+            }
+        };
+        Ok(crate::mesh::io::VtuFormat { compress, f32 })
+    }
+
     fn strain_image_settings(&self) -> Result<Option<StrainImageSettings>> {
         if !(1..=8192).contains(&self.strain_image_px) {
             return Err(Error::parameter(
@@ -396,6 +430,7 @@ impl Setup {
             write_mesh_vtu: scenario.output.mesh_vtu,
             write_mesh_tetgen: scenario.output.mesh_tetgen,
             write_frames: scenario.output.frames_vtu,
+            vtu_format: scenario.output.vtu_format()?,
             strain_images,
             micro,
             simulation,
@@ -477,6 +512,38 @@ mod tests {
         .unwrap();
         let err = s.mesh.patch_spec().unwrap_err().to_string();
         assert!(err.contains("strictly inside the patch"), "{err}");
+    }
+
+    #[test]
+    fn vtu_options_are_checked() {
+        let format = |text: &str| parse(text).unwrap().output.vtu_format();
+        assert_eq!(
+            format("").unwrap(),
+            crate::mesh::io::VtuFormat {
+                compress: true,
+                f32: false
+            }
+        );
+        assert_eq!(
+            format("[output]\nvtu_precision = \"f32\"\nvtu_compression = \"none\"\n").unwrap(),
+            crate::mesh::io::VtuFormat {
+                compress: false,
+                f32: true
+            }
+        );
+        for (text, key) in [
+            (
+                "[output]\nvtu_precision = \"f16\"\n",
+                "output.vtu_precision",
+            ),
+            (
+                "[output]\nvtu_compression = \"lz4\"\n",
+                "output.vtu_compression",
+            ),
+        ] {
+            let err = format(text).unwrap_err().to_string();
+            assert!(err.contains(key), "{err}");
+        }
     }
 
     #[test]

@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 
 pub use gmsh::read_gmsh;
 pub use tetgen::{read_tetgen, tetgen_paths, write_tetgen};
-pub use vtu::{read_vtu, write_vtu, Field, Grid, Values};
+pub use vtu::{read_vtu, write_vtu, write_vtu_as, Field, Grid, Values, VtuFormat};
 
 use crate::error::{Error, Result};
 use crate::mesh::TetMesh;

@@ -148,18 +148,44 @@ fn xml_attr(text: &str) -> String {
         .replace('>', "&gt;")
 }
 
+/// How [`write_vtu_as`] stores the arrays.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct VtuFormat {
+    /// zlib-compress each array in blocks of [`BLOCK`] bytes
+    /// (`vtkZLibDataCompressor`, lossless).
+    pub compress: bool,
+    /// Points and float arrays as Float32 (7 significant digits) instead of
+    /// Float64.
+    pub f32: bool,
+}
+
+impl Default for VtuFormat {
+    /// Compressed, Float64.
+    fn default() -> Self {
+        VtuFormat {
+            compress: true,
+            f32: false,
+        }
+    }
+}
+
+/// Uncompressed bytes per compressed block (VTK's default).
+pub const BLOCK: usize = 1 << 15;
+
 /// One `<DataArray>` in the VTK XML "binary" format: base64 of a UInt64
-/// byte count followed by the little-endian values.
+/// byte count and the little-endian values, or, compressed, base64 of the
+/// block header `[blocks, block size, last partial block size, compressed
+/// sizes…]` followed by base64 of the zlib blocks.
 fn data_array(
     out: &mut String,
-    type_name: &str,
-    name: &str,
-    components: usize,
+    format: VtuFormat,
+    (type_name, name, components): (&str, &str, usize),
     names: &[String],
     bytes: &[u8],
 ) {
     use base64::Engine;
     use std::fmt::Write;
+    let b64 = &base64::engine::general_purpose::STANDARD;
     let _ = write!(
         out,
         r#"<DataArray type="{type_name}" Name="{}""#,
@@ -171,29 +197,59 @@ fn data_array(
     for (k, n) in names.iter().enumerate() {
         let _ = write!(out, r#" ComponentName{k}="{}""#, xml_attr(n));
     }
-    let mut payload = Vec::with_capacity(8 + bytes.len());
-    payload.extend_from_slice(&(bytes.len() as u64).to_le_bytes());
-    payload.extend_from_slice(bytes);
     out.push_str(r#" format="binary">"#);
-    out.push_str(&base64::engine::general_purpose::STANDARD.encode(&payload));
+    if format.compress {
+        let blocks: Vec<Vec<u8>> = bytes
+            .chunks(BLOCK)
+            .map(|chunk| {
+                let mut z =
+                    flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+                std::io::Write::write_all(&mut z, chunk).expect("writing to memory");
+                z.finish().expect("writing to memory")
+            })
+            .collect();
+        let mut header: Vec<u64> = vec![
+            blocks.len() as u64,
+            BLOCK as u64,
+            (bytes.len() % BLOCK) as u64,
+        ];
+        header.extend(blocks.iter().map(|b| b.len() as u64));
+        out.push_str(&b64.encode(le_bytes(&header, |x| x.to_le_bytes())));
+        out.push_str(&b64.encode(blocks.concat()));
+    } else {
+        let mut payload = Vec::with_capacity(8 + bytes.len());
+        payload.extend_from_slice(&(bytes.len() as u64).to_le_bytes());
+        payload.extend_from_slice(bytes);
+        out.push_str(&b64.encode(&payload));
+    }
     out.push_str("</DataArray>\n");
 }
 
-fn field_array(out: &mut String, f: &Field) {
+/// A float array as Float64 or, with `format.f32`, Float32.
+fn float_array(
+    out: &mut String,
+    format: VtuFormat,
+    name: &str,
+    components: usize,
+    names: &[String],
+    v: &[f64],
+) {
+    if format.f32 {
+        let bytes = le_bytes(v, |x| (x as f32).to_le_bytes());
+        data_array(out, format, ("Float32", name, components), names, &bytes);
+    } else {
+        let bytes = le_bytes(v, |x| x.to_le_bytes());
+        data_array(out, format, ("Float64", name, components), names, &bytes);
+    }
+}
+
+fn field_array(out: &mut String, format: VtuFormat, f: &Field) {
     match &f.values {
-        Values::F64(v) => data_array(
-            out,
-            "Float64",
-            &f.name,
-            f.components,
-            &f.component_names,
-            &le_bytes(v, |x| x.to_le_bytes()),
-        ),
+        Values::F64(v) => float_array(out, format, &f.name, f.components, &f.component_names, v),
         Values::I32(v) => data_array(
             out,
-            "Int32",
-            &f.name,
-            f.components,
+            format,
+            ("Int32", &f.name, f.components),
             &f.component_names,
             &le_bytes(v, |x| x.to_le_bytes()),
         ),
@@ -204,17 +260,28 @@ fn le_bytes<T: Copy, const N: usize>(values: &[T], f: impl Fn(T) -> [u8; N]) -> 
     values.iter().flat_map(|&v| f(v)).collect()
 }
 
-/// Writes a `.vtu` file atomically (temporary file, then rename): VTK XML,
-/// inline base64 binary arrays with UInt64 headers, connectivity and
-/// offsets as Int64 (as VTK writes them; meshio reads unsigned ones back as
-/// floats), cell types UInt8, component names where the fields have them.
+/// Writes a `.vtu` file atomically in the default [`VtuFormat`]
+/// (compressed, Float64).
 pub fn write_vtu(path: &Path, grid: &Grid) -> Result<()> {
+    write_vtu_as(path, grid, VtuFormat::default())
+}
+
+/// Writes a `.vtu` file atomically (temporary file, then rename): VTK XML,
+/// inline base64 binary arrays with UInt64 headers as `format` says,
+/// connectivity and offsets as Int64 (as VTK writes them; meshio reads
+/// unsigned ones back as floats), cell types UInt8, component names where
+/// the fields have them.
+pub fn write_vtu_as(path: &Path, grid: &Grid, format: VtuFormat) -> Result<()> {
     grid.check()?;
     let mut out = String::new();
     out.push_str(
         "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" \
-         byte_order=\"LittleEndian\" header_type=\"UInt64\">\n<UnstructuredGrid>\n",
+         byte_order=\"LittleEndian\" header_type=\"UInt64\"",
     );
+    if format.compress {
+        out.push_str(" compressor=\"vtkZLibDataCompressor\"");
+    }
+    out.push_str(">\n<UnstructuredGrid>\n");
     out.push_str(&format!(
         "<Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">\n<PointData>\n",
         grid.points.len(),
@@ -222,47 +289,24 @@ pub fn write_vtu(path: &Path, grid: &Grid) -> Result<()> {
     ));
     grid.point_data
         .iter()
-        .for_each(|f| field_array(&mut out, f));
+        .for_each(|f| field_array(&mut out, format, f));
     out.push_str("</PointData>\n<CellData>\n");
-    grid.cell_data.iter().for_each(|f| field_array(&mut out, f));
+    grid.cell_data
+        .iter()
+        .for_each(|f| field_array(&mut out, format, f));
     out.push_str("</CellData>\n<Points>\n");
     let points: Vec<f64> = grid.points.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
-    data_array(
-        &mut out,
-        "Float64",
-        "Points",
-        3,
-        &[],
-        &le_bytes(&points, |x| x.to_le_bytes()),
-    );
+    float_array(&mut out, format, "Points", 3, &[], &points);
     out.push_str("</Points>\n<Cells>\n");
     let connectivity: Vec<i64> = grid.tets.iter().flat_map(|t| t.map(|v| v as i64)).collect();
     let offsets: Vec<i64> = (1..=grid.tets.len() as i64).map(|k| 4 * k).collect();
-    data_array(
-        &mut out,
-        "Int64",
-        "connectivity",
-        1,
-        &[],
-        &le_bytes(&connectivity, |x| x.to_le_bytes()),
-    );
-    data_array(
-        &mut out,
-        "Int64",
-        "offsets",
-        1,
-        &[],
-        &le_bytes(&offsets, |x| x.to_le_bytes()),
-    );
+    for (name, values) in [("connectivity", connectivity), ("offsets", offsets)] {
+        let bytes = le_bytes(&values, |x| x.to_le_bytes());
+        data_array(&mut out, format, ("Int64", name, 1), &[], &bytes);
+    }
     // VTK_TETRA.
-    data_array(
-        &mut out,
-        "UInt8",
-        "types",
-        1,
-        &[],
-        &vec![10u8; grid.tets.len()],
-    );
+    let types = vec![10u8; grid.tets.len()];
+    data_array(&mut out, format, ("UInt8", "types", 1), &[], &types);
     out.push_str("</Cells>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
     write_atomically(path, out.as_bytes())
 }
