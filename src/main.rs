@@ -39,6 +39,15 @@ enum Command {
         /// checked before anything is written).
         #[arg(long)]
         force: bool,
+        /// Override a scenario key: a dotted key and a TOML value, e.g.
+        /// `--set probe.friction=0.3 --set material.dermis.youngs_modulus_kpa=200`
+        /// (repeatable; validated like the file).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        /// No progress on stderr and no report on stdout (errors and
+        /// warnings only).
+        #[arg(short, long)]
+        quiet: bool,
     },
     /// Generate a layered patch mesh with TetGen, or inspect a mesh file.
     ///
@@ -255,7 +264,9 @@ fn main() -> ExitCode {
             scenario,
             output,
             force,
-        } => run(&scenario, output, force),
+            set,
+            quiet,
+        } => run(&scenario, output, force, &set, quiet),
         Command::Mesh(args) => mesh(*args),
         Command::Fit { samples } => fit(&samples),
         Command::Bench {
@@ -281,17 +292,29 @@ fn main() -> ExitCode {
     }
 }
 
-fn run(path: &Path, output: Option<PathBuf>, force: bool) -> anyhow::Result<()> {
-    let scenario = Scenario::load(path)?;
+fn run(
+    path: &Path,
+    output: Option<PathBuf>,
+    force: bool,
+    overrides: &[String],
+    quiet: bool,
+) -> anyhow::Result<()> {
+    let scenario = Scenario::load_with(path, overrides)?;
     let mut setup = Setup::from_scenario(&scenario, path)
         .with_context(|| format!("scenario {}", path.display()))?;
     if let Some(dir) = output {
         setup.output_dir = dir;
     }
     setup.force_large_output = force;
-    let progress = Progress::new();
-    let result = skinpatch::pipeline::run(&setup, |m, total| progress.frame(m, total));
-    progress.finish();
+    let progress = (!quiet).then(Progress::new);
+    let result = skinpatch::pipeline::run(&setup, |m, total| {
+        if let Some(p) = &progress {
+            p.frame(m, total)
+        }
+    });
+    if let Some(p) = &progress {
+        p.finish();
+    }
     let summary = result.with_context(|| {
         format!(
             "running scenario {} (output folder {})",
@@ -305,6 +328,9 @@ fn run(path: &Path, output: Option<PathBuf>, force: bool) -> anyhow::Result<()> 
     }
     for file in &summary.written {
         report += &format!("wrote {}\n", file.display());
+    }
+    if quiet {
+        return Ok(());
     }
     print_stdout(&report)
 }

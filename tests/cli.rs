@@ -802,3 +802,84 @@ fn gpu_info_lists_adapters_or_says_there_are_none() {
         assert!(std::env::var("SKINPATCH_REQUIRE_GPU").map_or(true, |v| v != "1"));
     }
 }
+
+/// `--set` overrides scenario keys (dotted keys, TOML values, bare words as
+/// strings) and is validated like the file; `--quiet` prints nothing.
+#[test]
+fn set_overrides_keys_and_quiet_prints_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("o");
+    let o = skinpatch(&[
+        "run",
+        "tests/fixtures/press_small.toml",
+        "--output",
+        out.to_str().unwrap(),
+        "--quiet",
+        "--set",
+        "time.frame_rate_hz=2",
+        "--set",
+        "probe.friction=0.3",
+        "--set",
+        "output.frames_vtu=false",
+    ]);
+    assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    assert_eq!(text(&o.stdout), "", "--quiet prints no report");
+    assert!(!text(&o.stderr).contains("frame 1/"), "{}", text(&o.stderr));
+    let metrics = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    // 2 frames per second over 1 s instead of the file's 6: rows 0, 1, 2.
+    assert_eq!(metrics.lines().count(), 1 + 3, "{metrics}");
+    assert!(!out.join("frames").join("frame_0001.vtu").exists());
+    // μ = 0.3 drags the probe less than the file's μ = 0.8 at the same frame.
+    let drag = |metrics: &str| -> f64 {
+        let last: Vec<f64> = metrics
+            .lines()
+            .last()
+            .unwrap()
+            .split(',')
+            .map(|v| v.parse().unwrap())
+            .collect();
+        last[2].abs() / last[4]
+    };
+    let file_out = dir.path().join("file");
+    let o = skinpatch(&[
+        "run",
+        "tests/fixtures/press_small.toml",
+        "--output",
+        file_out.to_str().unwrap(),
+        "--quiet",
+        "--set",
+        "time.frame_rate_hz=2",
+    ]);
+    assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    let file_metrics = std::fs::read_to_string(file_out.join("metrics.csv")).unwrap();
+    let (low, high) = (drag(&metrics), drag(&file_metrics));
+    assert!(low < 0.8 * high, "μ 0.3: {low}, μ 0.8: {high}");
+    for (set, needle) in [
+        (
+            "probe.radius_mm=\"big\"",
+            "--set: probe.radius_mm: invalid type",
+        ),
+        ("probe.radus_mm=1.0", "did you mean radius_mm?"),
+        ("probe.friction=-1", "probe.friction"),
+        ("probe", "--set probe: expected key=value"),
+        (
+            "probe.shape.x=1",
+            "--set probe.shape.x: probe.shape is a value",
+        ),
+        (
+            "render.lights.3.intensity=1",
+            "with --set: render.lights: invalid type",
+        ),
+    ] {
+        let o = skinpatch(&[
+            "run",
+            "tests/fixtures/press_small.toml",
+            "--output",
+            out.to_str().unwrap(),
+            "--set",
+            set,
+        ]);
+        let err = text(&o.stderr);
+        assert!(!o.status.success() && err.contains(needle), "{set}: {err}");
+    }
+}

@@ -250,9 +250,109 @@ impl Scenario {
 
     /// Reads and parses a scenario file.
     pub fn load(path: &Path) -> Result<Scenario> {
-        let text = crate::mesh::io::read_input_text(path)?;
-        Scenario::parse(&text, path)
+        Scenario::load_with(path, &[])
     }
+
+    /// Reads a scenario file and applies `overrides` (`key=value` with a
+    /// dotted key such as `probe.friction` or `render.lights.0.intensity`,
+    /// and a TOML value; a value that is not TOML is taken as a string).
+    /// The file is validated on its own first (errors name its lines), then
+    /// with the overrides (errors name the key as `--set key`).
+    pub fn load_with(path: &Path, overrides: &[String]) -> Result<Scenario> {
+        let text = crate::mesh::io::read_input_text(path)?;
+        let scenario = Scenario::parse(&text, path)?;
+        if overrides.is_empty() {
+            return Ok(scenario);
+        }
+        let fail = |message: String| Error::Scenario {
+            path: path.to_path_buf(),
+            message,
+        };
+        let mut table: toml::Table =
+            toml::from_str(&text).map_err(|e| fail(describe_toml_error(&e, &text)))?;
+        for o in overrides {
+            let (key, value) = o
+                .split_once('=')
+                .ok_or_else(|| fail(format!("--set {o}: expected key=value")))?;
+            set_key(&mut table, key.trim(), override_value(value.trim()))
+                .map_err(|reason| fail(format!("--set {}: {reason}", key.trim())))?;
+        }
+        serde_path_to_error::deserialize(toml::Value::Table(table)).map_err(|e| {
+            let message = e.inner().message().trim().to_string();
+            let key = e.path().to_string();
+            let message = match parse_unknown_field(&message) {
+                Some((unknown, expected)) => {
+                    let hint = closest(&unknown, &expected)
+                        .map(|s| format!("; did you mean {s}?"))
+                        .unwrap_or_default();
+                    format!("unknown key {unknown}{hint}")
+                }
+                None => message,
+            };
+            fail(format!("with --set: {key}: {message}"))
+        })
+    }
+}
+
+/// The TOML value of an override's right-hand side, or the text itself as
+/// a string when it is not TOML (`--set probe.contact=frictionless`).
+fn override_value(text: &str) -> toml::Value {
+    toml::from_str::<toml::Table>(&format!("v = {text}"))
+        .ok()
+        .and_then(|mut t| t.remove("v"))
+        .unwrap_or_else(|| toml::Value::String(text.to_string()))
+}
+
+/// Sets the dotted `key` of `table` to `value`, creating tables on the way;
+/// a numeric part indexes an array (of tables).
+fn set_key(
+    table: &mut toml::Table,
+    key: &str,
+    value: toml::Value,
+) -> std::result::Result<(), String> {
+    let parts: Vec<&str> = key.split('.').collect();
+    if parts.iter().any(|p| p.is_empty()) {
+        return Err("the key has an empty part".into());
+    }
+    let mut node: &mut toml::Value = table
+        .entry(parts[0])
+        .or_insert_with(|| toml::Value::Table(Default::default()));
+    if parts.len() == 1 {
+        *node = value;
+        return Ok(());
+    }
+    for (k, part) in parts.iter().enumerate().skip(1) {
+        let last = k == parts.len() - 1;
+        node = match node {
+            toml::Value::Table(t) => {
+                if last {
+                    t.insert(part.to_string(), value);
+                    return Ok(());
+                }
+                t.entry(*part)
+                    .or_insert_with(|| toml::Value::Table(Default::default()))
+            }
+            toml::Value::Array(a) => {
+                let index: usize = part.parse().map_err(|_| {
+                    format!(
+                        "{} is a list: expected an index, got {part}",
+                        parts[..k].join(".")
+                    )
+                })?;
+                let len = a.len();
+                let slot = a.get_mut(index).ok_or_else(|| {
+                    format!("{} has {len} entries, no [{index}]", parts[..k].join("."))
+                })?;
+                if last {
+                    *slot = value;
+                    return Ok(());
+                }
+                slot
+            }
+            _ => return Err(format!("{} is a value, not a table", parts[..k].join("."))),
+        };
+    }
+    Ok(())
 }
 
 /// Reads and deserialises a small TOML file (kernel files, fit samples);
