@@ -322,6 +322,19 @@ fn run(
             setup.output_dir.display()
         )
     })?;
+    // The machine-readable record of the run, next to its outputs.
+    let record = serde_json::json!({
+        "skinpatch_version": env!("CARGO_PKG_VERSION"),
+        "scenario_file": path,
+        "overrides": overrides,
+        "scenario": scenario,
+        "output_dir": setup.output_dir,
+        "fem_wall_s": summary.frames.iter().map(|m| m.step_wall_s).sum::<f64>(),
+        "run": summary,
+    });
+    let summary_path = setup.output_dir.join("summary.json");
+    let text = serde_json::to_string_pretty(&record)?;
+    skinpatch::mesh::io::write_atomically(&summary_path, format!("{text}\n").as_bytes())?;
     let mut report = format!("scenario {}: mesh\n{}", setup.name, summary.quality);
     if let Some(device) = &summary.micro_device {
         report += &format!("microstructure stages: {device}\n");
@@ -329,6 +342,7 @@ fn run(
     for file in &summary.written {
         report += &format!("wrote {}\n", file.display());
     }
+    report += &format!("wrote {}\n", summary_path.display());
     if quiet {
         return Ok(());
     }

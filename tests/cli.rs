@@ -854,6 +854,31 @@ fn set_overrides_keys_and_quiet_prints_nothing() {
     let file_metrics = std::fs::read_to_string(file_out.join("metrics.csv")).unwrap();
     let (low, high) = (drag(&metrics), drag(&file_metrics));
     assert!(low < 0.8 * high, "μ 0.3: {low}, μ 0.8: {high}");
+    // summary.json records the overrides, the scenario as run and the same
+    // per-frame metrics as metrics.csv.
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["overrides"][1], "probe.friction=0.3");
+    assert_eq!(summary["scenario"]["probe"]["friction"], 0.3);
+    assert_eq!(summary["scenario"]["time"]["frame_rate_hz"], 2.0);
+    let frames = summary["run"]["frames"].as_array().unwrap();
+    assert_eq!(frames.len(), metrics.lines().count() - 1);
+    for (row, frame) in metrics.lines().skip(1).zip(frames) {
+        let cols: Vec<f64> = row.split(',').map(|v| v.parse().unwrap()).collect();
+        assert_eq!(frame["frame"], cols[0] as u64);
+        for k in 0..3 {
+            assert_eq!(
+                frame["probe_force_n"][k].as_f64().unwrap(),
+                cols[2 + k],
+                "{row}"
+            );
+        }
+        assert_eq!(frame["newton_iterations"], cols[8] as u64);
+    }
+    assert!(
+        summary["skinpatch_version"].is_string()
+            && summary["run"]["quality"]["tets"].as_u64() > Some(1000)
+    );
     for (set, needle) in [
         (
             "probe.radius_mm=\"big\"",

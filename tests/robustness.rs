@@ -340,6 +340,7 @@ fn a_rerun_replaces_the_previous_run_as_a_set() {
             "mesh.vtu",
             "metrics.csv",
             "notes.txt",
+            "summary.json",
         ]
     );
     let pvd = std::fs::read_to_string(out.join("frames.pvd")).unwrap();

@@ -18,7 +18,7 @@ pub mod outputs;
 pub mod strain_images;
 
 /// One row of `metrics.csv`.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct FrameMetrics {
     /// Frame number (0 is t = 0).
     pub frame: usize,

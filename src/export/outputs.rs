@@ -30,7 +30,13 @@ pub fn is_run_output(folder: &str, name: &str) -> bool {
     match folder {
         "" => matches!(
             name,
-            "mesh.vtu" | "mesh.node" | "mesh.ele" | "mesh.face" | "metrics.csv" | "frames.pvd"
+            "mesh.vtu"
+                | "mesh.node"
+                | "mesh.ele"
+                | "mesh.face"
+                | "metrics.csv"
+                | "frames.pvd"
+                | "summary.json"
         ),
         "frames" => numbered("frame_", &[".vtu"]),
         "strain" => ["rs_", "rt_", "axes_"]

@@ -10,7 +10,7 @@ use std::fmt;
 use super::{TetMesh, Vec3, TET_FACES};
 
 /// Summary statistics of a mesh, printed by `skinpatch mesh`.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct QualityReport {
     /// Number of tets.
     pub tets: usize,

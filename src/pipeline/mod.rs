@@ -28,7 +28,7 @@ use crate::scenario::{MicroSetup, Setup};
 use crate::strain::{ElementStrains, StrainRaster, SurfaceField};
 
 /// What a run produced.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize)]
 pub struct RunSummary {
     /// Files written, in order (frame files are summarised by the collection).
     pub written: Vec<PathBuf>,
