@@ -809,19 +809,28 @@ fn gpu_info_lists_adapters_or_says_there_are_none() {
 fn set_overrides_keys_and_quiet_prints_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("o");
-    let o = skinpatch(&[
-        "run",
-        "tests/fixtures/press_small.toml",
-        "--output",
-        out.to_str().unwrap(),
-        "--quiet",
-        "--set",
-        "time.frame_rate_hz=2",
-        "--set",
-        "probe.friction=0.3",
-        "--set",
-        "output.frames_vtu=false",
-    ]);
+    let run_small = |out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "run",
+            "tests/fixtures/press_small.toml",
+            "--output",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        skinpatch(&args)
+    };
+    let o = run_small(
+        &out,
+        &[
+            "--quiet",
+            "--set",
+            "time.frame_rate_hz=2",
+            "--set",
+            "probe.friction=0.3",
+            "--set",
+            "output.frames_vtu=false",
+        ],
+    );
     assert!(o.status.success(), "stderr: {}", text(&o.stderr));
     assert_eq!(text(&o.stdout), "", "--quiet prints no report");
     assert!(!text(&o.stderr).contains("frame 1/"), "{}", text(&o.stderr));
@@ -841,15 +850,7 @@ fn set_overrides_keys_and_quiet_prints_nothing() {
         last[2].abs() / last[4]
     };
     let file_out = dir.path().join("file");
-    let o = skinpatch(&[
-        "run",
-        "tests/fixtures/press_small.toml",
-        "--output",
-        file_out.to_str().unwrap(),
-        "--quiet",
-        "--set",
-        "time.frame_rate_hz=2",
-    ]);
+    let o = run_small(&file_out, &["--quiet", "--set", "time.frame_rate_hz=2"]);
     assert!(o.status.success(), "stderr: {}", text(&o.stderr));
     let file_metrics = std::fs::read_to_string(file_out.join("metrics.csv")).unwrap();
     let (low, high) = (drag(&metrics), drag(&file_metrics));
@@ -896,14 +897,7 @@ fn set_overrides_keys_and_quiet_prints_nothing() {
             "with --set: render.lights: invalid type",
         ),
     ] {
-        let o = skinpatch(&[
-            "run",
-            "tests/fixtures/press_small.toml",
-            "--output",
-            out.to_str().unwrap(),
-            "--set",
-            set,
-        ]);
+        let o = run_small(&out, &["--set", set]);
         let err = text(&o.stderr);
         assert!(!o.status.success() && err.contains(needle), "{set}: {err}");
     }
