@@ -6,7 +6,7 @@
 //! frame VTUs: the measured size of an uncompressed Float64 frame (10.1 MB
 //! for patch_25k's 26,146 tets and 4,914 points: ≈ 380 bytes a tet and 100
 //! a point), halved with `vtu_precision = "f32"`; compression (the default)
-//! makes them smaller still (8.0 MB and 4.1 MB).
+//! makes them smaller still (8.1 MB and 4.1 MB).
 
 use crate::error::{Error, Result};
 use crate::scenario::Setup;

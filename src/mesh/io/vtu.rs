@@ -1,7 +1,8 @@
 //! VTK XML unstructured grids (`.vtu`): written here, read through `vtkio`.
 //!
-//! Files are written with inline base64 ("binary") arrays, which ParaView and
-//! the Python package meshio read. The writer takes any points, tets and
+//! Files are written with inline base64 ("binary") arrays, zlib-compressed
+//! by default ([`VtuFormat`]), which ParaView and the Python package meshio
+//! read. The writer takes any points, tets and
 //! named point/cell arrays, so later stages (per-frame displacement, strains)
 //! export through the same function. The reader returns the raw arrays; it is
 //! used to check round trips.
@@ -152,7 +153,8 @@ fn xml_attr(text: &str) -> String {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct VtuFormat {
     /// zlib-compress each array in blocks of [`BLOCK`] bytes
-    /// (`vtkZLibDataCompressor`, lossless).
+    /// (`vtkZLibDataCompressor`, lossless; zlib's fastest level, which on a
+    /// frame is 0.5% larger than the default level in half the time).
     pub compress: bool,
     /// Points and float arrays as Float32 (7 significant digits) instead of
     /// Float64.
@@ -199,11 +201,14 @@ fn data_array(
     }
     out.push_str(r#" format="binary">"#);
     if format.compress {
+        // Blocks compress independently, in parallel, and are concatenated in
+        // order (the same bytes on any thread count).
+        use rayon::prelude::*;
         let blocks: Vec<Vec<u8>> = bytes
-            .chunks(BLOCK)
+            .par_chunks(BLOCK)
             .map(|chunk| {
                 let mut z =
-                    flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+                    flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::fast());
                 std::io::Write::write_all(&mut z, chunk).expect("writing to memory");
                 z.finish().expect("writing to memory")
             })
