@@ -26,9 +26,19 @@ struct Cli {
 enum Command {
     /// Run a scenario file: validate it, build or load its mesh, write outputs.
     ///
-    /// Outputs go to [output] dir of the scenario (default out/<name>):
+    /// Outputs go to [output] dir of the scenario (default out/<name>), or
+    /// --output:
     /// mesh.vtu (rest mesh with regions, volumes, top-surface UVs), optionally
-    /// mesh.node/.ele/.face.
+    /// mesh.node/.ele/.face; metrics.csv (one row per frame); summary.json
+    /// (the run's record: scenario as run, overrides, metrics, files);
+    /// frames/frame_NNNN.vtu and frames.pvd (deformed mesh, displacement,
+    /// principal strains and directions, surface stretch); with
+    /// [output] strain_images, strain/{rs,rt,axes}_NNNN.png; with
+    /// [microstructure], micro/height_neutral.png, micro/height_NNNN.png and
+    /// micro/normal_NNNN.png (16-bit; .exr too when asked) and, when asked,
+    /// micro/roughness.csv; with [render], render/<mode>/frame_NNNN.png (or
+    /// .exr) and, when asked, render/<mode>.mp4. The README lists every
+    /// array and column.
     Run {
         /// Scenario file (TOML).
         scenario: PathBuf,

@@ -241,6 +241,24 @@ fn help_explains_the_commands() {
     }
     let o = skinpatch(&["--help"]);
     assert!(text(&o.stdout).contains("run"));
+    // `run --help` names every output and the sweep flags.
+    let o = skinpatch(&["run", "--help"]);
+    let help = text(&o.stdout);
+    for needle in [
+        "mesh.vtu",
+        "metrics.csv",
+        "summary.json",
+        "frames.pvd",
+        "strain/",
+        "micro/normal_NNNN.png",
+        "roughness.csv",
+        "render/<mode>/frame_NNNN.png",
+        ".mp4",
+        "--set",
+        "--quiet",
+    ] {
+        assert!(help.contains(needle), "{needle} missing from:\n{help}");
+    }
 }
 
 /// A scenario that fails validation reports the key, exits non-zero, and
