@@ -15,9 +15,6 @@ use super::map::DisplacementMap;
 
 /// Default histogram size (64 × 64 buckets, seed 000).
 pub const HISTOGRAM_BINS: usize = 64;
-/// Default histogram half range of the tangent-plane normal components:
-/// ±0.5, a slope of about 27°, beyond which skin microstructure rarely goes.
-pub const HISTOGRAM_RANGE: f64 = 0.5;
 
 /// Slope `(∂h/∂x, ∂h/∂y)` at texel `(i, j)`, dimensionless (µm per µm).
 /// `stretch` scales the texel spacing along (x, y): slopes of the map as

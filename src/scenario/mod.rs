@@ -277,19 +277,14 @@ impl Scenario {
             set_key(&mut table, key.trim(), override_value(value.trim()))
                 .map_err(|reason| fail(format!("--set {}: {reason}", key.trim())))?;
         }
+        // A value tree has no spans, so the message names the key without a
+        // line.
         serde_path_to_error::deserialize(toml::Value::Table(table)).map_err(|e| {
-            let message = e.inner().message().trim().to_string();
             let key = e.path().to_string();
-            let message = match parse_unknown_field(&message) {
-                Some((unknown, expected)) => {
-                    let hint = closest(&unknown, &expected)
-                        .map(|s| format!("; did you mean {s}?"))
-                        .unwrap_or_default();
-                    format!("unknown key {unknown}{hint}")
-                }
-                None => message,
-            };
-            fail(format!("with --set: {key}: {message}"))
+            fail(format!(
+                "with --set: {}",
+                describe_schema_error(&key, e.inner(), "")
+            ))
         })
     }
 }
