@@ -317,9 +317,9 @@ fn run(
     }
     setup.force_large_output = force;
     let progress = (!quiet).then(Progress::new);
-    let result = skinpatch::pipeline::run(&setup, |m, total| {
+    let result = skinpatch::pipeline::run(&setup, |frame| {
         if let Some(p) = &progress {
-            p.frame(m, total)
+            p.frame(frame.metrics, frame.total_frames)
         }
     });
     if let Some(p) = &progress {

@@ -148,27 +148,12 @@ print(len(m.points), len(tetra[0]), len(point_data), len(cell_data))
 "#,
         path = path.to_str().unwrap()
     );
-    let required = std::env::var("SKINPATCH_REQUIRE_MESHIO").is_ok_and(|v| v == "1");
-    match Command::new("python3").args(["-c", &script]).output() {
-        Ok(o) if o.status.success() => {
-            let out = text(&o.stdout);
-            let counts: Vec<usize> = out.split_whitespace().map(|v| v.parse().unwrap()).collect();
-            assert_eq!(counts[..2], [points, tets], "{out}");
-            assert!(counts[2] >= 3 && counts[3] >= 10, "arrays converted: {out}");
-        }
-        Ok(o) if required || text(&o.stderr).contains("AssertionError") => {
-            panic!(
-                "meshio disagrees on {}: {}",
-                path.display(),
-                text(&o.stderr)
-            )
-        }
-        other => assert!(
-            !required,
-            "meshio could not read {}: {other:?}",
-            path.display()
-        ),
-    }
+    let Some(out) = common::python_check("meshio", "SKINPATCH_REQUIRE_MESHIO", &script, &[]) else {
+        return;
+    };
+    let counts: Vec<usize> = out.split_whitespace().map(|v| v.parse().unwrap()).collect();
+    assert_eq!(counts[..2], [points, tets], "{out}");
+    assert!(counts[2] >= 3 && counts[3] >= 10, "arrays converted: {out}");
 }
 
 #[test]
@@ -528,6 +513,53 @@ fn strain_maps_metrics_and_fields() {
     ] {
         assert!(xml.contains(needle), "{needle}");
     }
+    vtk_reads_names_and_directions(&out.join("frames/frame_0006.vtu"), &axes);
+}
+
+/// VTK's own VTU reader (the Python `vtk` package; `.ci/run` requires it)
+/// shows the component names we write, and reads principal direction K of
+/// a tet as the 3-vector `principal_axis_K_deformed` holds (what ParaView's
+/// Calculator and glyphs use): checked on a few tets against `axes`.
+fn vtk_reads_names_and_directions(path: &Path, axes: &[Vec<f64>]) {
+    let script = r#"
+import sys
+from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridReader
+r = vtkXMLUnstructuredGridReader()
+r.SetFileName(sys.argv[1])
+r.Update()
+g = r.GetOutput()
+def names(data, name):
+    a = data.GetArray(name)
+    return [a.GetComponentName(i) for i in range(a.GetNumberOfComponents())]
+assert names(g.GetCellData(), "principal_stretch") == ["λ1", "λ2", "λ3"], names(g.GetCellData(), "principal_stretch")
+assert names(g.GetCellData(), "principal_green_strain") == ["E1", "E2", "E3"]
+assert names(g.GetPointData(), "surface_stretch") == ["r_s", "r_t"]
+assert names(g.GetPointData(), "displacement_mm") == ["X", "Y", "Z"]
+for t in (0, 17, g.GetNumberOfCells() - 1):
+    for k in (1, 2, 3):
+        print(t, k, *g.GetCellData().GetArray(f"principal_axis_{k}_deformed").GetTuple3(t))
+"#;
+    let Some(out) = common::python_check(
+        "vtk",
+        "SKINPATCH_REQUIRE_VTK",
+        script,
+        &[path.to_str().unwrap()],
+    ) else {
+        return;
+    };
+    let mut lines = 0;
+    for line in out.lines() {
+        let v: Vec<f64> = line
+            .split_whitespace()
+            .map(|x| x.parse().unwrap())
+            .collect();
+        let (t, k) = (v[0] as usize, v[1] as usize);
+        let ours = &axes[k - 1][3 * t..3 * t + 3];
+        // Printed by Python's repr: the shortest text that reads back exactly.
+        assert_eq!(&v[2..], ours, "tet {t}, direction {k}");
+        lines += 1;
+    }
+    assert_eq!(lines, 9, "{out}");
 }
 
 /// `[microstructure]` writes the neutral map and, every `frame_stride`
@@ -919,4 +951,98 @@ fn set_overrides_keys_and_quiet_prints_nothing() {
         let err = text(&o.stderr);
         assert!(!o.status.success() && err.contains(needle), "{set}: {err}");
     }
+}
+
+/// A build without HDF5 refuses `frames_vtkhdf` before writing anything,
+/// naming the key and how to get a build that has it.
+#[cfg(not(feature = "vtkhdf"))]
+#[test]
+fn vtkhdf_without_the_feature_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let (out, o) = run_press_small_with(dir.path(), "\n[output]\nframes_vtkhdf = true\n");
+    assert!(!o.status.success());
+    let stderr = text(&o.stderr);
+    for needle in ["output.frames_vtkhdf", "--features vtkhdf", "libhdf5-dev"] {
+        assert!(stderr.contains(needle), "{needle}: {stderr}");
+    }
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(!out.exists(), "nothing written");
+}
+
+/// The library example (`examples/press_api.rs`, built by `cargo test`)
+/// runs the press on patch_3k with a changed modulus, and what its
+/// callback read from the fields equals what the run wrote to metrics.csv.
+#[test]
+fn the_api_example_reads_the_fields_the_run_writes() {
+    // target/<profile>/deps/cli-… → target/<profile>/examples/press_api
+    let exe = std::env::current_exe().unwrap();
+    let example = exe
+        .parent()
+        .and_then(Path::parent)
+        .unwrap()
+        .join("examples")
+        .join(format!("press_api{}", std::env::consts::EXE_SUFFIX));
+    assert!(
+        example.exists(),
+        "{} is missing: cargo test builds the examples",
+        example.display()
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("api");
+    let o = Command::new(&example)
+        .args(["examples/press.toml", "--dermis-kpa", "75", "--mesh"])
+        .arg(root().join("meshes/patch_3k.node"))
+        .arg("--out")
+        .arg(&out)
+        .current_dir(root())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    assert!(
+        text(&o.stderr).contains("dermis E = 75 kPa"),
+        "{}",
+        text(&o.stderr)
+    );
+    let stdout = text(&o.stdout);
+    let rows: Vec<Vec<f64>> = stdout
+        .lines()
+        .skip(1)
+        .take_while(|l| !l.starts_with("peak"))
+        .map(|l| l.split_whitespace().map(|v| v.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), 61, "{stdout}");
+    let metrics = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    let header: Vec<&str> = metrics.lines().next().unwrap().split(',').collect();
+    let column = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    for (row, line) in rows.iter().zip(metrics.lines().skip(1)) {
+        let m: Vec<f64> = line.split(',').map(|v| v.parse().unwrap()).collect();
+        assert_eq!(row[0], m[column("frame")]);
+        // Printed to 5 and 4 decimals.
+        assert!(
+            (row[2] - m[column("probe_force_z_n")]).abs() <= 5e-6,
+            "{row:?} vs {line}"
+        );
+        assert!(
+            (row[3] - m[column("contact_area_mm2")]).abs() <= 5e-5,
+            "{row:?} vs {line}"
+        );
+        assert!(
+            (row[4] - m[column("rs_max")]).abs() <= 5e-5,
+            "{row:?} vs {line}"
+        );
+        assert!(
+            (row[5] - m[column("rt_min")]).abs() <= 5e-5,
+            "{row:?} vs {line}"
+        );
+    }
+    let peak = rows.iter().map(|r| r[2]).fold(f64::MIN, f64::max);
+    assert!(peak > 0.05, "{stdout}");
+    assert!(
+        stdout.contains(&format!("peak force {peak:.5} N")),
+        "{stdout}"
+    );
+    // The largest displacement is the press depth, 1 mm, give or take the
+    // drag's tangential pull.
+    let u = rows.iter().map(|r| r[7]).fold(0.0, f64::max);
+    assert!((0.9..1.5).contains(&u), "{u}");
 }

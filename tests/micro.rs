@@ -117,6 +117,108 @@ fn exr_round_trip_is_exact() {
     assert_eq!(read_map(&old, &DEFAULTS).unwrap(), map);
 }
 
+/// The `key=value` entries of an EXR's `skinpatch:map` attribute.
+fn exr_entries(path: &std::path::Path) -> std::collections::BTreeMap<String, String> {
+    use exr::prelude::{AttributeValue, Text};
+    let meta = exr::meta::MetaData::read_from_file(path, false).unwrap();
+    let Some(AttributeValue::TextVector(list)) = meta.headers[0]
+        .own_attributes
+        .other
+        .get(&Text::from("skinpatch:map"))
+    else {
+        panic!("{} has no skinpatch:map attribute", path.display());
+    };
+    list.iter()
+        .map(|t| {
+            let (k, v) = t
+                .to_string()
+                .split_once('=')
+                .map(|(k, v)| (k.to_string(), v.to_string()))
+                .unwrap();
+            (k, v)
+        })
+        .collect()
+}
+
+/// The tEXt chunks of a PNG.
+fn png_entries(path: &std::path::Path) -> std::collections::BTreeMap<String, String> {
+    let file = std::io::BufReader::new(std::fs::File::open(path).unwrap());
+    let reader = png::Decoder::new(file).read_info().unwrap();
+    reader
+        .info()
+        .uncompressed_latin1_text
+        .iter()
+        .map(|c| (c.keyword.clone(), c.text.clone()))
+        .collect()
+}
+
+/// Height and normal maps, PNG and EXR, state the same texel size, height
+/// unit and edge rule, in the same words (the EXR edge used to be a number
+/// while the PNG said "wrap", and normal files had no metadata at all).
+#[test]
+fn every_map_file_carries_the_same_metadata() {
+    use skinpatch::micro::io::{write_normal_exr, write_normal_png16};
+    for edge in [Edge::Wrap, Edge::Clamp] {
+        let mut map = skin(5);
+        map.edge = edge;
+        map.height_unit_um = 0.25;
+        let normals = skinpatch::micro::normals::normal_map(&map);
+        let dir = tempfile::tempdir().unwrap();
+        let p = |name: &str| dir.path().join(name);
+        write_png16(&p("h.png"), &map).unwrap();
+        write_exr(&p("h.exr"), &map).unwrap();
+        write_normal_png16(&p("n.png"), &normals, &map).unwrap();
+        write_normal_exr(&p("n.exr"), &normals, &map).unwrap();
+        let want = [
+            ("skinpatch:texel_um", format!("{:e}", map.texel_um)),
+            ("skinpatch:height_unit_um", "2.5e-1".to_string()),
+            (
+                "skinpatch:edge",
+                if edge == Edge::Wrap { "wrap" } else { "clamp" }.to_string(),
+            ),
+        ];
+        let files = [
+            ("h.png", png_entries(&p("h.png"))),
+            ("h.exr", exr_entries(&p("h.exr"))),
+            ("n.png", png_entries(&p("n.png"))),
+            ("n.exr", exr_entries(&p("n.exr"))),
+        ];
+        for (name, entries) in &files {
+            for (key, value) in &want {
+                assert_eq!(
+                    entries.get(*key),
+                    Some(value),
+                    "{name}: {key} in {entries:?}"
+                );
+            }
+            let is_normal = name.starts_with('n');
+            assert_eq!(
+                entries
+                    .get("skinpatch:content")
+                    .is_some_and(|c| c.contains("normal")),
+                is_normal,
+                "{name}: {entries:?}"
+            );
+        }
+        // The height files still read back with that edge rule.
+        for name in ["h.png", "h.exr"] {
+            assert_eq!(read_map(&p(name), &DEFAULTS).unwrap().edge, edge, "{name}");
+        }
+        // The normal PNG decodes to the normals within its quantisation.
+        let decoded = image::open(p("n.png")).unwrap().into_rgb16();
+        let (x, y) = (17, 40);
+        let file_row = map.height - 1 - y;
+        let px = decoded.get_pixel(x as u32, file_row as u32);
+        for c in 0..3 {
+            let n = px[c] as f32 / 65535.0 * 2.0 - 1.0;
+            assert!(
+                (n - normals[y * map.width + x][c]).abs() < 2e-5,
+                "component {c}"
+            );
+        }
+    }
+}
+
 #[test]
 fn bad_map_files_are_clear_errors() {
     let dir = tempfile::tempdir().unwrap();

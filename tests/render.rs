@@ -287,7 +287,7 @@ fn run_render_small(out: &Path, extra: &str) -> skinpatch::error::Result<()> {
     let scenario = skinpatch::scenario::Scenario::parse(&text, &path)?;
     let mut setup = skinpatch::scenario::Setup::from_scenario(&scenario, &path)?;
     setup.output_dir = out.to_path_buf();
-    skinpatch::pipeline::run(&setup, |_, _| {}).map(|_| ())
+    skinpatch::pipeline::run(&setup, |_| {}).map(|_| ())
 }
 
 /// Golden images of the three comparison modes (128², lavapipe): mean
@@ -724,7 +724,7 @@ fn mp4_holds_every_rendered_frame() {
     let scenario = skinpatch::scenario::Scenario::parse(&text, &path).unwrap();
     let mut setup = skinpatch::scenario::Setup::from_scenario(&scenario, &path).unwrap();
     setup.output_dir = with_mp4.clone();
-    skinpatch::pipeline::run(&setup, |_, _| {}).unwrap();
+    skinpatch::pipeline::run(&setup, |_| {}).unwrap();
     for mode in ["none", "static", "dynamic"] {
         let video = with_mp4.join(format!("render/{mode}.mp4"));
         let o = std::process::Command::new("ffprobe")

@@ -1,5 +1,6 @@
 //! Writers for run outputs: per-frame VTU grids, the ParaView collection
-//! file and the metrics table.
+//! file, the one-file VTKHDF alternative (feature `vtkhdf`) and the
+//! metrics table.
 //!
 //! Every file is complete when it exists: grids are written atomically, and
 //! `metrics.csv` is flushed row by row so an interrupted run keeps every
@@ -16,6 +17,8 @@ use crate::strain::{ElementStrains, SurfaceField};
 pub mod frames;
 pub mod outputs;
 pub mod strain_images;
+#[cfg(feature = "vtkhdf")]
+pub mod vtkhdf;
 
 /// One row of `metrics.csv`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]

@@ -36,6 +36,7 @@ pub fn is_run_output(folder: &str, name: &str) -> bool {
                 | "mesh.face"
                 | "metrics.csv"
                 | "frames.pvd"
+                | "frames.vtkhdf"
                 | "summary.json"
         ),
         "frames" => numbered("frame_", &[".vtu"]),
@@ -103,6 +104,7 @@ mod tests {
         for (folder, name) in [
             ("", "metrics.csv"),
             ("", "frames.pvd"),
+            ("", "frames.vtkhdf"),
             ("", "metrics.csv.tmp4242"),
             ("frames", "frame_0007.vtu"),
             ("frames", "frame_0007.vtu.tmp17"),

@@ -12,6 +12,10 @@
 //! metadata as layer attributes of the same names (`skinpatch:edge` as 0 =
 //! wrap, 1 = clamp).
 //!
+//! Normal maps (16-bit RGB PNG, f32 RGB EXR) carry the texel size, height
+//! unit and edge rule of the height map they come from in the same places,
+//! and a `skinpatch:content` entry saying what they hold.
+//!
 //! Rows are written top to bottom with v decreasing, so the image shows v up
 //! like the strain maps. Writes are atomic (temporary file, then rename).
 
@@ -61,6 +65,37 @@ const EDGE: &str = "skinpatch:edge";
 /// bytes. (Files with the three as separate f64 attributes still read.)
 const EXR_METADATA: &str = "skinpatch:map";
 
+/// What a normal map file holds, in its `skinpatch:content` entry.
+const CONTENT: &str = "skinpatch:content";
+const NORMAL_CONTENT: &str =
+    "unit normal (x along u, y along v, z out of the skin) of the height map with this texel size";
+
+/// The metadata every map file carries beyond its pixels: texel size,
+/// height unit and edge rule (heights also carry their PNG quantisation).
+fn map_entries(map: &DisplacementMap) -> [(&'static str, String); 3] {
+    [
+        (TEXEL, format!("{:e}", map.texel_um)),
+        (UNIT, format!("{:e}", map.height_unit_um)),
+        (EDGE, edge_name(map.edge).to_string()),
+    ]
+}
+
+/// The EXR attribute holding `entries` as `key=value` texts.
+fn exr_metadata<'a>(
+    entries: impl IntoIterator<Item = (&'a str, String)>,
+) -> (exr::prelude::Text, exr::prelude::AttributeValue) {
+    use exr::prelude::{AttributeValue, Text};
+    (
+        Text::from(EXR_METADATA),
+        AttributeValue::TextVector(
+            entries
+                .into_iter()
+                .map(|(k, v)| Text::from(format!("{k}={v}").as_str()))
+                .collect(),
+        ),
+    )
+}
+
 fn edge_name(edge: Edge) -> &'static str {
     match edge {
         Edge::Wrap => "wrap",
@@ -88,13 +123,8 @@ pub fn write_png16(path: &Path, map: &DisplacementMap) -> Result<()> {
         let mut encoder = png::Encoder::new(&mut out, map.width as u32, map.height as u32);
         encoder.set_color(png::ColorType::Grayscale);
         encoder.set_depth(png::BitDepth::Sixteen);
-        for (key, value) in [
-            (TEXEL, format!("{:e}", map.texel_um)),
-            (OFFSET, format!("{lo:e}")),
-            (SCALE, format!("{scale:e}")),
-            (UNIT, format!("{:e}", map.height_unit_um)),
-            (EDGE, edge_name(map.edge).to_string()),
-        ] {
+        let quantisation = [(OFFSET, format!("{lo:e}")), (SCALE, format!("{scale:e}"))];
+        for (key, value) in map_entries(map).into_iter().chain(quantisation) {
             encoder.add_text_chunk(key.into(), value).map_err(failed)?;
         }
         let mut writer = encoder.write_header().map_err(failed)?;
@@ -204,21 +234,14 @@ fn flip_rows<T: Copy>(values: &[T], width: usize, height: usize) -> Vec<T> {
 
 /// Writes `map` as a single-channel f32 EXR with its metadata.
 pub fn write_exr(path: &Path, map: &DisplacementMap) -> Result<()> {
-    use exr::prelude::{AnyChannel, AttributeValue, FlatSamples, LayerAttributes, Text};
+    use exr::prelude::{AnyChannel, FlatSamples, LayerAttributes};
     let channel = AnyChannel::new(
         "Y",
         FlatSamples::F32(flip_rows(&map.data, map.width, map.height)),
     );
     let mut attributes = LayerAttributes::named("height");
-    let entries = [
-        format!("{TEXEL}={:e}", map.texel_um),
-        format!("{UNIT}={:e}", map.height_unit_um),
-        format!("{EDGE}={}", edge_name(map.edge)),
-    ];
-    attributes.other.insert(
-        Text::from(EXR_METADATA),
-        AttributeValue::TextVector(entries.iter().map(|e| Text::from(e.as_str())).collect()),
-    );
+    let (key, value) = exr_metadata(map_entries(map));
+    attributes.other.insert(key, value);
     write_exr_channels(path, (map.width, map.height), attributes, vec![channel])
 }
 
@@ -357,17 +380,14 @@ pub fn read_map(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap> 
     }
 }
 
-/// Writes a normal map as a 16-bit RGB PNG, each component `n` stored as
-/// `round((n + 1)/2 · 65535)` (the usual tangent-space encoding; x along u,
-/// y along v, z out of the skin), rows with v up like the height maps.
-pub fn write_normal_png16(
-    path: &Path,
-    normals: &[[f32; 3]],
-    width: usize,
-    height: usize,
-) -> Result<()> {
+/// Writes the normals of `map` as a 16-bit RGB PNG, each component `n`
+/// stored as `round((n + 1)/2 · 65535)` (the usual tangent-space encoding;
+/// x along u, y along v, z out of the skin), rows with v up like the height
+/// maps, with the map's texel size, height unit and edge rule as tEXt
+/// chunks like a height map's, and `skinpatch:content` saying what it holds.
+pub fn write_normal_png16(path: &Path, normals: &[[f32; 3]], map: &DisplacementMap) -> Result<()> {
     let mut bytes = Vec::with_capacity(6 * normals.len());
-    for n in flip_rows(normals, width, height) {
+    for n in flip_rows(normals, map.width, map.height) {
         for c in n {
             let q = ((c.clamp(-1.0, 1.0) + 1.0) * 0.5 * 65535.0).round() as u16;
             bytes.extend_from_slice(&q.to_be_bytes());
@@ -376,9 +396,16 @@ pub fn write_normal_png16(
     let mut out = Vec::new();
     let failed = |e: png::EncodingError| Error::io(path, std::io::Error::other(e));
     {
-        let mut encoder = png::Encoder::new(&mut out, width as u32, height as u32);
+        let mut encoder = png::Encoder::new(&mut out, map.width as u32, map.height as u32);
         encoder.set_color(png::ColorType::Rgb);
         encoder.set_depth(png::BitDepth::Sixteen);
+        let content = (
+            CONTENT,
+            format!("{NORMAL_CONTENT}; stored as (n + 1)/2 of 65535"),
+        );
+        for (key, value) in map_entries(map).into_iter().chain([content]) {
+            encoder.add_text_chunk(key.into(), value).map_err(failed)?;
+        }
         let mut writer = encoder.write_header().map_err(failed)?;
         writer.write_image_data(&bytes).map_err(failed)?;
         writer.finish().map_err(failed)?;
@@ -386,15 +413,13 @@ pub fn write_normal_png16(
     write_atomically(path, &out)
 }
 
-/// Writes a normal map as an f32 EXR with channels `R`, `G`, `B` = the
-/// normal's x (along u), y (along v) and z, rows with v up.
-pub fn write_normal_exr(
-    path: &Path,
-    normals: &[[f32; 3]],
-    width: usize,
-    height: usize,
-) -> Result<()> {
+/// Writes the normals of `map` as an f32 EXR with channels `R`, `G`, `B` =
+/// the normal's x (along u), y (along v) and z, rows with v up, and the
+/// map's metadata in the same `skinpatch:map` attribute as a height EXR
+/// (plus `skinpatch:content`).
+pub fn write_normal_exr(path: &Path, normals: &[[f32; 3]], map: &DisplacementMap) -> Result<()> {
     use exr::prelude::{AnyChannel, FlatSamples, LayerAttributes};
+    let (width, height) = (map.width, map.height);
     let component = |c: usize| -> Vec<f32> {
         (0..height)
             .rev()
@@ -410,10 +435,9 @@ pub fn write_normal_exr(
         .enumerate()
         .map(|(c, name)| AnyChannel::new(*name, FlatSamples::F32(component(c))))
         .collect::<Vec<_>>();
-    write_exr_channels(
-        path,
-        (width, height),
-        LayerAttributes::named("normal"),
-        channels,
-    )
+    let mut attributes = LayerAttributes::named("normal");
+    let content = (CONTENT, NORMAL_CONTENT.to_string());
+    let (key, value) = exr_metadata(map_entries(map).into_iter().chain([content]));
+    attributes.other.insert(key, value);
+    write_exr_channels(path, (width, height), attributes, channels)
 }

@@ -16,6 +16,7 @@ use std::time::Instant;
 
 pub mod plan;
 mod render;
+mod vtkhdf;
 
 pub use render::{bench_render, RenderBench};
 
@@ -97,8 +98,64 @@ impl MicroEngine {
     }
 }
 
-/// Runs the scenario; `on_frame` is called after each frame (for progress).
-pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Result<RunSummary> {
+/// One finished frame as [`run`]'s callback sees it: the metrics row and the
+/// frame's fields, borrowed for the duration of the call.
+pub struct Frame<'a> {
+    /// The frame's row of `metrics.csv` (probe force, contact, ranges, …).
+    pub metrics: &'a FrameMetrics,
+    /// Frames in the run, the rest frame included (for progress).
+    pub total_frames: usize,
+    /// The rest mesh (its `positions` are the rest positions, mm).
+    pub mesh: &'a crate::mesh::TetMesh,
+    /// Deformed positions of every mesh vertex (mm), indexed like the mesh.
+    pub positions: &'a [Vec3],
+    /// The deformation of the top surface in texture space: per top
+    /// triangle T (eq. 10) and per top vertex its area-weighted average
+    /// with stretch ratios and axes (eq. 11–13).
+    pub surface: &'a SurfaceField,
+    strains: &'a std::cell::OnceCell<ElementStrains>,
+}
+
+impl Frame<'_> {
+    /// Displacement of vertex `v` from its rest position (mm).
+    pub fn displacement(&self, v: usize) -> Vec3 {
+        self.positions[v] - self.mesh.positions[v]
+    }
+
+    /// Principal strains of every tet (computed on first use, and shared
+    /// with the frame's VTU when frames are written).
+    pub fn strains(&self) -> &ElementStrains {
+        self.strains
+            .get_or_init(|| ElementStrains::compute(self.mesh, self.positions))
+    }
+}
+
+/// Runs the scenario and writes its outputs; `on_frame` is called after
+/// each frame's files are written, with the frame's metrics and fields
+/// (for progress, or to read results without going through files).
+///
+/// ```
+/// # fn main() -> skinpatch::Result<()> {
+/// use skinpatch::scenario::Setup;
+/// let mut setup = Setup::load(std::path::Path::new("tests/fixtures/press_small.toml"))?;
+/// let out = std::env::temp_dir().join(format!("skinpatch-doc-{}", std::process::id()));
+/// setup.output_dir = out.clone();
+/// let (mut forces, mut peak_rs) = (Vec::new(), 0.0f64);
+/// let summary = skinpatch::pipeline::run(&setup, |frame| {
+///     forces.push(frame.metrics.probe_force_n[2]);
+///     for v in &frame.surface.vertices {
+///         peak_rs = peak_rs.max(v.strain().svd.rs);
+///     }
+/// })?;
+/// assert_eq!(forces.len(), 7);
+/// assert!(forces[3] > 0.01, "the skin pushes the probe back: {forces:?}");
+/// assert!(peak_rs > 1.01, "the skin stretches around the probe");
+/// assert!(summary.written.contains(&out.join("metrics.csv")));
+/// std::fs::remove_dir_all(&out).ok();
+/// # Ok(())
+/// # }
+/// ```
+pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<RunSummary> {
     let dir = &setup.output_dir;
     // Everything that can fail before the first frame is checked before
     // the folder is touched: the planned output size, the adapters and
@@ -156,6 +213,7 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Res
         written.extend(write_neutral(dir, setup, micro)?);
     }
     let micro_device = engine.as_ref().map(MicroEngine::describe);
+    let mut hdf = None;
     let result = simulate(setup, |m, sim| {
         let mut m = *m;
         let field = SurfaceField::new(&mesh.top, &mesh.positions, &sim.x);
@@ -164,16 +222,22 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Res
         m.rt_range = [rt.0, rt.1];
         m.folded_vertices = folded;
         metrics.push(&m)?;
-        if setup.write_frames {
-            let strains = ElementStrains::compute(mesh, &sim.x);
-            let grid = export::frame_grid(mesh, &sim.x, &strains, &field);
-            collection.push((
-                m.time_s,
-                export::write_frame(dir, m.frame, &grid, setup.vtu_format)?,
-            ));
-            // Rewritten (atomically) after every frame, so a killed run's
-            // frames open in ParaView too.
-            export::write_collection(dir, &collection)?;
+        let strains = std::cell::OnceCell::new();
+        if setup.write_frames || setup.write_vtkhdf {
+            let strains = strains.get_or_init(|| ElementStrains::compute(mesh, &sim.x));
+            let grid = export::frame_grid(mesh, &sim.x, strains, &field);
+            if setup.write_frames {
+                collection.push((
+                    m.time_s,
+                    export::write_frame(dir, m.frame, &grid, setup.vtu_format)?,
+                ));
+                // Rewritten (atomically) after every frame, so a killed
+                // run's frames open in ParaView too.
+                export::write_collection(dir, &collection)?;
+            }
+            if setup.write_vtkhdf {
+                vtkhdf::push(&mut hdf, dir, setup, m.time_s, &grid)?;
+            }
         }
         if let Some(images) = setup.strain_images {
             let raster = StrainRaster::new(&field, images.px, images.px);
@@ -216,13 +280,24 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&FrameMetrics, usize)) -> Res
             }
         }
         frames.push(m);
-        on_frame(&m, setup.simulation.frames + 1);
+        on_frame(&Frame {
+            metrics: &m,
+            total_frames: setup.simulation.frames + 1,
+            mesh,
+            positions: &sim.x,
+            surface: &field,
+            strains: &strains,
+        });
         Ok(())
     });
     if !collection.is_empty() {
         written.push(dir.join("frames.pvd"));
     }
+    // Closed whether or not the run finished: the steps so far stay. The
+    // run's own error, if any, is the one reported.
+    let closed = vtkhdf::finish(hdf);
     result?;
+    written.extend(closed?);
     if let (Some(r), Some(renderer)) = (&setup.render, &renderer) {
         written.extend(renderer.finish(r, 1.0 / setup.simulation.frame_dt)?);
     }
@@ -290,11 +365,11 @@ fn write_micro_frame(
     if micro.normal_maps {
         let path = folder.join(format!("normal_{tag}.png"));
         let normals = normals.unwrap_or_else(|| crate::micro::normals::normal_map(map));
-        io::write_normal_png16(&path, &normals, map.width, map.height)?;
+        io::write_normal_png16(&path, &normals, map)?;
         written.push(path);
         if micro.exr {
             let path = folder.join(format!("normal_{tag}.exr"));
-            io::write_normal_exr(&path, &normals, map.width, map.height)?;
+            io::write_normal_exr(&path, &normals, map)?;
             written.push(path);
         }
     }

@@ -6,7 +6,8 @@
 //! frame VTUs: the measured size of an uncompressed Float64 frame (10.1 MB
 //! for patch_25k's 26,146 tets and 4,914 points: ≈ 380 bytes a tet and 100
 //! a point), halved with `vtu_precision = "f32"`; compression (the default)
-//! makes them smaller still (8.1 MB and 4.1 MB).
+//! makes them smaller still (8.1 MB and 4.1 MB). `frames.vtkhdf` is
+//! bounded by the same figure a frame.
 
 use crate::error::{Error, Result};
 use crate::scenario::Setup;
@@ -32,6 +33,11 @@ pub fn planned_bytes(setup: &Setup) -> u64 {
         add(1, vtu);
     }
     if setup.write_frames {
+        add(frames, vtu);
+    }
+    if setup.write_vtkhdf {
+        // The same arrays uncompressed, less the connectivity of every
+        // frame after the first: a bound like the VTU's.
         add(frames, vtu);
     }
     if let Some(images) = setup.strain_images {

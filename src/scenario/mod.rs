@@ -87,6 +87,12 @@ pub struct OutputSection {
     /// strains and directions, surface stretch ratios and axes) and
     /// `frames.pvd` for ParaView. Default true.
     pub frames_vtu: bool,
+    /// Write every frame into one `frames.vtkhdf` (VTK's HDF5 format, read
+    /// by ParaView 5.12+): the same grid and arrays as the VTUs, with the
+    /// connectivity and unchanged arrays stored once; float precision and
+    /// compression follow `vtu_precision` and `vtu_compression`. Needs a
+    /// build with the `vtkhdf` feature. Default false.
+    pub frames_vtkhdf: bool,
     /// Write PNG maps of the surface strain per frame under `strain/`
     /// (`rs_NNNN.png`, `rt_NNNN.png`, `axes_NNNN.png`). Default false.
     pub strain_images: bool,
@@ -108,6 +114,7 @@ impl Default for OutputSection {
             mesh_vtu: true,
             mesh_tetgen: false,
             frames_vtu: true,
+            frames_vtkhdf: false,
             strain_images: false,
             strain_image_px: 512,
             strain_image_range: 0.25,
@@ -134,6 +141,8 @@ pub struct Setup {
     pub write_mesh_tetgen: bool,
     /// Write one VTU per frame.
     pub write_frames: bool,
+    /// Write every frame into `frames.vtkhdf`.
+    pub write_vtkhdf: bool,
     /// How the VTU files store their arrays.
     pub vtu_format: crate::mesh::io::VtuFormat,
     /// Strain maps per frame, if asked for.
@@ -182,6 +191,21 @@ impl OutputSection {
             }
         };
         Ok(crate::mesh::io::VtuFormat { compress, f32 })
+    }
+
+    /// Whether to write `frames.vtkhdf`; an error when asked of a build
+    /// without the `vtkhdf` feature.
+    fn vtkhdf(&self) -> Result<bool> {
+        if self.frames_vtkhdf && !cfg!(feature = "vtkhdf") {
+            return Err(Error::parameter(
+                "output.frames_vtkhdf",
+                "this skinpatch was built without HDF5: install the HDF5 library \
+                 (Debian/Ubuntu: `apt-get install libhdf5-dev`) and build with \
+                 `cargo build --release --features vtkhdf`, or write the VTU frames \
+                 (`frames_vtu`, the default)",
+            ));
+        }
+        Ok(self.frames_vtkhdf)
     }
 
     fn strain_image_settings(&self) -> Result<Option<StrainImageSettings>> {
@@ -525,6 +549,7 @@ impl Setup {
             write_mesh_vtu: scenario.output.mesh_vtu,
             write_mesh_tetgen: scenario.output.mesh_tetgen,
             write_frames: scenario.output.frames_vtu,
+            write_vtkhdf: scenario.output.vtkhdf()?,
             vtu_format: scenario.output.vtu_format()?,
             strain_images,
             micro,
@@ -533,7 +558,25 @@ impl Setup {
         })
     }
 
-    /// Loads, parses and validates a scenario file.
+    /// Loads, parses and validates a scenario file: paths in it are taken
+    /// relative to the file, and a bad value is an error naming its key.
+    ///
+    /// ```
+    /// # fn main() -> skinpatch::Result<()> {
+    /// use skinpatch::scenario::{Scenario, Setup};
+    /// let path = std::path::Path::new("tests/fixtures/press_small.toml");
+    /// let setup = Setup::load(path)?;
+    /// assert_eq!(setup.simulation.frames + 1, 7); // 1 s at 6 Hz, and t = 0
+    /// assert!(setup.mesh.num_tets() > 3000);
+    ///
+    /// // Edit the scenario first, then validate it like a file.
+    /// let mut scenario = Scenario::load(path)?;
+    /// scenario.probe.as_mut().unwrap().friction = Some(-0.5);
+    /// let err = Setup::from_scenario(&scenario, path).unwrap_err();
+    /// assert!(err.to_string().contains("friction"), "{err}");
+    /// # Ok(())
+    /// # }
+    /// ```
     pub fn load(path: &Path) -> Result<Setup> {
         Setup::from_scenario(&Scenario::load(path)?, path)
     }

@@ -109,7 +109,7 @@ pub fn run_fixture(
     let mut setup = skinpatch::scenario::Setup::from_scenario(&scenario, &fixture).unwrap();
     let dir = tempfile::tempdir().unwrap();
     setup.output_dir = dir.path().to_path_buf();
-    (skinpatch::pipeline::run(&setup, |_, _| {}).unwrap(), dir)
+    (skinpatch::pipeline::run(&setup, |_| {}).unwrap(), dir)
 }
 
 /// One tet with its top face at z = 0 (a mesh needs a top surface) and its
@@ -123,4 +123,44 @@ pub fn one_tet() -> skinpatch::mesh::TetMesh {
         ..Default::default()
     };
     skinpatch::mesh::TetMesh::from_raw("one tet", raw).unwrap()
+}
+
+/// Runs the Python `script` (with `args` as `sys.argv[1:]`) that checks
+/// our output with an independent reader from the Python package
+/// `package`, and returns what it printed. When the package is not
+/// installed the check is skipped with a note and `None` returned, unless
+/// the environment variable `require_var` is `1` (`.ci/run` sets it): then,
+/// as for any failure of the script, the test fails.
+pub fn python_check(
+    package: &str,
+    require_var: &str,
+    script: &str,
+    args: &[&str],
+) -> Option<String> {
+    let required = std::env::var(require_var).is_ok_and(|v| v == "1");
+    let skip = |why: String| {
+        assert!(
+            !required,
+            "{package} check required ({require_var}=1): {why}"
+        );
+        eprintln!("{package} check skipped ({why}; set {require_var}=1 to fail instead)");
+        None
+    };
+    match std::process::Command::new("python3")
+        .arg("-c")
+        .arg(script)
+        .args(args)
+        .output()
+    {
+        Ok(o) if o.status.success() => Some(String::from_utf8_lossy(&o.stdout).into_owned()),
+        Ok(o) => {
+            let stderr = String::from_utf8_lossy(&o.stderr).into_owned();
+            if stderr.contains("ModuleNotFoundError") {
+                skip(format!("the Python package {package} is not installed"))
+            } else {
+                panic!("{package} disagrees with our output:\n{stderr}")
+            }
+        }
+        Err(e) => skip(format!("python3 does not run: {e}")),
+    }
 }
