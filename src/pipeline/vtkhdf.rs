@@ -48,7 +48,7 @@ pub(super) fn push(
 ) -> Result<()> {
     Err(crate::error::Error::parameter(
         "output.frames_vtkhdf",
-        "this skinpatch was built without the `vtkhdf` feature",
+        "needs skinpatch built with the `vtkhdf` feature",
     ))
 }
 

@@ -199,9 +199,9 @@ impl OutputSection {
         if self.frames_vtkhdf && !cfg!(feature = "vtkhdf") {
             return Err(Error::parameter(
                 "output.frames_vtkhdf",
-                "this skinpatch was built without HDF5: install the HDF5 library \
-                 (Debian/Ubuntu: `apt-get install libhdf5-dev`) and build with \
-                 `cargo build --release --features vtkhdf`, or write the VTU frames \
+                "needs skinpatch built with HDF5, which this build is not: install the \
+                 HDF5 library (Debian/Ubuntu: `apt-get install libhdf5-dev`) and build \
+                 with `cargo build --release --features vtkhdf`, or write the VTU frames \
                  (`frames_vtu`, the default)",
             ));
         }
