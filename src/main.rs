@@ -32,8 +32,10 @@ enum Command {
     /// mesh.node/.ele/.face; metrics.csv (one row per frame); summary.json
     /// (the run's record: scenario as run, overrides, metrics, files);
     /// frames/frame_NNNN.vtu and frames.pvd (deformed mesh, displacement,
-    /// principal strains and directions, surface stretch); with
-    /// [output] strain_images, strain/{rs,rt,axes}_NNNN.png; with
+    /// principal strains and directions, surface stretch); with [output]
+    /// frames_vtkhdf, the same frames in one frames.vtkhdf (a build with
+    /// the vtkhdf feature); with [output] strain_images,
+    /// strain/{rs,rt,axes}_NNNN.png; with
     /// [microstructure], micro/height_neutral.png, micro/height_NNNN.png and
     /// micro/normal_NNNN.png (16-bit; .exr too when asked) and, when asked,
     /// micro/roughness.csv; with [render], render/<mode>/frame_NNNN.png (or

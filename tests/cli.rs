@@ -234,6 +234,7 @@ fn help_explains_the_commands() {
         "metrics.csv",
         "summary.json",
         "frames.pvd",
+        "frames.vtkhdf",
         "strain/",
         "micro/normal_NNNN.png",
         "roughness.csv",
