@@ -49,6 +49,9 @@ struct Globals {
     // x: light count; y: mode (0 none, 1 static, 2 dynamic);
     // z: roughness (0 microgeometry, 1 anisotropic); w: translucency on.
     flags: vec4<u32>,
+    // x: microstructure filter (0 bilinear normals, 1 slope moments);
+    // yzw unused.
+    options: vec4<u32>,
 };
 
 @group(0) @binding(0) var<uniform> globals: Globals;
@@ -183,6 +186,48 @@ fn shadow_pcf(k: u32, p: vec3<f32>, n: vec3<f32>) -> f32 {
         }
     }
     return lit / 16.0;
+}
+
+// Beckmann distribution of a Gaussian slope distribution (LEAN mapping):
+// mean slope `mean`, covariance `cov` = (xx, yy, xy); h in the tangent
+// frame. The slopes of h as a facet normal are (-h.x, -h.y) / h.z. With
+// mean 0 and cov = (m^2/2, m^2/2, 0) this is beckmann(h.z, m).
+fn beckmann_slopes(h: vec3<f32>, mean: vec2<f32>, cov: vec3<f32>) -> f32 {
+    if (h.z <= 0.0) {
+        return 0.0;
+    }
+    let s = vec2<f32>(-h.x, -h.y) / h.z - mean;
+    let det = cov.x * cov.y - cov.z * cov.z;
+    let e = (cov.y * s.x * s.x - 2.0 * cov.z * s.x * s.y + cov.x * s.y * s.y) / det;
+    let hz2 = h.z * h.z;
+    return exp(-0.5 * e) / (2.0 * PI * sqrt(det) * hz2 * hz2);
+}
+
+// The KS BRDF times n.l for two lobes (without rho_s) over a slope
+// distribution of mean `mean` and covariance `cov` (xx, yy, xy); each
+// lobe's own Beckmann slope variance m^2/2 adds to `cov`. `frame` holds
+// the tangent, bitangent and geometric normal.
+fn ks_specular_moments(
+    frame: mat3x3<f32>,
+    l: vec3<f32>,
+    v: vec3<f32>,
+    lobes: vec4<f32>,
+    mean: vec2<f32>,
+    cov: vec3<f32>,
+) -> f32 {
+    let n = frame[2];
+    let nl = dot(n, l);
+    if (nl <= 0.0 || dot(n, v) <= 0.0) {
+        return 0.0;
+    }
+    let hv = l + v;
+    let h = normalize(hv);
+    let ht = vec3<f32>(dot(h, frame[0]), dot(h, frame[1]), dot(h, n));
+    let v1 = 0.5 * lobes.x * lobes.x;
+    let v2 = 0.5 * lobes.y * lobes.y;
+    let d = lobes.z * beckmann_slopes(ht, mean, cov + vec3<f32>(v1, v1, 0.0))
+        + (1.0 - lobes.z) * beckmann_slopes(ht, mean, cov + vec3<f32>(v2, v2, 0.0));
+    return d * schlick(dot(v, h), 0.028) / dot(hv, hv) * nl;
 }
 
 // Kelemen/Szirmay-Kalos BRDF times n.l for two lobes (without rho_s).

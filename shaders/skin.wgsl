@@ -15,6 +15,13 @@
 @group(1) @binding(7) var micro_normals: texture_2d<f32>;
 // Shadow factor of light k in component k, in texture space.
 @group(1) @binding(8) var shadow_factors: texture_2d<f32>;
+// Slope moments of the same normals with every mip level (moments.wgsl):
+// (x, y, x^2, y^2) and x y.
+@group(1) @binding(9) var moments_a: texture_2d<f32>;
+@group(1) @binding(10) var moments_b: texture_2d<f32>;
+
+// Most taps along the major axis of an anisotropic footprint.
+const MAX_TAPS: i32 = 8;
 
 // Mirrors `MeshVertex` in src/render/scene.rs.
 struct MeshVertex {
@@ -82,6 +89,62 @@ fn micro_normal(uv: vec2<f32>) -> vec3<f32> {
     return normalize(sum);
 }
 
+struct SlopeMoments {
+    // Means of x, y, x^2, y^2.
+    a: vec4<f32>,
+    // Mean of x y.
+    b: f32,
+};
+
+// Bilinear, wrapped lookup of the slope moments at level `level`.
+fn moments_bilinear(uv: vec2<f32>, level: i32) -> SlopeMoments {
+    let size = vec2<i32>(textureDimensions(moments_a, level));
+    let x = uv * vec2<f32>(size) - 0.5;
+    let base = vec2<i32>(floor(x));
+    let f = x - floor(x);
+    var out = SlopeMoments(vec4<f32>(0.0), 0.0);
+    for (var j = 0; j < 2; j++) {
+        for (var i = 0; i < 2; i++) {
+            let t = ((base + vec2<i32>(i, j)) % size + size) % size;
+            let w = select(1.0 - f.x, f.x, i == 1) * select(1.0 - f.y, f.y, j == 1);
+            out.a += w * textureLoad(moments_a, t, level);
+            out.b += w * textureLoad(moments_b, t, level).x;
+        }
+    }
+    return out;
+}
+
+// Mean slope moments over a pixel's footprint, whose axes in uv are
+// `dx` and `dy` (screen derivatives): trilinear at the level where a tap
+// covers the footprint's minor axis, with up to MAX_TAPS taps along the
+// major axis (anisotropic filtering done by hand: no sampler filters f32).
+fn footprint_moments(uv: vec2<f32>, dx: vec2<f32>, dy: vec2<f32>) -> SlopeMoments {
+    let size = vec2<f32>(textureDimensions(moments_a, 0));
+    let top = i32(textureNumLevels(moments_a)) - 1;
+    let lx = length(dx * size);
+    let ly = length(dy * size);
+    let major = select(dy, dx, lx >= ly);
+    let long = max(lx, ly);
+    let short = min(lx, ly);
+    let taps = clamp(i32(ceil(long / max(short, 1e-6))), 1, MAX_TAPS);
+    let width = max(long / f32(taps), short);
+    let lod = clamp(log2(max(width, 1.0)), 0.0, f32(top));
+    let l0 = i32(floor(lod));
+    let l1 = min(l0 + 1, top);
+    let t = lod - f32(l0);
+    var sum = SlopeMoments(vec4<f32>(0.0), 0.0);
+    for (var k = 0; k < taps; k++) {
+        let p = uv + major * ((f32(k) + 0.5) / f32(taps) - 0.5);
+        let m0 = moments_bilinear(p, l0);
+        let m1 = moments_bilinear(p, l1);
+        sum.a += mix(m0.a, m1.a, t);
+        sum.b += mix(m0.b, m1.b, t);
+    }
+    sum.a /= f32(taps);
+    sum.b /= f32(taps);
+    return sum;
+}
+
 // m(r) / m(1) of the strain-driven roughness model, linear in r.
 fn roughness_scale(r: f32) -> f32 {
     let x = clamp((r - 0.7) / 0.05, 0.0, 15.0);
@@ -126,6 +189,9 @@ fn diffused(uv: vec2<f32>) -> vec3<f32> {
 
 @fragment
 fn fs_skin(in: SurfaceVaryings) -> @location(0) vec4<f32> {
+    // The pixel's footprint in uv (derivatives need uniform control flow).
+    let duv_dx = dpdx(in.uv);
+    let duv_dy = dpdy(in.uv);
     let n = normalize(in.normal);
     let t = normalize(in.tangent - n * dot(n, in.tangent));
     let b = cross(n, t);
@@ -143,12 +209,27 @@ fn fs_skin(in: SurfaceVaryings) -> @location(0) vec4<f32> {
     diffuse *= pow(albedo, vec3<f32>(1.0 - globals.params.x));
     diffuse *= energy_factor(max(dot(n, v), 0.0), lobes);
 
-    // Specular normal: the microstructure's in static and dynamic modes.
+    // Specular normal: the microstructure's in static and dynamic modes,
+    // either looked up bilinearly or, prefiltered, as the mean slope with
+    // the slopes' covariance under the pixel (LEAN).
     var ns = n;
-    if (mode != 0u && !anisotropic) {
+    let prefiltered = mode != 0u && !anisotropic && globals.options.x == 1u;
+    var mean = vec2<f32>(0.0);
+    var cov = vec3<f32>(0.0);
+    if (prefiltered) {
+        let m = footprint_moments(in.uv, duv_dx, duv_dy);
+        mean = m.a.xy;
+        cov = vec3<f32>(
+            max(m.a.z - mean.x * mean.x, 0.0),
+            max(m.a.w - mean.y * mean.y, 0.0),
+            m.b - mean.x * mean.y,
+        );
+        ns = normalize(n - mean.x * t - mean.y * b);
+    } else if (mode != 0u && !anisotropic) {
         let m = micro_normal(in.uv);
         ns = normalize(m.x * t + m.y * b + m.z * n);
     }
+    let tangent_frame = mat3x3<f32>(t, b, n);
     // Strain frame for anisotropic roughness.
     let s_uv = in.strain.zw;
     var s_axis = t * s_uv.x + b * s_uv.y;
@@ -171,6 +252,8 @@ fn fs_skin(in: SurfaceVaryings) -> @location(0) vec4<f32> {
         var brdf: f32;
         if (mode != 0u && anisotropic) {
             brdf = ks_specular_aniso(frame, inc.dir, v, lobes, scale);
+        } else if (prefiltered) {
+            brdf = ks_specular_moments(tangent_frame, inc.dir, v, lobes, mean, cov);
         } else {
             brdf = ks_specular(ns, inc.dir, v, lobes);
         }

@@ -35,6 +35,7 @@ pub mod fit;
 pub mod histogram;
 pub mod map;
 pub mod micro;
+pub mod moments;
 pub mod normals;
 pub mod raster;
 pub mod svd2;
@@ -420,6 +421,7 @@ pub fn shader_sources() -> Vec<(&'static str, String)> {
         ("svd2.wgsl", svd2::SHADER.to_string()),
         ("convolve.wgsl", convolve::source()),
         ("normals.wgsl", map::with_map_access(normals::SHADER)),
+        ("moments.wgsl", moments::SHADER.to_string()),
         ("histogram.wgsl", map::with_map_access(histogram::SHADER)),
         ("fit.wgsl", fit::SHADER.to_string()),
         ("shadow.wgsl", crate::render::shadow::SHADER.to_string()),

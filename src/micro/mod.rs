@@ -10,7 +10,8 @@
 //! * [`normals`]: normal maps, 64 × 64 normal histograms, slope variance;
 //! * [`fit`]: fitting (α, σ) to measured deformations (eq. 7) and the
 //!   piecewise-linear model to fitted points;
-//!
+//! * [`moments`]: slope moments of a normal map and their mip pyramid, for
+//!   prefiltered (LEAN) specular;
 //! * [`roughness`]: per-axis Beckmann roughness m(r) from the kernel model
 //!   (seed 003), for the renderer;
 //! * [`io`]: 16-bit PNG and f32 EXR files.
@@ -22,6 +23,7 @@ pub mod fit;
 pub mod io;
 pub mod kernel;
 pub mod map;
+pub mod moments;
 pub mod normals;
 pub mod procedural;
 pub mod roughness;

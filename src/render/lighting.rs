@@ -52,6 +52,8 @@ pub struct Globals {
     pub params: [f32; 4],
     /// Light count, mode, roughness kind, translucency.
     pub flags: [u32; 4],
+    /// Microstructure filter (0 bilinear normals, 1 slope moments), unused ×3.
+    pub options: [u32; 4],
 }
 
 /// Stretch ratios of [`Globals::roughness_curve`].
@@ -170,6 +172,12 @@ impl Globals {
                 (setup.roughness == Roughness::Anisotropic) as u32,
                 setup.translucency as u32,
             ],
+            options: [
+                (setup.microstructure_filter == super::MicroFilter::Moments) as u32,
+                0,
+                0,
+                0,
+            ],
         }
     }
 }
@@ -181,9 +189,9 @@ mod tests {
     #[test]
     fn uniform_sizes_match_wgsl() {
         // WGSL: Light 96 B; Globals 64 + 16 + 16 + 4·96 + 9·16 + 6·16 + 16
-        // + 16 + 64 + 16 + 16.
+        // + 16 + 64 + 16 + 16 + 16.
         assert_eq!(std::mem::size_of::<GpuLight>(), 96);
-        assert_eq!(std::mem::size_of::<Globals>(), 848);
+        assert_eq!(std::mem::size_of::<Globals>(), 864);
     }
 
     #[test]

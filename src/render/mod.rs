@@ -103,6 +103,18 @@ pub enum Roughness {
     Anisotropic,
 }
 
+/// How the skin pass reads the microstructure in the static and dynamic
+/// modes (with `Roughness::Microgeometry`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MicroFilter {
+    /// The normal map looked up bilinearly at the pixel's centre: aliases
+    /// where a pixel covers several texels (supersampling hides it).
+    None,
+    /// The slope moments' mip pyramid over the pixel's footprint (LEAN):
+    /// mean slope and covariance widen the Beckmann lobes.
+    Moments,
+}
+
 /// Validated render settings (from `[render]`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct RenderSetup {
@@ -142,6 +154,8 @@ pub struct RenderSetup {
     pub specular_intensity: f32,
     /// Specular detail.
     pub roughness: Roughness,
+    /// Prefiltering of the microstructure's specular.
+    pub microstructure_filter: MicroFilter,
     /// Camera.
     pub camera: camera::Camera,
     /// Lights.

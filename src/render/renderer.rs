@@ -1,6 +1,7 @@
 //! The renderer: owns every render resource and records a frame as
-//! shadow maps → texture-space irradiance → six-Gaussian diffusion → skin
-//! pass → supersampling resolve, in one command buffer.
+//! shadow maps → texture-space irradiance → six-Gaussian diffusion →
+//! (slope moments of the dynamic normals) → skin pass → supersampling
+//! resolve, in one command buffer.
 
 use glam::Vec3;
 
@@ -14,8 +15,9 @@ use super::shadow::{ShadowInfo, ShadowStage};
 use super::skin::{FrameBuffers, SkinStage, HDR_FORMAT};
 use super::specular::EnergyTable;
 use super::stage::{linear_sampler, texture_entry, uniform_entry, DEPTH_FORMAT};
-use super::{Image, Mode, RenderSetup};
+use super::{Image, MicroFilter, Mode, RenderSetup, Roughness};
 use crate::error::Result;
+use crate::gpu::moments::{MomentPyramidGpu, MomentStage};
 use crate::gpu::{bind_group, buffers, encoder, Context};
 
 /// Tangent-space normals of a displacement map, for the static mode.
@@ -121,6 +123,9 @@ pub struct Renderer {
     skin: SkinStage,
     // Group 1 of the skin pass with the neutral and the dynamic normals.
     diffused: [wgpu::BindGroup; 2],
+    moment_stage: MomentStage,
+    // The dynamic normals' slope moments (rebuilt per dynamic frame).
+    dynamic_moments: Option<MomentPyramidGpu>,
     hdr: wgpu::TextureView,
     depth: wgpu::TextureView,
     resolve: ResolveStage,
@@ -300,6 +305,9 @@ impl Renderer {
             (0..7).map(|k| texture_entry(k, true, false)).collect();
         diffused_entries.push(texture_entry(7, false, false));
         diffused_entries.push(texture_entry(8, true, false));
+        // The slope moments' pyramids (A and B) of the same normals.
+        diffused_entries.push(texture_entry(9, false, false));
+        diffused_entries.push(texture_entry(10, false, false));
         let diffused_layout =
             ctx.device
                 .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -327,11 +335,31 @@ impl Renderer {
         );
         let neutral_view = view(&neutral_tex);
         let dynamic_view = dynamic.map(view);
+        // Slope moments: the neutral map's once, the dynamic map's each
+        // time its normals change (`submit`).
+        let moment_stage = MomentStage::new(ctx);
+        let neutral_moments =
+            moment_stage.pyramid(ctx, &neutral_tex, (neutral.width, neutral.height));
+        let dynamic_moments = dynamic.map(|texture| {
+            let size = (texture.width() as usize, texture.height() as usize);
+            moment_stage.pyramid(ctx, texture, size)
+        });
+        let mut enc = encoder(ctx);
+        moment_stage.encode(&mut enc, &neutral_moments);
+        ctx.queue.submit([enc.finish()]);
+        let moment_views = |p: &MomentPyramidGpu| [view(&p.a), view(&p.b)];
+        let neutral_moment_views = moment_views(&neutral_moments);
+        let dynamic_moment_views = dynamic_moments.as_ref().map(moment_views);
         let diffused = [
-            &neutral_view,
-            dynamic_view.as_ref().unwrap_or(&neutral_view),
+            (&neutral_view, &neutral_moment_views),
+            (
+                dynamic_view.as_ref().unwrap_or(&neutral_view),
+                dynamic_moment_views
+                    .as_ref()
+                    .unwrap_or(&neutral_moment_views),
+            ),
         ]
-        .map(|normals| {
+        .map(|(normals, moments)| {
             let mut resources: Vec<wgpu::BindingResource<'_>> = blurred
                 .iter()
                 .map(wgpu::BindingResource::TextureView)
@@ -339,6 +367,8 @@ impl Renderer {
             resources.push(wgpu::BindingResource::TextureView(&irradiance_views[2]));
             resources.push(wgpu::BindingResource::TextureView(normals));
             resources.push(wgpu::BindingResource::TextureView(&irradiance_views[3]));
+            resources.push(wgpu::BindingResource::TextureView(&moments[0]));
+            resources.push(wgpu::BindingResource::TextureView(&moments[1]));
             bind_group(ctx, &diffused_layout, &resources)
         });
 
@@ -375,6 +405,8 @@ impl Renderer {
             diffusion,
             skin: SkinStage::new(ctx, [&lighting_layout, &diffused_layout]),
             diffused,
+            moment_stage,
+            dynamic_moments,
             hdr,
             depth,
             resolve,
@@ -453,6 +485,13 @@ impl Renderer {
             (&self.surface.buffer, self.surface.count),
         );
         self.diffusion.encode(&mut enc);
+        let prefiltered = self.setup.microstructure_filter == MicroFilter::Moments
+            && self.setup.roughness == Roughness::Microgeometry;
+        if let (Mode::Dynamic, true, Some(pyramid)) =
+            (mode, prefiltered, self.dynamic_moments.as_ref())
+        {
+            self.moment_stage.encode(&mut enc, pyramid);
+        }
         let normals = &self.diffused[(mode == Mode::Dynamic) as usize];
         self.skin.encode(
             &mut enc,

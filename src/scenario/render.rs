@@ -11,7 +11,7 @@ use crate::error::{shown, Error, Result};
 use crate::render::camera::{Camera, Projection};
 use crate::render::light::{Environment, Light, LightKind, GRACE_CATHEDRAL, MAX_LIGHTS};
 use crate::render::specular::{region_lobes, Lobes, REGIONS};
-use crate::render::{AlbedoSource, FrameFormat, Mode, RenderSetup, Roughness};
+use crate::render::{AlbedoSource, FrameFormat, MicroFilter, Mode, RenderSetup, Roughness};
 
 /// `[render]`.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -66,6 +66,12 @@ pub struct RenderSection {
     /// Beckmann roughness along the strain axes following the map's m(r),
     /// seed 003). Default `microgeometry`.
     pub roughness: String,
+    /// How `microgeometry` specular reads the map: `moments` (the slope
+    /// moments' mip pyramid over each pixel's footprint, LEAN mapping:
+    /// antialiased, no sparkle) or `none` (the normal map looked up
+    /// bilinearly at the pixel centre, which aliases unless supersampled).
+    /// Default `moments`.
+    pub microstructure_filter: String,
     /// The camera.
     pub camera: CameraSection,
     /// Up to four lights. Default: one directional light from above-left-front.
@@ -96,6 +102,7 @@ impl Default for RenderSection {
             lobes: None,
             specular_intensity: 1.0,
             roughness: "microgeometry".into(),
+            microstructure_filter: "moments".into(),
             camera: CameraSection::default(),
             lights: None,
             environment: EnvironmentSection::default(),
@@ -557,6 +564,14 @@ impl RenderSection {
             "microgeometry" => Roughness::Microgeometry,
             _ => Roughness::Anisotropic,
         };
+        let microstructure_filter = match one_of(
+            "render.microstructure_filter",
+            &self.microstructure_filter,
+            &["moments", "none"],
+        )? {
+            "moments" => MicroFilter::Moments,
+            _ => MicroFilter::None,
+        };
         let albedo = self.albedo(base)?;
         let lights = self.lights()?;
         Ok(RenderSetup {
@@ -578,6 +593,7 @@ impl RenderSection {
             meso_lobes,
             specular_intensity: rho_s as f32,
             roughness,
+            microstructure_filter,
             camera: self.camera.camera()?,
             lights,
             environment: self.environment.environment()?,
