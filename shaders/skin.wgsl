@@ -20,8 +20,13 @@
 @group(1) @binding(9) var moments_a: texture_2d<f32>;
 @group(1) @binding(10) var moments_b: texture_2d<f32>;
 
-// Most taps along the major axis of an anisotropic footprint.
-const MAX_TAPS: i32 = 8;
+// Most taps per footprint axis (footprint_taps).
+const MAX_TAPS: i32 = 4;
+// Footprint width (texels) one tap covers before another is added.
+const TAP_TEXELS: f32 = 1.0;
+// log2(sqrt(3)): the level shift that matches a bilinear tap's spread to
+// its box footprint (footprint_taps).
+const LOD_BIAS: f32 = 0.7925;
 
 // Mirrors `MeshVertex` in src/render/scene.rs.
 struct MeshVertex {
@@ -114,35 +119,67 @@ fn moments_bilinear(uv: vec2<f32>, level: i32) -> SlopeMoments {
     return out;
 }
 
-// Mean slope moments over a pixel's footprint, whose axes in uv are
-// `dx` and `dy` (screen derivatives): trilinear at the level where a tap
-// covers the footprint's minor axis, with up to MAX_TAPS taps along the
-// major axis (anisotropic filtering done by hand: no sampler filters f32).
-fn footprint_moments(uv: vec2<f32>, dx: vec2<f32>, dy: vec2<f32>) -> SlopeMoments {
-    let size = vec2<f32>(textureDimensions(moments_a, 0));
+// Trilinear moments at `lod`.
+fn moments_trilinear(uv: vec2<f32>, lod: f32) -> SlopeMoments {
     let top = i32(textureNumLevels(moments_a)) - 1;
-    let lx = length(dx * size);
-    let ly = length(dy * size);
-    let major = select(dy, dx, lx >= ly);
-    let long = max(lx, ly);
-    let short = min(lx, ly);
-    let taps = clamp(i32(ceil(long / max(short, 1e-6))), 1, MAX_TAPS);
-    let width = max(long / f32(taps), short);
-    let lod = clamp(log2(max(width, 1.0)), 0.0, f32(top));
-    let l0 = i32(floor(lod));
+    let l0 = min(i32(floor(lod)), top);
     let l1 = min(l0 + 1, top);
     let t = lod - f32(l0);
-    var sum = SlopeMoments(vec4<f32>(0.0), 0.0);
-    for (var k = 0; k < taps; k++) {
-        let p = uv + major * ((f32(k) + 0.5) / f32(taps) - 0.5);
-        let m0 = moments_bilinear(p, l0);
-        let m1 = moments_bilinear(p, l1);
-        sum.a += mix(m0.a, m1.a, t);
-        sum.b += mix(m0.b, m1.b, t);
+    let m0 = moments_bilinear(uv, l0);
+    let m1 = moments_bilinear(uv, l1);
+    return SlopeMoments(mix(m0.a, m1.a, t), mix(m0.b, m1.b, t));
+}
+
+// Mean slope and covariance (xx, yy, xy) of filtered moments.
+struct SlopeGaussian {
+    mean: vec2<f32>,
+    cov: vec3<f32>,
+};
+
+fn gaussian_of(m: SlopeMoments) -> SlopeGaussian {
+    let mean = m.a.xy;
+    let cov = vec3<f32>(
+        max(m.a.z - mean.x * mean.x, 0.0),
+        max(m.a.w - mean.y * mean.y, 0.0),
+        m.b - mean.x * mean.y,
+    );
+    return SlopeGaussian(mean, cov);
+}
+
+// The slope distribution under a pixel whose footprint spans `dx` and `dy`
+// in uv (its screen derivatives), as a grid of up to MAX_TAPS x MAX_TAPS
+// taps, each a Gaussian from the moments filtered over its share of the
+// footprint (at most about TAP_TEXELS texels wide). One Gaussian for the
+// whole footprint would flatten the peaky slope distribution of skin
+// (flat cells, steep grooves); a few keep its shape. Anisotropic
+// footprints get more taps along their long axis. Returns the tap count.
+fn footprint_taps(
+    uv: vec2<f32>,
+    dx: vec2<f32>,
+    dy: vec2<f32>,
+    taps: ptr<function, array<SlopeGaussian, 16>>,
+) -> i32 {
+    let size = vec2<f32>(textureDimensions(moments_a, 0));
+    let top = f32(textureNumLevels(moments_a) - 1u);
+    let lx = length(dx * size);
+    let ly = length(dy * size);
+    let nx = clamp(i32(ceil(lx / TAP_TEXELS)), 1, MAX_TAPS);
+    let ny = clamp(i32(ceil(ly / TAP_TEXELS)), 1, MAX_TAPS);
+    let width = max(lx / f32(nx), ly / f32(ny));
+    // A bilinear tap at level L spreads the box-averaged texels of side 2^L
+    // over a tent of the same half-width: its standard deviation, 2^L / 2,
+    // equals a box of `width`'s (width / sqrt(12)) at L = log2(width) - 0.79.
+    let lod = clamp(log2(max(width, 1.0)) - LOD_BIAS, 0.0, top);
+    var k = 0;
+    for (var j = 0; j < ny; j++) {
+        for (var i = 0; i < nx; i++) {
+            let p = uv + dx * ((f32(i) + 0.5) / f32(nx) - 0.5)
+                + dy * ((f32(j) + 0.5) / f32(ny) - 0.5);
+            (*taps)[k] = gaussian_of(moments_trilinear(p, lod));
+            k++;
+        }
     }
-    sum.a /= f32(taps);
-    sum.b /= f32(taps);
-    return sum;
+    return k;
 }
 
 // m(r) / m(1) of the strain-driven roughness model, linear in r.
@@ -214,16 +251,15 @@ fn fs_skin(in: SurfaceVaryings) -> @location(0) vec4<f32> {
     // the slopes' covariance under the pixel (LEAN).
     var ns = n;
     let prefiltered = mode != 0u && !anisotropic && globals.options.x == 1u;
-    var mean = vec2<f32>(0.0);
-    var cov = vec3<f32>(0.0);
+    var taps: array<SlopeGaussian, 16>;
+    var tap_count = 0;
     if (prefiltered) {
-        let m = footprint_moments(in.uv, duv_dx, duv_dy);
-        mean = m.a.xy;
-        cov = vec3<f32>(
-            max(m.a.z - mean.x * mean.x, 0.0),
-            max(m.a.w - mean.y * mean.y, 0.0),
-            m.b - mean.x * mean.y,
-        );
+        tap_count = footprint_taps(in.uv, duv_dx, duv_dy, &taps);
+        var mean = vec2<f32>(0.0);
+        for (var k = 0; k < tap_count; k++) {
+            mean += taps[k].mean;
+        }
+        mean /= f32(tap_count);
         ns = normalize(n - mean.x * t - mean.y * b);
     } else if (mode != 0u && !anisotropic) {
         let m = micro_normal(in.uv);
@@ -253,7 +289,12 @@ fn fs_skin(in: SurfaceVaryings) -> @location(0) vec4<f32> {
         if (mode != 0u && anisotropic) {
             brdf = ks_specular_aniso(frame, inc.dir, v, lobes, scale);
         } else if (prefiltered) {
-            brdf = ks_specular_moments(tangent_frame, inc.dir, v, lobes, mean, cov);
+            brdf = 0.0;
+            for (var j = 0; j < tap_count; j++) {
+                let g = taps[j];
+                brdf += ks_specular_moments(tangent_frame, inc.dir, v, lobes, g.mean, g.cov);
+            }
+            brdf /= f32(tap_count);
         } else {
             brdf = ks_specular(ns, inc.dir, v, lobes);
         }

@@ -110,6 +110,65 @@ pub fn ks_brdf(l: [f64; 3], v: [f64; 3], m: f64, f0: f64) -> f64 {
     beckmann(h[2], m) * schlick(dot(v, h), f0) / len2
 }
 
+/// A Gaussian distribution of microfacet slopes (LEAN mapping): mean
+/// `(x̄, ȳ)` and covariance `(σ_xx, σ_yy, σ_xy)` of `x̃ = ∂h/∂u`,
+/// `ỹ = ∂h/∂v` (the facet normal of slopes `s` is `normalize(−s, 1)`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SlopeGaussian {
+    /// Mean slope.
+    pub mean: [f64; 2],
+    /// Covariance `[xx, yy, xy]`.
+    pub cov: [f64; 3],
+}
+
+impl SlopeGaussian {
+    /// From the five slope moments `[x̃, ỹ, x̃², ỹ², x̃ỹ]` (variances floored
+    /// at 0 against round-off), as `skin.wgsl`'s `gaussian_of`.
+    pub fn of_moments(m: [f64; 5]) -> SlopeGaussian {
+        let mean = [m[0], m[1]];
+        SlopeGaussian {
+            mean,
+            cov: [
+                (m[2] - mean[0] * mean[0]).max(0.0),
+                (m[3] - mean[1] * mean[1]).max(0.0),
+                m[4] - mean[0] * mean[1],
+            ],
+        }
+    }
+
+    /// The distribution of half vectors `h` (unit, normal +z) with this
+    /// slope distribution widened by a Beckmann lobe of roughness `m`
+    /// (slope variance `m²/2` per axis): `P(s_h) / h_z⁴`, normalised so
+    /// that `∫ D (n·h) dω = 1`. With zero mean and covariance it is
+    /// [`beckmann`]`(h_z, m)`. Mirrors `beckmann_slopes` in lighting.wgsl.
+    pub fn distribution(&self, h: [f64; 3], m: f64) -> f64 {
+        if h[2] <= 0.0 {
+            return 0.0;
+        }
+        let lobe = 0.5 * m * m;
+        let (a, b, c) = (self.cov[0] + lobe, self.cov[1] + lobe, self.cov[2]);
+        let det = a * b - c * c;
+        let d = [-h[0] / h[2] - self.mean[0], -h[1] / h[2] - self.mean[1]];
+        let e = (b * d[0] * d[0] - 2.0 * c * d[0] * d[1] + a * d[1] * d[1]) / det;
+        (-0.5 * e).exp() / (2.0 * PI * det.sqrt() * h[2].powi(4))
+    }
+}
+
+/// The two-lobe KS BRDF (without `ρ_s`) times `n·l` over the slope
+/// distribution `slopes` (frame with the geometric normal +z): the
+/// prefiltered specular of `skin.wgsl` (`ks_specular_moments`).
+pub fn ks_moments(l: [f64; 3], v: [f64; 3], lobes: &Lobes, slopes: &SlopeGaussian, f0: f64) -> f64 {
+    if l[2] <= 0.0 || v[2] <= 0.0 {
+        return 0.0;
+    }
+    let sum = [l[0] + v[0], l[1] + v[1], l[2] + v[2]];
+    let len2 = dot(sum, sum);
+    let h = normalize(sum);
+    let d = lobes.w * slopes.distribution(h, lobes.m1)
+        + (1.0 - lobes.w) * slopes.distribution(h, lobes.m2);
+    d * schlick(dot(v, h), f0) / len2 * l[2]
+}
+
 /// `A(μ, m)`: the KS BRDF's directional albedo for `n·l = μ`, by the
 /// half-vector quadrature (see the module docs) on `nx × nphi` points.
 pub fn directional_albedo(mu: f64, m: f64, f0: f64, nx: usize, nphi: usize) -> f64 {

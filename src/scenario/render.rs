@@ -21,7 +21,7 @@ pub struct RenderSection {
     pub width_px: usize,
     /// Image height in pixels. Default 360.
     pub height_px: usize,
-    /// Supersampling factor per axis (1 … 4): shading runs at
+    /// Supersampling factor per axis (1 … 8): shading runs at
     /// `factor × size` and is box-filtered down. Default 2.
     pub supersample: usize,
     /// Comparison modes rendered per frame (seed 000 Fig. 1): any of `none`
@@ -510,7 +510,7 @@ impl RenderSection {
     pub fn setup(&self, base: &Path, has_micro: bool) -> Result<RenderSetup> {
         let width = in_range("render.width_px", self.width_px, 8, 8192)?;
         let height = in_range("render.height_px", self.height_px, 8, 8192)?;
-        let supersample = in_range("render.supersample", self.supersample, 1, 4)?;
+        let supersample = in_range("render.supersample", self.supersample, 1, 8)?;
         if width * supersample > 16384 || height * supersample > 16384 {
             return Err(Error::parameter(
                 "render.supersample",
