@@ -333,6 +333,43 @@ fn golden_images_of_the_three_modes() {
     );
 }
 
+/// `[render] difference = true` writes |dynamic − static| per rendered
+/// frame in false colour: black at rest (frame 0, where D′ is the neutral
+/// map), coloured under the probe at the end; without both modes it is an
+/// error naming the key.
+#[test]
+fn difference_images_show_where_the_microstructure_changed() {
+    let Some(_ctx) = context() else { return };
+    let path = root().join("tests/fixtures/render_small.toml");
+    let text = std::fs::read_to_string(&path)
+        .unwrap()
+        .replace("[render]\n", "[render]\ndifference = true\n");
+    let scenario = skinpatch::scenario::Scenario::parse(&text, &path).unwrap();
+    let mut setup = skinpatch::scenario::Setup::from_scenario(&scenario, &path).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    setup.output_dir = dir.path().to_path_buf();
+    let summary = skinpatch::pipeline::run(&setup, |_| {}).unwrap();
+    let folder = dir.path().join("render/difference");
+    assert!(summary.written.contains(&folder));
+    // Pixels off black (a 1% change is about 4 levels of violet). From
+    // this far (2–3 texels a pixel, prefiltered) the change is subtle.
+    let coloured = |frame: usize| {
+        let (_, _, px) = read_png(&folder.join(format!("frame_{frame:04}.png")));
+        px.chunks(3).filter(|p| p.iter().any(|&c| c > 0)).count()
+    };
+    let (rest, pressed) = (coloured(0), coloured(2));
+    println!("difference pixels: {rest} at rest, {pressed} pressed");
+    assert_eq!(rest, 0, "D′ equals the neutral map at rest");
+    assert!(pressed > 50, "the pressed skin differs: {pressed} px");
+    let bad = text.replace(
+        "modes = [\"none\", \"static\", \"dynamic\"]",
+        "modes = [\"none\", \"dynamic\"]",
+    );
+    let scenario = skinpatch::scenario::Scenario::parse(&bad, &path).unwrap();
+    let err = skinpatch::scenario::Setup::from_scenario(&scenario, &path).unwrap_err();
+    assert!(err.to_string().contains("render.difference"), "{err}");
+}
+
 /// Static and dynamic microstructure renders of the same deformed patch
 /// agree where the skin is unstrained and differ where it is stretched.
 /// The patch is stretched by 1.3 along x only for x > 0.5 mm; a top-down
@@ -923,6 +960,9 @@ fn a_flat_map_gives_the_base_lobes() {
         .collect();
     let worst = differences.iter().copied().fold(0.0f32, f32::max);
     let mean = differences.iter().sum::<f32>() / differences.len() as f32;
-    assert!(worst <= 1.0 / 1024.0 + 1e-6, "flat map: the filters differ by {worst:e}");
+    assert!(
+        worst <= 1.0 / 1024.0 + 1e-6,
+        "flat map: the filters differ by {worst:e}"
+    );
     assert!(mean < 1e-4, "flat map: mean difference {mean:e}");
 }

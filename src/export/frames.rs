@@ -73,6 +73,52 @@ fn write_exr(path: &Path, image: &Image) -> Result<()> {
     )
 }
 
+/// Relative difference at which the false colour saturates (white).
+pub const DIFFERENCE_RANGE: f32 = 0.5;
+
+/// False colour of `x` ∈ [0, 1]: black → violet → orange → yellow → white.
+fn heat(x: f32) -> [u8; 3] {
+    const STOPS: [[f32; 3]; 5] = [
+        [0.0, 0.0, 0.0],
+        [0.35, 0.05, 0.55],
+        [0.9, 0.35, 0.1],
+        [1.0, 0.85, 0.2],
+        [1.0, 1.0, 1.0],
+    ];
+    let t = x.clamp(0.0, 1.0) * (STOPS.len() - 1) as f32;
+    let k = (t.floor() as usize).min(STOPS.len() - 2);
+    let f = t - k as f32;
+    std::array::from_fn(|c| {
+        ((STOPS[k][c] + (STOPS[k + 1][c] - STOPS[k][c]) * f) * 255.0).round() as u8
+    })
+}
+
+/// |dynamic − static| / static of the linear luminance per pixel, in false
+/// colour saturating at [`DIFFERENCE_RANGE`], as an 8-bit RGB PNG.
+pub fn write_difference(path: &Path, stat: &Image, dynamic: &Image) -> Result<()> {
+    let lum = |p: &[f32; 4]| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
+    let bytes: Vec<u8> = stat
+        .pixels
+        .iter()
+        .zip(&dynamic.pixels)
+        .flat_map(|(s, d)| {
+            let (s, d) = (lum(s), lum(d));
+            heat((d - s).abs() / s.max(1e-4) / DIFFERENCE_RANGE)
+        })
+        .collect();
+    let failed = |e: png::EncodingError| Error::io(path, std::io::Error::other(e));
+    let mut out = Vec::new();
+    {
+        let mut encoder = png::Encoder::new(&mut out, stat.width as u32, stat.height as u32);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        let mut writer = encoder.write_header().map_err(failed)?;
+        writer.write_image_data(&bytes).map_err(failed)?;
+        writer.finish().map_err(failed)?;
+    }
+    write_atomically(path, &out)
+}
+
 /// Whether an `ffmpeg` executable runs.
 pub fn ffmpeg_available() -> bool {
     Command::new("ffmpeg")

@@ -63,6 +63,9 @@ pub fn planned_bytes(setup: &Setup) -> u64 {
             every(r.frame_stride) * r.modes.len() as u64,
             pixels * bytes_per_pixel,
         );
+        if r.difference {
+            add(every(r.frame_stride), pixels * 3);
+        }
     }
     total
 }

@@ -1,7 +1,8 @@
 //! The rendered frames of a run: builds the renderer on the device the
 //! microstructure chain uses (or its own), and per rendered frame builds the
 //! geometry, makes sure D′'s normals are current, renders every comparison
-//! mode and writes `render/<mode>/frame_NNNN.<ext>` atomically.
+//! mode and writes `render/<mode>/frame_NNNN.<ext>` atomically (and, when
+//! asked, `render/difference/frame_NNNN.png`).
 
 use std::path::{Path, PathBuf};
 
@@ -22,6 +23,8 @@ pub(super) struct RenderEngine {
     renderer: Renderer,
     own: Option<Context>,
     folders: Vec<(Mode, PathBuf)>,
+    /// `render/difference/` when asked.
+    difference: Option<PathBuf>,
     rendered: Vec<usize>,
 }
 
@@ -75,6 +78,14 @@ impl RenderEngine {
             probe_writable(&folder)?;
             folders.push((mode, folder));
         }
+        let difference = if setup.difference {
+            let folder = dir.join("render").join("difference");
+            std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
+            probe_writable(&folder)?;
+            Some(folder)
+        } else {
+            None
+        };
         let albedo = Albedo::from_source(&setup.albedo, setup.texture_px, patch_width_mm)?;
         let neutral_normals = micro.map(|m| crate::micro::normals::normal_map(&m.neutral));
         let neutral = match (micro, &neutral_normals) {
@@ -116,6 +127,7 @@ impl RenderEngine {
             renderer,
             own,
             folders,
+            difference,
             rendered: Vec::new(),
         })
     }
@@ -147,6 +159,7 @@ impl RenderEngine {
         };
         let geometry = crate::render::scene::build(mesh, x, field, probe, setup.tessellate);
         self.renderer.set_geometry(ctx, &geometry);
+        let mut kept = [None, None];
         for (mode, folder) in &self.folders {
             let image = self
                 .renderer
@@ -161,6 +174,15 @@ impl RenderEngine {
             )?;
             let path = folder.join(frames::frame_name(frame, setup.format));
             frames::write_image(&path, &image, setup.format)?;
+            match mode {
+                Mode::Static => kept[0] = Some(image),
+                Mode::Dynamic => kept[1] = Some(image),
+                Mode::None => {}
+            }
+        }
+        if let (Some(folder), [Some(stat), Some(dynamic)]) = (&self.difference, &kept) {
+            let path = folder.join(frames::frame_name(frame, crate::render::FrameFormat::Png8));
+            frames::write_difference(&path, stat, dynamic)?;
         }
         self.rendered.push(frame);
         Ok(())
@@ -169,6 +191,7 @@ impl RenderEngine {
     /// Encodes the MP4s (when asked) and returns the files written.
     pub(super) fn finish(&self, setup: &RenderSetup, frame_rate_hz: f64) -> Result<Vec<PathBuf>> {
         let mut written: Vec<PathBuf> = self.folders.iter().map(|(_, f)| f.clone()).collect();
+        written.extend(self.difference.iter().cloned());
         if setup.mp4 && !self.rendered.is_empty() {
             let fps = frame_rate_hz / setup.frame_stride as f64;
             for (mode, folder) in &self.folders {

@@ -126,6 +126,8 @@ pub struct RenderSetup {
     pub supersample: usize,
     /// Modes rendered per frame.
     pub modes: Vec<Mode>,
+    /// Write |dynamic − static| in false colour per rendered frame.
+    pub difference: bool,
     /// Frame file format.
     pub format: FrameFormat,
     /// Render every n-th frame.

@@ -24,6 +24,10 @@ pub struct RenderSection {
     /// Supersampling factor per axis (1 … 8): shading runs at
     /// `factor × size` and is box-filtered down. Default 2.
     pub supersample: usize,
+    /// Also write `render/difference/frame_NNNN.png`: |dynamic − static|
+    /// relative to static, in false colour (black 0, white ≥ 50%). Needs
+    /// both modes. Default false.
+    pub difference: bool,
     /// Comparison modes rendered per frame (seed 000 Fig. 1): any of `none`
     /// (mesoscale surface, mesoscale BRDF), `static` (neutral
     /// microstructure), `dynamic` (deformed microstructure D′). Default
@@ -87,6 +91,7 @@ impl Default for RenderSection {
             height_px: 360,
             supersample: 2,
             modes: vec!["dynamic".into()],
+            difference: false,
             format: "png8".into(),
             frame_stride: 1,
             mp4: false,
@@ -524,6 +529,12 @@ impl RenderSection {
             ));
         }
         let modes = self.modes(has_micro)?;
+        if self.difference && !(modes.contains(&Mode::Static) && modes.contains(&Mode::Dynamic)) {
+            return Err(Error::parameter(
+                "render.difference",
+                "needs both \"static\" and \"dynamic\" in render.modes",
+            ));
+        }
         let format = match one_of("render.format", &self.format, &["png8", "png16", "exr"])? {
             "png8" => FrameFormat::Png8,
             "png16" => FrameFormat::Png16,
@@ -579,6 +590,7 @@ impl RenderSection {
             height,
             supersample,
             modes,
+            difference: self.difference,
             format,
             frame_stride: self.frame_stride,
             mp4: self.mp4,
