@@ -254,3 +254,33 @@ fn a_stopped_run_keeps_its_finished_steps() {
         &points
     ));
 }
+
+/// A process started while the file is being written inherits its
+/// descriptor (HDF5 does not set close-on-exec); the file must still open
+/// once the writer is finished, while that process lives (with HDF5's file
+/// lock the inherited descriptor kept it locked).
+#[test]
+fn a_child_process_does_not_keep_the_file_locked() {
+    use skinpatch::export::vtkhdf::VtkHdfWriter;
+    let mesh = common::one_tet();
+    let grid = io::Grid::from_mesh(&mesh);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("frames.vtkhdf");
+    let mut writer = VtkHdfWriter::create(&path, &grid, io::VtuFormat::default()).unwrap();
+    writer.push(0.0, &grid).unwrap();
+    let mut child = std::process::Command::new("sleep")
+        .arg("5")
+        .spawn()
+        .unwrap();
+    writer.push(0.5, &grid).unwrap();
+    assert_eq!(writer.steps(), 2);
+    writer.finish().unwrap();
+    let opened = hdf5::File::open(&path).map(|f| {
+        f.group("VTKHDF/Steps")
+            .and_then(|g| g.attr("NSteps"))
+            .and_then(|a| a.read_scalar::<i64>())
+    });
+    child.kill().ok();
+    child.wait().ok();
+    assert_eq!(opened.unwrap().unwrap(), 2);
+}

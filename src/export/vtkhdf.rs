@@ -92,10 +92,17 @@ impl VtkHdfWriter {
     /// array layout of `grid`; the steps follow with [`VtkHdfWriter::push`].
     pub fn create(path: &Path, grid: &Grid, format: VtuFormat) -> Result<VtkHdfWriter> {
         let failed = |e: hdf5::Error| h5_error(path, e);
-        // Strong close: closing the file closes every handle into it, so
-        // nothing keeps it open (and locked) once the writer is finished.
+        // Strong close: closing the file closes every handle into it.
+        // No file lock: HDF5 opens the file without close-on-exec, so a
+        // process started meanwhile (ffmpeg, a caller's tool) would inherit
+        // the descriptor and keep the lock after we close; a lock would also
+        // keep ParaView from reading a run in progress, and fails on some
+        // cluster file systems. Only this writer ever writes the file.
         let file = hdf5::File::with_options()
-            .with_fapl(|fapl| fapl.fclose_degree(hdf5::file::FileCloseDegree::Strong))
+            .with_fapl(|fapl| {
+                fapl.fclose_degree(hdf5::file::FileCloseDegree::Strong)
+                    .file_locking(false)
+            })
             .create(path)
             .map_err(failed)?;
         let root = file.create_group("VTKHDF").map_err(failed)?;
