@@ -203,6 +203,27 @@ fn beckmann_slopes(h: vec3<f32>, mean: vec2<f32>, cov: vec3<f32>) -> f32 {
     return exp(-0.5 * e) / (2.0 * PI * sqrt(det) * hz2 * hz2);
 }
 
+// What the KS BRDF's lobes share for light l and view v in `frame`
+// (two tangent axes and the normal): the half vector in that frame and
+// F(v.h) n.l / |l + v|^2, the factor that multiplies D (0 when l or v is
+// below the surface).
+struct KsTerms {
+    h: vec3<f32>,
+    factor: f32,
+};
+
+fn ks_terms(frame: mat3x3<f32>, l: vec3<f32>, v: vec3<f32>) -> KsTerms {
+    let n = frame[2];
+    let nl = dot(n, l);
+    if (nl <= 0.0 || dot(n, v) <= 0.0) {
+        return KsTerms(vec3<f32>(0.0, 0.0, 1.0), 0.0);
+    }
+    let hv = l + v;
+    let h = normalize(hv);
+    let ht = vec3<f32>(dot(h, frame[0]), dot(h, frame[1]), dot(h, n));
+    return KsTerms(ht, schlick(dot(v, h), 0.028) / dot(hv, hv) * nl);
+}
+
 // The KS BRDF times n.l for two lobes (without rho_s) over a slope
 // distribution of mean `mean` and covariance `cov` (xx, yy, xy); each
 // lobe's own Beckmann slope variance m^2/2 adds to `cov`. `frame` holds
@@ -215,19 +236,15 @@ fn ks_specular_moments(
     mean: vec2<f32>,
     cov: vec3<f32>,
 ) -> f32 {
-    let n = frame[2];
-    let nl = dot(n, l);
-    if (nl <= 0.0 || dot(n, v) <= 0.0) {
+    let k = ks_terms(frame, l, v);
+    if (k.factor == 0.0) {
         return 0.0;
     }
-    let hv = l + v;
-    let h = normalize(hv);
-    let ht = vec3<f32>(dot(h, frame[0]), dot(h, frame[1]), dot(h, n));
     let v1 = 0.5 * lobes.x * lobes.x;
     let v2 = 0.5 * lobes.y * lobes.y;
-    let d = lobes.z * beckmann_slopes(ht, mean, cov + vec3<f32>(v1, v1, 0.0))
-        + (1.0 - lobes.z) * beckmann_slopes(ht, mean, cov + vec3<f32>(v2, v2, 0.0));
-    return d * schlick(dot(v, h), 0.028) / dot(hv, hv) * nl;
+    let d = lobes.z * beckmann_slopes(k.h, mean, cov + vec3<f32>(v1, v1, 0.0))
+        + (1.0 - lobes.z) * beckmann_slopes(k.h, mean, cov + vec3<f32>(v2, v2, 0.0));
+    return d * k.factor;
 }
 
 // Kelemen/Szirmay-Kalos BRDF times n.l for two lobes (without rho_s).

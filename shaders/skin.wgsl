@@ -200,17 +200,13 @@ fn ks_specular_aniso(
     lobes: vec4<f32>,
     scale: vec2<f32>,
 ) -> f32 {
-    let n = frame[2];
-    let nl = dot(n, l);
-    if (nl <= 0.0 || dot(n, v) <= 0.0) {
+    let k = ks_terms(frame, l, v);
+    if (k.factor == 0.0) {
         return 0.0;
     }
-    let hv = l + v;
-    let h = normalize(hv);
-    let hl = vec3<f32>(dot(h, frame[0]), dot(h, frame[1]), dot(h, n));
-    let d = lobes.z * beckmann_aniso(hl, lobes.x * scale.x, lobes.x * scale.y)
-        + (1.0 - lobes.z) * beckmann_aniso(hl, lobes.y * scale.x, lobes.y * scale.y);
-    return d * schlick(dot(v, h), 0.028) / dot(hv, hv) * nl;
+    let d = lobes.z * beckmann_aniso(k.h, lobes.x * scale.x, lobes.x * scale.y)
+        + (1.0 - lobes.z) * beckmann_aniso(k.h, lobes.y * scale.x, lobes.y * scale.y);
+    return d * k.factor;
 }
 
 fn diffused(uv: vec2<f32>) -> vec3<f32> {

@@ -370,6 +370,19 @@ fn difference_images_show_where_the_microstructure_changed() {
     assert!(err.to_string().contains("render.difference"), "{err}");
 }
 
+/// The neutral map of the microstructure render tests: 512² texels over
+/// the 10 mm patch (19.5 µm), seed 9.
+fn skin_512() -> skinpatch::micro::DisplacementMap {
+    use skinpatch::micro::procedural::{generate, SkinParams};
+    generate(&SkinParams {
+        size_px: 512,
+        extent_mm: 10.0,
+        seed: 9,
+        ..SkinParams::default()
+    })
+    .unwrap()
+}
+
 /// Static and dynamic microstructure renders of the same deformed patch
 /// agree where the skin is unstrained and differ where it is stretched.
 /// The patch is stretched by 1.3 along x only for x > 0.5 mm; a top-down
@@ -378,7 +391,6 @@ fn difference_images_show_where_the_microstructure_changed() {
 /// Mean |dynamic − static| where unstrained and where stretched, and the
 /// mean level, with `roughness` (`microgeometry` or `anisotropic`).
 fn static_vs_dynamic(ctx: Context, roughness: &str, light: [f32; 3]) -> (f64, f64, f64) {
-    use skinpatch::micro::procedural::{generate, SkinParams};
     use skinpatch::micro::KernelModel;
     use skinpatch::render::albedo::Albedo;
     use skinpatch::render::{Mode, NormalMap, Renderer};
@@ -397,13 +409,7 @@ fn static_vs_dynamic(ctx: Context, roughness: &str, light: [f32; 3]) -> (f64, f6
         })
         .collect();
     let field = SurfaceField::new(&mesh.top, &mesh.positions, &x);
-    let neutral = generate(&SkinParams {
-        size_px: 512,
-        extent_mm: 10.0,
-        seed: 9,
-        ..SkinParams::default()
-    })
-    .unwrap();
+    let neutral = skin_512();
     let model = KernelModel::forehead();
     let mut chain = skinpatch::gpu::micro::GpuMicro::new(ctx, &neutral, &model, 4).unwrap();
     chain.submit(&field, true);
@@ -797,20 +803,13 @@ fn close_up_of(
     shift_px: f32,
     flat: bool,
 ) -> Vec<[f32; 4]> {
-    use skinpatch::micro::procedural::{generate, SkinParams};
     use skinpatch::render::albedo::Albedo;
     use skinpatch::render::{Mode, NormalMap, Renderer};
     use skinpatch::strain::SurfaceField;
 
     let mesh = skinpatch::mesh::io::read_mesh(&root().join("meshes/patch_3k.node")).unwrap();
     let field = SurfaceField::new(&mesh.top, &mesh.positions, &mesh.positions);
-    let neutral = generate(&SkinParams {
-        size_px: 512,
-        extent_mm: 10.0,
-        seed: 9,
-        ..SkinParams::default()
-    })
-    .unwrap();
+    let neutral = skin_512();
     // 4.55 mm over 96 px at the target.
     let dx = shift_px * 2.0 * 8.485 * (15.0f32).to_radians().tan() / 96.0;
     let text = format!(

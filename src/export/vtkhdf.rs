@@ -146,28 +146,23 @@ impl VtkHdfWriter {
             n_points,
             float(format.f32),
         )?;
-        let mut point_data = BTreeMap::new();
-        for field in &grid.point_data {
-            let series = writer.series(
-                &format!("PointData/{}", field.name),
-                &format!("Steps/PointDataOffsets/{}", field.name),
-                field.components,
-                n_points,
-                kind_of(&field.values),
-            )?;
-            point_data.insert(field.name.clone(), series);
-        }
-        let mut cell_data = BTreeMap::new();
-        for field in &grid.cell_data {
-            let series = writer.series(
-                &format!("CellData/{}", field.name),
-                &format!("Steps/CellDataOffsets/{}", field.name),
-                field.components,
-                n_cells,
-                kind_of(&field.values),
-            )?;
-            cell_data.insert(field.name.clone(), series);
-        }
+        let data = |group: &str, fields: &[Field], entries: usize| -> Result<BTreeMap<_, _>> {
+            fields
+                .iter()
+                .map(|field| {
+                    let series = writer.series(
+                        &format!("{group}Data/{}", field.name),
+                        &format!("Steps/{group}DataOffsets/{}", field.name),
+                        field.components,
+                        entries,
+                        kind_of(&field.values),
+                    )?;
+                    Ok((field.name.clone(), series))
+                })
+                .collect()
+        };
+        let point_data = data("Point", &grid.point_data, n_points)?;
+        let cell_data = data("Cell", &grid.cell_data, n_cells)?;
         let step_arrays = StepArrays {
             values: writer.growing("Steps/Values", false, Kind::F64)?,
             part_offsets: writer.growing("Steps/PartOffsets", false, Kind::I64)?,
