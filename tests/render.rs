@@ -370,6 +370,16 @@ fn difference_images_show_where_the_microstructure_changed() {
     assert!(err.to_string().contains("render.difference"), "{err}");
 }
 
+/// The validated `[render]` section of `text` (with a microstructure).
+fn render_setup(text: &str) -> skinpatch::render::RenderSetup {
+    let scenario = skinpatch::scenario::Scenario::parse(text, Path::new("t.toml")).unwrap();
+    scenario
+        .render
+        .unwrap()
+        .setup(Path::new("."), true)
+        .unwrap()
+}
+
 /// The neutral map of the microstructure render tests: 512² texels over
 /// the 10 mm patch (19.5 µm), seed 9.
 fn skin_512() -> skinpatch::micro::DisplacementMap {
@@ -419,12 +429,7 @@ fn static_vs_dynamic(ctx: Context, roughness: &str, light: [f32; 3]) -> (f64, f6
         up = [0, 1, 0]\nheight_mm = 10\n\
         [[render.lights]]\nkind = \"directional\"\ndirection = {light:?}\nintensity = 3.0\n\
         [render.environment]\npreset = \"none\"\n");
-    let scenario = skinpatch::scenario::Scenario::parse(&text, Path::new("t.toml")).unwrap();
-    let setup = scenario
-        .render
-        .unwrap()
-        .setup(Path::new("."), true)
-        .unwrap();
+    let setup = render_setup(&text);
     let normals = skinpatch::micro::normals::normal_map(&neutral);
     // m(r)/m(1) of the map under the model (anisotropic roughness).
     let ratios = skinpatch::render::lighting::curve_ratios();
@@ -820,12 +825,7 @@ fn close_up_of(
          [[render.lights]]\nkind = \"directional\"\ndirection = [0, -0.7071, -0.7071]\nintensity = 3.0\n\
          [render.environment]\npreset = \"none\"\n"
     );
-    let scenario = skinpatch::scenario::Scenario::parse(&text, Path::new("t.toml")).unwrap();
-    let setup = scenario
-        .render
-        .unwrap()
-        .setup(Path::new("."), true)
-        .unwrap();
+    let setup = render_setup(&text);
     let mut normals = skinpatch::micro::normals::normal_map(&neutral);
     if flat {
         normals.fill([0.0, 0.0, 1.0]);
