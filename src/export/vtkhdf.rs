@@ -396,10 +396,7 @@ impl Series {
     /// its offset repeats the last one's.
     fn append(&mut self, path: &Path, values: &Values, f32: bool, dedup: bool) -> Result<()> {
         let expected = self.entries * self.components;
-        let len = match values {
-            Values::F64(v) => v.len(),
-            Values::I32(v) => v.len(),
-        };
+        let len = values.len();
         if len != expected {
             return Err(Error::io(
                 path,

@@ -25,7 +25,8 @@ pub enum Values {
 }
 
 impl Values {
-    fn len(&self) -> usize {
+    /// Number of values.
+    pub(crate) fn len(&self) -> usize {
         match self {
             Values::F64(v) => v.len(),
             Values::I32(v) => v.len(),
