@@ -19,6 +19,9 @@
 // (x, y, x^2, y^2) and x y.
 @group(1) @binding(9) var moments_a: texture_2d<f32>;
 @group(1) @binding(10) var moments_b: texture_2d<f32>;
+// Trilinear, wrapping; used only when globals.options.y == 1 (the adapter
+// filters f32 textures).
+@group(1) @binding(11) var moments_sampler: sampler;
 
 // Most taps per footprint axis (footprint_taps).
 const MAX_TAPS: i32 = 4;
@@ -119,8 +122,15 @@ fn moments_bilinear(uv: vec2<f32>, level: i32) -> SlopeMoments {
     return out;
 }
 
-// Trilinear moments at `lod`.
+// Trilinear moments at `lod`: by the sampler where it filters f32, else
+// the same filter by loads.
 fn moments_trilinear(uv: vec2<f32>, lod: f32) -> SlopeMoments {
+    if (globals.options.y == 1u) {
+        return SlopeMoments(
+            textureSampleLevel(moments_a, moments_sampler, uv, lod),
+            textureSampleLevel(moments_b, moments_sampler, uv, lod).x,
+        );
+    }
     let top = i32(textureNumLevels(moments_a)) - 1;
     let l0 = min(i32(floor(lod)), top);
     let l1 = min(l0 + 1, top);

@@ -487,6 +487,10 @@ fn bench_render(path: &Path, frames: usize, width: usize, height: usize) -> anyh
         "  render + read-back      {:>10.2} ms",
         b.render_readback_ms
     );
+    println!("  render, each pass submitted alone:");
+    for (stage, ms) in skinpatch::render::FrameStage::ALL.iter().zip(b.stages_ms) {
+        println!("    {:<22}{:>10.2} ms", stage.name(), ms);
+    }
     println!(
         "  whole frame             {:>10.2} ms  = {:.2} frames/s",
         full,
@@ -521,6 +525,17 @@ fn gpu_info() -> anyhow::Result<()> {
             l.max_compute_invocations_per_workgroup,
             l.max_compute_workgroups_per_dimension,
         );
+        let names: Vec<&str> = [(wgpu::Features::FLOAT32_FILTERABLE, "FLOAT32_FILTERABLE")]
+            .into_iter()
+            .filter(|(f, _)| a.features.contains(*f))
+            .map(|(_, name)| name)
+            .collect();
+        let features = if names.is_empty() {
+            "none".to_string()
+        } else {
+            names.join(", ")
+        };
+        text += &format!("  optional features used: {features}\n");
     }
     match skinpatch::gpu::Context::new() {
         Ok(ctx) => text += &format!("in use: {}\n", ctx.describe()),

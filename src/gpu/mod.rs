@@ -61,6 +61,8 @@ pub struct AdapterReport {
     pub info: wgpu::AdapterInfo,
     /// The adapter's limits.
     pub limits: wgpu::Limits,
+    /// Which of [`OPTIONAL_FEATURES`] it has.
+    pub features: wgpu::Features,
 }
 
 /// A headless device and its queue.
@@ -73,6 +75,11 @@ pub struct Context {
     pub info: wgpu::AdapterInfo,
     /// Limits granted (the adapter's own).
     pub limits: wgpu::Limits,
+    /// Optional features the stages use, where the adapter has them
+    /// ([`OPTIONAL_FEATURES`]). Stages read this, not the device's own
+    /// list: clearing a bit makes them take the path without it (the
+    /// tests compare both paths on one adapter).
+    pub features: wgpu::Features,
     errors: Arc<Mutex<Vec<String>>>,
 }
 
@@ -82,6 +89,11 @@ fn instance() -> wgpu::Instance {
     wgpu::Instance::new(desc)
 }
 
+/// Features used where the adapter offers them: `FLOAT32_FILTERABLE` lets
+/// the skin pass filter the f32 slope-moment pyramid with the sampler
+/// instead of eight loads a lookup.
+pub const OPTIONAL_FEATURES: wgpu::Features = wgpu::Features::FLOAT32_FILTERABLE;
+
 /// Every Vulkan adapter with its limits.
 pub fn adapters() -> Vec<AdapterReport> {
     pollster::block_on(instance().enumerate_adapters(wgpu::Backends::VULKAN))
@@ -89,6 +101,7 @@ pub fn adapters() -> Vec<AdapterReport> {
         .map(|a| AdapterReport {
             info: a.get_info(),
             limits: a.limits(),
+            features: a.features() & OPTIONAL_FEATURES,
         })
         .collect()
 }
@@ -116,9 +129,10 @@ impl Context {
         let adapter = select_adapter(name)?;
         let info = adapter.get_info();
         let limits = adapter.limits();
+        let features = adapter.features() & OPTIONAL_FEATURES;
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("skinpatch"),
-            required_features: wgpu::Features::empty(),
+            required_features: features,
             required_limits: limits.clone(),
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,
@@ -145,6 +159,7 @@ impl Context {
             queue,
             info,
             limits,
+            features,
             errors,
         })
     }

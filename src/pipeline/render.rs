@@ -14,7 +14,7 @@ use crate::gpu::micro::GpuMicro;
 use crate::gpu::Context;
 use crate::mesh::{TetMesh, Vec3};
 use crate::render::albedo::Albedo;
-use crate::render::{Mode, NormalMap, RenderSetup, Renderer, Roughness};
+use crate::render::{FrameStage, Mode, NormalMap, RenderSetup, Renderer, Roughness};
 use crate::scenario::MicroSetup;
 use crate::strain::SurfaceField;
 
@@ -244,6 +244,9 @@ pub struct RenderBench {
     pub render_ms: f64,
     /// Render with the image read back.
     pub render_readback_ms: f64,
+    /// Each pass of the render submitted alone and waited for, in
+    /// [`FrameStage::ALL`] order (wall time; a profile, not a throughput).
+    pub stages_ms: [f64; FrameStage::COUNT],
 }
 
 /// Simulates the first `frames` frames of `setup` and times, per frame, the
@@ -331,7 +334,11 @@ pub fn bench_render(
         let start = Instant::now();
         renderer.render(ctx, mode)?;
         let readback_ms = start.elapsed().as_secs_f64() * 1e3;
+        let stages = renderer.time_stages(ctx, mode)?;
         if m.frame > 0 {
+            for (sum, t) in figures.stages_ms.iter_mut().zip(stages) {
+                *sum += t;
+            }
             figures.frames += 1;
             figures.fem_ms += m.step_wall_s * 1e3;
             figures.micro_ms += micro_ms;
@@ -348,7 +355,10 @@ pub fn bench_render(
         &mut figures.geometry_ms,
         &mut figures.render_ms,
         &mut figures.render_readback_ms,
-    ] {
+    ]
+    .into_iter()
+    .chain(figures.stages_ms.iter_mut())
+    {
         *x /= n;
     }
     Ok(figures)

@@ -52,7 +52,8 @@ pub struct Globals {
     pub params: [f32; 4],
     /// Light count, mode, roughness kind, translucency.
     pub flags: [u32; 4],
-    /// Microstructure filter (0 bilinear normals, 1 slope moments), unused ×3.
+    /// Microstructure filter (0 bilinear normals, 1 slope moments); the
+    /// moments sampled with the sampler (1) or by loads (0); unused ×2.
     pub options: [u32; 4],
 }
 

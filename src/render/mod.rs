@@ -39,7 +39,7 @@ pub mod stage;
 
 use std::path::PathBuf;
 
-pub use renderer::{NormalMap, Renderer};
+pub use renderer::{FrameStage, NormalMap, Renderer};
 
 /// A comparison mode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

@@ -20,6 +20,50 @@ use crate::error::Result;
 use crate::gpu::moments::{MomentPyramidGpu, MomentStage};
 use crate::gpu::{bind_group, buffers, encoder, Context};
 
+/// The passes of one frame, in the order they are recorded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FrameStage {
+    /// One depth map per light.
+    Shadows,
+    /// Texture-space irradiance (four targets).
+    Irradiance,
+    /// The six-Gaussian diffusion passes.
+    Diffusion,
+    /// The slope-moment pyramid of the dynamic normals (dynamic mode with
+    /// the moment filter only).
+    Moments,
+    /// Skin, cut sides and probe at the supersampled size.
+    Skin,
+    /// Supersampling resolve to the output image.
+    Resolve,
+}
+
+impl FrameStage {
+    /// Number of stages.
+    pub const COUNT: usize = 6;
+    /// Every stage, in recording order.
+    pub const ALL: [FrameStage; FrameStage::COUNT] = [
+        FrameStage::Shadows,
+        FrameStage::Irradiance,
+        FrameStage::Diffusion,
+        FrameStage::Moments,
+        FrameStage::Skin,
+        FrameStage::Resolve,
+    ];
+
+    /// Short name for tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            FrameStage::Shadows => "shadow maps",
+            FrameStage::Irradiance => "irradiance",
+            FrameStage::Diffusion => "diffusion",
+            FrameStage::Moments => "slope moments",
+            FrameStage::Skin => "skin pass",
+            FrameStage::Resolve => "resolve",
+        }
+    }
+}
+
 /// Tangent-space normals of a displacement map, for the static mode.
 pub struct NormalMap<'a> {
     /// Normals, row-major.
@@ -65,6 +109,26 @@ fn vertex_buffer(ctx: &Context, label: &str, bytes: usize) -> wgpu::Buffer {
         size: bytes as u64,
         usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
+    })
+}
+
+/// The slope moments' sampler: trilinear with wrapping when `filtering`
+/// (the texture's wrap rule, as the shader's load path applies it), else a
+/// nearest sampler that satisfies the layout and is never used.
+fn moment_sampler(ctx: &Context, filtering: bool) -> wgpu::Sampler {
+    let (filter, mipmap) = if filtering {
+        (wgpu::FilterMode::Linear, wgpu::MipmapFilterMode::Linear)
+    } else {
+        (wgpu::FilterMode::Nearest, wgpu::MipmapFilterMode::Nearest)
+    };
+    ctx.device.create_sampler(&wgpu::SamplerDescriptor {
+        label: Some("slope moments"),
+        address_mode_u: wgpu::AddressMode::Repeat,
+        address_mode_v: wgpu::AddressMode::Repeat,
+        mag_filter: filter,
+        min_filter: filter,
+        mipmap_filter: mipmap,
+        ..Default::default()
     })
 }
 
@@ -126,6 +190,8 @@ pub struct Renderer {
     moment_stage: MomentStage,
     // The dynamic normals' slope moments (rebuilt per dynamic frame).
     dynamic_moments: Option<MomentPyramidGpu>,
+    // The skin pass samples the moments with the sampler (f32 filterable).
+    filter_moments: bool,
     hdr: wgpu::TextureView,
     depth: wgpu::TextureView,
     resolve: ResolveStage,
@@ -305,9 +371,25 @@ impl Renderer {
             (0..7).map(|k| texture_entry(k, true, false)).collect();
         diffused_entries.push(texture_entry(7, false, false));
         diffused_entries.push(texture_entry(8, true, false));
-        // The slope moments' pyramids (A and B) of the same normals.
-        diffused_entries.push(texture_entry(9, false, false));
-        diffused_entries.push(texture_entry(10, false, false));
+        // The slope moments' pyramids (A and B) of the same normals, and
+        // their sampler: trilinear and wrapping where the adapter filters
+        // f32 textures, else unused (the shader filters by loads).
+        let filter_moments = ctx
+            .features
+            .contains(wgpu::Features::FLOAT32_FILTERABLE);
+        diffused_entries.push(texture_entry(9, filter_moments, false));
+        diffused_entries.push(texture_entry(10, filter_moments, false));
+        diffused_entries.push(wgpu::BindGroupLayoutEntry {
+            binding: 11,
+            visibility: wgpu::ShaderStages::FRAGMENT,
+            ty: wgpu::BindingType::Sampler(if filter_moments {
+                wgpu::SamplerBindingType::Filtering
+            } else {
+                wgpu::SamplerBindingType::NonFiltering
+            }),
+            count: None,
+        });
+        let moment_sampler = moment_sampler(ctx, filter_moments);
         let diffused_layout =
             ctx.device
                 .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -369,6 +451,7 @@ impl Renderer {
             resources.push(wgpu::BindingResource::TextureView(&irradiance_views[3]));
             resources.push(wgpu::BindingResource::TextureView(&moments[0]));
             resources.push(wgpu::BindingResource::TextureView(&moments[1]));
+            resources.push(wgpu::BindingResource::Sampler(&moment_sampler));
             bind_group(ctx, &diffused_layout, &resources)
         });
 
@@ -407,6 +490,7 @@ impl Renderer {
             diffused,
             moment_stage,
             dynamic_moments,
+            filter_moments,
             hdr,
             depth,
             resolve,
@@ -437,9 +521,39 @@ impl Renderer {
 
     /// Records and submits the frame in `mode` without waiting.
     pub fn submit(&mut self, ctx: &Context, mode: Mode) {
+        self.write_globals(ctx, mode);
+        let mut enc = encoder(ctx);
+        for stage in FrameStage::ALL {
+            self.encode_stage(&mut enc, stage, mode);
+        }
+        ctx.queue.submit([enc.finish()]);
+    }
+
+    /// Renders one frame in `mode` stage by stage, each stage submitted
+    /// alone and waited for, and returns the wall time of each in ms (the
+    /// stages in [`FrameStage::ALL`] order; a stage with nothing to do in
+    /// this mode costs only its empty submission). For profiling: the
+    /// sum is a little above [`Renderer::submit`]'s time, which overlaps
+    /// nothing either but pays one submission.
+    pub fn time_stages(&mut self, ctx: &Context, mode: Mode) -> Result<[f64; FrameStage::COUNT]> {
+        self.write_globals(ctx, mode);
+        ctx.finish()?;
+        let mut times = [0.0; FrameStage::COUNT];
+        for (k, stage) in FrameStage::ALL.into_iter().enumerate() {
+            let start = std::time::Instant::now();
+            let mut enc = encoder(ctx);
+            self.encode_stage(&mut enc, stage, mode);
+            ctx.queue.submit([enc.finish()]);
+            ctx.finish()?;
+            times[k] = start.elapsed().as_secs_f64() * 1e3;
+        }
+        Ok(times)
+    }
+
+    fn write_globals(&self, ctx: &Context, mode: Mode) {
         let (w, h) = (self.setup.width, self.setup.height);
         let aspect = w as f32 / h as f32;
-        let globals = Globals::new(
+        let mut globals = Globals::new(
             &self.setup,
             &self.table,
             mode,
@@ -447,6 +561,7 @@ impl Renderer {
             self.bounds,
             self.curve,
         );
+        globals.options[1] = self.filter_moments as u32;
         ctx.queue
             .write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
         // The shadow passes use the lights exactly as the shading sees them.
@@ -457,55 +572,66 @@ impl Renderer {
             };
             ctx.queue.write_buffer(info, 0, bytemuck::bytes_of(&value));
         }
-        let mut enc = encoder(ctx);
-        let casters = [
-            (&self.top.buffer, self.top.count),
-            (&self.sides.buffer, self.sides.count),
-            (&self.probe.buffer, self.probe.count),
-        ];
-        for (k, layer) in self
-            .shadow_layers
-            .iter()
-            .enumerate()
-            .take(self.setup.lights.len())
-        {
-            self.shadow.encode(
-                &mut enc,
-                &self.shadow_binds[k],
-                layer,
-                &self.shadow_depth,
-                &casters,
-            );
+    }
+
+    fn encode_stage(&self, enc: &mut wgpu::CommandEncoder, stage: FrameStage, mode: Mode) {
+        match stage {
+            FrameStage::Shadows => {
+                let casters = [
+                    (&self.top.buffer, self.top.count),
+                    (&self.sides.buffer, self.sides.count),
+                    (&self.probe.buffer, self.probe.count),
+                ];
+                for (k, layer) in self
+                    .shadow_layers
+                    .iter()
+                    .enumerate()
+                    .take(self.setup.lights.len())
+                {
+                    self.shadow.encode(
+                        enc,
+                        &self.shadow_binds[k],
+                        layer,
+                        &self.shadow_depth,
+                        &casters,
+                    );
+                }
+            }
+            FrameStage::Irradiance => {
+                let v = &self.irradiance_views;
+                self.irradiance.encode(
+                    enc,
+                    &self.lighting,
+                    [&v[0], &v[1], &v[2], &v[3]],
+                    (&self.surface.buffer, self.surface.count),
+                );
+            }
+            FrameStage::Diffusion => self.diffusion.encode(enc),
+            FrameStage::Moments => {
+                let prefiltered = self.setup.microstructure_filter == MicroFilter::Moments
+                    && self.setup.roughness == Roughness::Microgeometry;
+                if let (Mode::Dynamic, true, Some(pyramid)) =
+                    (mode, prefiltered, self.dynamic_moments.as_ref())
+                {
+                    self.moment_stage.encode(enc, pyramid);
+                }
+            }
+            FrameStage::Skin => {
+                let normals = &self.diffused[(mode == Mode::Dynamic) as usize];
+                self.skin.encode(
+                    enc,
+                    [&self.lighting, normals],
+                    &self.hdr,
+                    &self.depth,
+                    &FrameBuffers {
+                        surface: (&self.surface.buffer, self.surface.count),
+                        sides: (&self.sides.buffer, self.sides.count),
+                        probe: (&self.probe.buffer, self.probe.count),
+                    },
+                );
+            }
+            FrameStage::Resolve => self.resolve.encode(enc),
         }
-        let v = &self.irradiance_views;
-        self.irradiance.encode(
-            &mut enc,
-            &self.lighting,
-            [&v[0], &v[1], &v[2], &v[3]],
-            (&self.surface.buffer, self.surface.count),
-        );
-        self.diffusion.encode(&mut enc);
-        let prefiltered = self.setup.microstructure_filter == MicroFilter::Moments
-            && self.setup.roughness == Roughness::Microgeometry;
-        if let (Mode::Dynamic, true, Some(pyramid)) =
-            (mode, prefiltered, self.dynamic_moments.as_ref())
-        {
-            self.moment_stage.encode(&mut enc, pyramid);
-        }
-        let normals = &self.diffused[(mode == Mode::Dynamic) as usize];
-        self.skin.encode(
-            &mut enc,
-            [&self.lighting, normals],
-            &self.hdr,
-            &self.depth,
-            &FrameBuffers {
-                surface: (&self.surface.buffer, self.surface.count),
-                sides: (&self.sides.buffer, self.sides.count),
-                probe: (&self.probe.buffer, self.probe.count),
-            },
-        );
-        self.resolve.encode(&mut enc);
-        ctx.queue.submit([enc.finish()]);
     }
 
     /// Renders the current geometry in `mode` and reads the image back.
