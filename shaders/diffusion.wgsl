@@ -1,8 +1,10 @@
 // One separable pass of the six-Gaussian diffusion (seed 001 §2.2.4): a
 // seven-tap blur along u or v adding `variance` mm^2, the taps spaced by
 // the blur's standard deviation divided by the local millimetres per texel
-// (stretch correction). CPU reference: src/render/profile.rs `blur_pass`.
-// Rust side: src/render/diffusion.rs.
+// (stretch correction). The output may be smaller than the source (a wide
+// Gaussian is stored coarser); every size is addressed by uv. CPU
+// reference: src/render/profile.rs `blur_pass`. Rust side:
+// src/render/diffusion.rs.
 
 // Mirrors `BlurInfo` in src/render/diffusion.rs.
 struct BlurInfo {
@@ -35,11 +37,12 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if (id.x >= size.x || id.y >= size.y) {
         return;
     }
-    let dims = vec2<f32>(size);
-    let uv = (vec2<f32>(id.xy) + 0.5) / dims;
-    let mm = dot(textureLoad(stretch, id.xy, 0).xy, info.axis);
+    let uv = (vec2<f32>(id.xy) + 0.5) / vec2<f32>(size);
+    // Millimetres per texel of the stretch texture's own grid.
+    let mm = dot(textureSampleLevel(stretch, linear_clamp, uv, 0.0).xy, info.axis);
+    let grid = vec2<f32>(textureDimensions(stretch));
     // Tap spacing in texture coordinates.
-    let step = info.axis * (sqrt(info.variance) / max(mm, 1e-9)) / dims;
+    let step = info.axis * (sqrt(info.variance) / max(mm, 1e-9)) / grid;
     var sum = vec4<f32>(0.0);
     for (var k = 0u; k < 7u; k++) {
         let offset = f32(k) - 3.0;

@@ -168,16 +168,13 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<RunSum
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let mesh = &setup.mesh;
     let mut renderer = match &setup.render {
-        Some(r) => {
-            let (lo, hi) = mesh.bounds();
-            Some(render::RenderEngine::new(
-                dir,
-                r,
-                setup.micro.as_ref(),
-                engine.as_ref(),
-                hi.x - lo.x,
-            )?)
-        }
+        Some(r) => Some(render::RenderEngine::new(
+            dir,
+            r,
+            setup.micro.as_ref(),
+            engine.as_ref(),
+            mesh,
+        )?),
         None => None,
     };
     // Then the previous run's files go, so the folder holds one run.

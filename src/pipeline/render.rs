@@ -62,7 +62,7 @@ impl RenderEngine {
         setup: &RenderSetup,
         micro: Option<&MicroSetup>,
         engine: Option<&MicroEngine>,
-        patch_width_mm: f64,
+        mesh: &TetMesh,
     ) -> Result<RenderEngine> {
         if setup.mp4 && !frames::ffmpeg_available() {
             return Err(Error::MissingTool(
@@ -86,7 +86,9 @@ impl RenderEngine {
         } else {
             None
         };
-        let albedo = Albedo::from_source(&setup.albedo, setup.texture_px, patch_width_mm)?;
+        let (lo, hi) = mesh.bounds();
+        let albedo = Albedo::from_source(&setup.albedo, setup.texture_px, hi.x - lo.x)?;
+        let texel_mm = texel_mm(mesh, setup.texture_px);
         let neutral_normals = micro.map(|m| crate::micro::normals::normal_map(&m.neutral));
         let neutral = match (micro, &neutral_normals) {
             (Some(m), Some(n)) => Some(NormalMap {
@@ -106,13 +108,14 @@ impl RenderEngine {
                     neutral,
                     Some(chain.normals_texture()),
                     curve,
+                    texel_mm,
                 )?,
                 None,
             ),
             Some(MicroEngine::Cpu) => return Err(no_gpu()),
             None => {
                 let ctx = crate::gpu::acquire()?.ok_or_else(no_gpu)?;
-                let renderer = Renderer::new(&ctx, setup, &albedo, neutral, None, curve)?;
+                let renderer = Renderer::new(&ctx, setup, &albedo, neutral, None, curve, texel_mm)?;
                 (renderer, Some(ctx))
             }
         };
@@ -201,6 +204,14 @@ impl RenderEngine {
         }
         Ok(written)
     }
+}
+
+/// Millimetres a texel of the texture-space targets covers on the patch at
+/// rest (the wider of the two axes: the UVs stretch the top surface's
+/// bounding rectangle over the unit square).
+fn texel_mm(mesh: &TetMesh, texture_px: usize) -> f64 {
+    let (lo, hi) = mesh.bounds();
+    (hi.x - lo.x).max(hi.y - lo.y) / texture_px as f64
 }
 
 fn at_frame(e: Error, frame: usize, mode: Mode) -> Error {
@@ -300,6 +311,7 @@ pub fn bench_render(
             None,
             chain.as_ref().map(|c| c.normals_texture()),
             [1.0; 16],
+            texel_mm(&setup.mesh, render.texture_px),
         )?
     };
     let mut figures = RenderBench {

@@ -1,10 +1,11 @@
 //! The six-Gaussian texture-space diffusion (`shaders/diffusion.wgsl`;
 //! CPU reference [`super::profile::diffuse`]): twelve separable passes,
-//! Gaussian `i` blurred from Gaussian `i − 1`.
+//! Gaussian `i` blurred from Gaussian `i − 1` and stored at its own side
+//! ([`super::profile::level_sizes`]: the wide Gaussians coarser).
 
 use bytemuck::{Pod, Zeroable};
 
-use super::profile::{tap_weights, variance_steps};
+use super::profile::{pass_sizes, tap_weights, variance_steps};
 use super::stage::{sampler_entry, texture_entry, uniform_entry};
 use crate::gpu::{buffers, dispatch, Context};
 
@@ -44,23 +45,24 @@ impl BlurInfo {
     }
 }
 
-/// The compiled stage with its twelve bind groups.
+/// The compiled stage: its six output textures (one per Gaussian, each at
+/// its level size), the u passes' results, and the twelve passes.
 pub struct DiffusionStage {
     pipeline: wgpu::ComputePipeline,
-    binds: Vec<wgpu::BindGroup>,
-    size: usize,
+    // Bind group and output size of each pass.
+    passes: Vec<(wgpu::BindGroup, (usize, usize))>,
+    outputs: Vec<wgpu::Texture>,
+    views: Vec<wgpu::TextureView>,
 }
 
 impl DiffusionStage {
-    /// Compiles the stage for `irradiance` and `stretch` inputs, the
-    /// `scratch` texture and the six `outputs` (all `size²`).
+    /// Compiles the stage for the `irradiance` and `stretch` inputs and
+    /// makes the six outputs at `sizes` ([`super::profile::level_sizes`]).
     pub fn new(
         ctx: &Context,
-        size: usize,
         irradiance: &wgpu::TextureView,
         stretch: &wgpu::TextureView,
-        scratch: &wgpu::TextureView,
-        outputs: &[wgpu::TextureView],
+        sizes: [usize; 6],
     ) -> DiffusionStage {
         let layout = ctx
             .device
@@ -106,16 +108,44 @@ impl DiffusionStage {
                 compilation_options: Default::default(),
                 cache: None,
             });
+        let usage = wgpu::TextureUsages::STORAGE_BINDING
+            | wgpu::TextureUsages::TEXTURE_BINDING
+            | wgpu::TextureUsages::COPY_SRC;
+        let make = |label, side| buffers::texture(ctx, label, (side, side), FORMAT, usage);
+        let view = |t: &wgpu::Texture| t.create_view(&wgpu::TextureViewDescriptor::default());
+        let outputs: Vec<wgpu::Texture> = sizes
+            .iter()
+            .map(|&side| make("blurred irradiance", side))
+            .collect();
+        let views: Vec<wgpu::TextureView> = outputs.iter().map(view).collect();
+        // The u pass's result, one texture per distinct size.
+        let mut scratch: Vec<((usize, usize), wgpu::TextureView)> = Vec::new();
+        let mut rows = irradiance.texture().height() as usize;
+        let mut plan = Vec::with_capacity(6);
+        for &side in &sizes {
+            let [along_u, done] = pass_sizes(rows, side);
+            if !scratch.iter().any(|(s, _)| *s == along_u) {
+                let texture = buffers::texture(ctx, "blur scratch", along_u, FORMAT, usage);
+                scratch.push((along_u, view(&texture)));
+            }
+            plan.push((along_u, done));
+            rows = side;
+        }
         let sampler = super::stage::linear_sampler(ctx);
-        let mut binds = Vec::with_capacity(12);
-        for (i, dv) in variance_steps().into_iter().enumerate() {
-            let source = if i == 0 { irradiance } else { &outputs[i - 1] };
-            for (axis, (src, dst)) in [(source, scratch), (scratch, &outputs[i])]
+        let mut passes = Vec::with_capacity(12);
+        for (i, (dv, (along_u, done))) in variance_steps().into_iter().zip(plan).enumerate() {
+            let source = if i == 0 { irradiance } else { &views[i - 1] };
+            let middle = &scratch
+                .iter()
+                .find(|(s, _)| *s == along_u)
+                .expect("a scratch for every size")
+                .1;
+            for (axis, (src, dst, size)) in [(source, middle, along_u), (middle, &views[i], done)]
                 .into_iter()
                 .enumerate()
             {
                 let info = buffers::uniform(ctx, "blur info", &BlurInfo::new(axis, dv));
-                binds.push(crate::gpu::bind_group(
+                let bind = crate::gpu::bind_group(
                     ctx,
                     &layout,
                     &[
@@ -125,38 +155,40 @@ impl DiffusionStage {
                         wgpu::BindingResource::Sampler(&sampler),
                         wgpu::BindingResource::TextureView(dst),
                     ],
-                ));
+                );
+                passes.push((bind, size));
             }
         }
         DiffusionStage {
             pipeline,
-            binds,
-            size,
+            passes,
+            outputs,
+            views,
         }
+    }
+
+    /// The six blurred textures, narrowest Gaussian first.
+    pub fn outputs(&self) -> &[wgpu::TextureView] {
+        &self.views
     }
 
     /// Records the twelve passes.
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder) {
-        for bind in &self.binds {
-            dispatch(
-                encoder,
-                "diffusion",
-                &self.pipeline,
-                &[bind],
-                self.size,
-                self.size,
-            );
+        for (bind, (width, height)) in &self.passes {
+            dispatch(encoder, "diffusion", &self.pipeline, &[bind], *width, *height);
         }
     }
 }
 
 /// Runs the chain once on the GPU for `irradiance` and `stretch` (square,
-/// same size) and reads the six blurred textures back: the comparison with
-/// [`super::profile::diffuse`] in the tests.
+/// same size) with the outputs at `sizes` and reads the six blurred
+/// textures back: the comparison with [`super::profile::diffuse`] in the
+/// tests.
 pub fn diffuse_on_gpu(
     ctx: &Context,
     irradiance: &super::profile::Texture,
     stretch: &super::profile::Texture,
+    sizes: [usize; 6],
 ) -> crate::error::Result<Vec<super::profile::Texture>> {
     let size = irradiance.width;
     let upload = |label, t: &super::profile::Texture| {
@@ -176,35 +208,23 @@ pub fn diffuse_on_gpu(
         )
     };
     let (irr, st) = (upload("irradiance", irradiance), upload("stretch", stretch));
-    let usage = wgpu::TextureUsages::STORAGE_BINDING
-        | wgpu::TextureUsages::TEXTURE_BINDING
-        | wgpu::TextureUsages::COPY_SRC;
-    let make = |label| buffers::texture(ctx, label, (size, size), FORMAT, usage);
-    let scratch = make("blur scratch");
-    let outputs: Vec<wgpu::Texture> = (0..6).map(|_| make("blurred")).collect();
     let view = |t: &wgpu::Texture| t.create_view(&wgpu::TextureViewDescriptor::default());
-    let out_views: Vec<wgpu::TextureView> = outputs.iter().map(view).collect();
-    let stage = DiffusionStage::new(
-        ctx,
-        size,
-        &view(&irr),
-        &view(&st),
-        &view(&scratch),
-        &out_views,
-    );
+    let stage = DiffusionStage::new(ctx, &view(&irr), &view(&st), sizes);
     let mut enc = crate::gpu::encoder(ctx);
     stage.encode(&mut enc);
     ctx.queue.submit([enc.finish()]);
-    let result = outputs
+    let result = stage
+        .outputs
         .iter()
-        .map(|t| {
-            let texels = buffers::read_texture_texels::<[u16; 4]>(ctx, t, size, size)?
+        .zip(sizes)
+        .map(|(t, side)| {
+            let texels = buffers::read_texture_texels::<[u16; 4]>(ctx, t, side, side)?
                 .into_iter()
                 .map(|h| h.map(|b| half::f16::from_bits(b).to_f32()))
                 .collect();
             Ok(super::profile::Texture {
-                width: size,
-                height: size,
+                width: side,
+                height: side,
                 texels,
             })
         })

@@ -125,21 +125,67 @@ impl Texture {
     }
 }
 
-/// One seven-tap pass along `axis` (0: u, 1: v) adding `variance_mm2`, with
-/// per-texel millimetres per texel along u and v in `stretch` channels 0 and
-/// 1 (CPU reference of `diffusion.wgsl`'s `blur`).
-pub fn blur_pass(input: &Texture, stretch: &Texture, variance_mm2: f64, axis: usize) -> Texture {
+/// Texels per standard deviation a Gaussian of the chain keeps at least
+/// (at rest): a Gaussian this wide is stored at the coarsest halving of the
+/// texture that still has them (see [`level_sizes`]).
+pub const TEXELS_PER_SIGMA: f64 = 6.0;
+
+/// Smallest side a blurred texture is reduced to.
+pub const MIN_LEVEL_SIZE: usize = 8;
+
+/// The side of each of the six blurred textures for an irradiance texture
+/// of `size²` texels, `texel_mm` millimetres a texel at rest: Gaussian `i`
+/// (standard deviation `σ_i = √v_i`) goes to the smallest halving of the
+/// previous Gaussian's side whose texels are at most `σ_i /`
+/// [`TEXELS_PER_SIGMA`] wide. A wide Gaussian's texture is smooth over
+/// many texels, so storing it coarser and reading it bilinearly changes the
+/// diffused light by a small fraction of a percent while the passes that
+/// make it cost a quarter per halving ([`pass_sizes`] says how each pass
+/// reduces).
+pub fn level_sizes(size: usize, texel_mm: f64) -> [usize; 6] {
+    let mut sizes = [size; 6];
+    let mut side = size;
+    for (out, v) in sizes.iter_mut().zip(VARIANCES_MM2) {
+        let widest = v.sqrt() / TEXELS_PER_SIGMA;
+        loop {
+            let half = side.div_ceil(2);
+            if half < MIN_LEVEL_SIZE || half == side || texel_mm * size as f64 / half as f64 > widest {
+                break;
+            }
+            side = half;
+        }
+        *out = side;
+    }
+    sizes
+}
+
+/// One seven-tap pass along `axis` (0: u, 1: v) adding `variance_mm2`, read
+/// from `input` and written at `width × height` texels (CPU reference of
+/// `diffusion.wgsl`). `stretch` holds millimetres per texel of its own grid
+/// along u and v in channels 0 and 1; it is read bilinearly at each output
+/// texel's centre.
+pub fn blur_pass(
+    input: &Texture,
+    stretch: &Texture,
+    variance_mm2: f64,
+    axis: usize,
+    (width, height): (usize, usize),
+) -> Texture {
     let weights = tap_weights();
     let sigma = variance_mm2.sqrt();
-    let mut out = Texture::zeros(input.width, input.height);
-    for j in 0..input.height {
-        for i in 0..input.width {
-            let u = (i as f64 + 0.5) / input.width as f64;
-            let v = (j as f64 + 0.5) / input.height as f64;
-            let mm_per_texel = stretch.texels[j * input.width + i][axis] as f64;
-            let size = if axis == 0 { input.width } else { input.height };
+    let stretch_side = if axis == 0 {
+        stretch.width
+    } else {
+        stretch.height
+    } as f64;
+    let mut out = Texture::zeros(width, height);
+    for j in 0..height {
+        for i in 0..width {
+            let u = (i as f64 + 0.5) / width as f64;
+            let v = (j as f64 + 0.5) / height as f64;
+            let mm_per_texel = stretch.sample(u, v)[axis];
             // Tap spacing in texture coordinates.
-            let step = sigma / mm_per_texel.max(1e-9) / size as f64;
+            let step = sigma / mm_per_texel.max(1e-9) / stretch_side;
             let mut sum = [0.0; 4];
             for (w, x) in weights.iter().zip(TAP_OFFSETS) {
                 let (du, dv) = if axis == 0 {
@@ -152,32 +198,43 @@ pub fn blur_pass(input: &Texture, stretch: &Texture, variance_mm2: f64, axis: us
                     sum[c] += w * s[c];
                 }
             }
-            out.texels[j * input.width + i] = sum.map(|x| x as f32);
+            out.texels[j * width + i] = sum.map(|x| x as f32);
         }
     }
     out
 }
 
-/// The six blurred irradiance textures of the chain (Gaussian `i` is blur
-/// `i` applied to Gaussian `i − 1`, the first to the irradiance itself).
-pub fn diffuse(irradiance: &Texture, stretch: &Texture) -> Vec<Texture> {
+/// The six blurred irradiance textures of the chain at the sides `sizes`
+/// ([`level_sizes`]): Gaussian `i` is blur `i` applied to Gaussian `i − 1`,
+/// the first to the irradiance itself.
+pub fn diffuse(irradiance: &Texture, stretch: &Texture, sizes: &[usize; 6]) -> Vec<Texture> {
     let mut out: Vec<Texture> = Vec::with_capacity(6);
     for (i, dv) in variance_steps().into_iter().enumerate() {
         let source = if i == 0 { irradiance } else { &out[i - 1] };
-        let along_u = blur_pass(source, stretch, dv, 0);
-        out.push(blur_pass(&along_u, stretch, dv, 1));
+        let [along_u, done] = pass_sizes(source.height, sizes[i]);
+        let along_u = blur_pass(source, stretch, dv, 0, along_u);
+        out.push(blur_pass(&along_u, stretch, dv, 1, done));
     }
     out
 }
 
-/// The weighted sum of the six blurred textures at one texel: the diffused
+/// Output sizes of the two passes of a Gaussian stored at `side²` blurred
+/// from a source `rows` texels tall: the u pass reduces only u (its result
+/// is still only as smooth along v as the source, so it keeps the source's
+/// rows), the v pass then reduces v.
+pub fn pass_sizes(rows: usize, side: usize) -> [(usize, usize); 2] {
+    [(side, rows), (side, side)]
+}
+
+/// The weighted sum of the six blurred textures at texture coordinates
+/// `(u, v)`, each read bilinearly as the skin pass does: the diffused
 /// radiance per channel.
-pub fn combine(blurred: &[Texture], texel: usize) -> [f64; 3] {
+pub fn combine(blurred: &[Texture], u: f64, v: f64) -> [f64; 3] {
     let mut sum = [0.0; 3];
     for (tex, w) in blurred.iter().zip(WEIGHTS) {
-        let t = tex.texels[texel];
+        let t = tex.sample(u, v);
         for c in 0..3 {
-            sum[c] += w[c] * t[c] as f64;
+            sum[c] += w[c] * t[c];
         }
     }
     sum
@@ -200,6 +257,27 @@ mod tests {
         for (a, b) in w[..4].iter().zip([0.006, 0.061, 0.242, 0.383]) {
             assert!((a - b).abs() < 0.03, "{a} vs {b}");
         }
+    }
+
+    #[test]
+    fn level_sizes_halve_with_the_gaussians() {
+        // 1024² over 10 mm (the examples): the narrowest Gaussian keeps
+        // the full size, each wider one has at least TEXELS_PER_SIGMA
+        // texels per standard deviation and would lose that at half size.
+        let sizes = level_sizes(1024, 10.0 / 1024.0);
+        assert_eq!(sizes, [1024, 512, 256, 128, 64, 32]);
+        for (side, v) in sizes.iter().zip(VARIANCES_MM2) {
+            let texels = v.sqrt() / (10.0 / *side as f64);
+            assert!(texels >= TEXELS_PER_SIGMA, "{side}: {texels}");
+            assert!(v.sqrt() / (20.0 / *side as f64) < TEXELS_PER_SIGMA);
+        }
+        // Never below MIN_LEVEL_SIZE, never above the input, non-increasing.
+        let sizes = level_sizes(100, 1.0);
+        assert_eq!(sizes, [100; 6]);
+        let sizes = level_sizes(96, 0.001);
+        assert!(sizes.windows(2).all(|w| w[1] <= w[0]), "{sizes:?}");
+        assert!(sizes.iter().all(|&s| (MIN_LEVEL_SIZE..=96).contains(&s)), "{sizes:?}");
+        assert_eq!(sizes[5], 12);
     }
 
     #[test]

@@ -207,7 +207,9 @@ impl Renderer {
     /// normal map (none: a flat one), `dynamic` the texture the
     /// microstructure chain writes D′'s normals to (none: `neutral` again),
     /// `curve` the roughness ratio m(r)/m(1) at
-    /// [`super::lighting::curve_ratios`].
+    /// [`super::lighting::curve_ratios`], `texel_mm` the width of a texel
+    /// of the texture-space targets on the patch at rest (millimetres; it
+    /// sets the sides of the diffusion's textures).
     pub fn new(
         ctx: &Context,
         setup: &RenderSetup,
@@ -215,6 +217,7 @@ impl Renderer {
         neutral: Option<NormalMap<'_>>,
         dynamic: Option<&wgpu::Texture>,
         curve: [f32; 16],
+        texel_mm: f64,
     ) -> Result<Renderer> {
         let (w, h, f) = (setup.width, setup.height, setup.supersample);
         let tex = setup.texture_px;
@@ -343,27 +346,11 @@ impl Renderer {
                     target_usage,
                 ))
             });
-        let blur_usage =
-            wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING;
-        let blur_texture = |label| {
-            view(&buffers::texture(
-                ctx,
-                label,
-                (tex, tex),
-                super::diffusion::FORMAT,
-                blur_usage,
-            ))
-        };
-        let scratch = blur_texture("blur scratch");
-        let blurred: Vec<wgpu::TextureView> =
-            (0..6).map(|_| blur_texture("blurred irradiance")).collect();
         let diffusion = DiffusionStage::new(
             ctx,
-            tex,
             &irradiance_views[0],
             &irradiance_views[1],
-            &scratch,
-            &blurred,
+            super::profile::level_sizes(tex, texel_mm),
         );
 
         // Group 1 of the skin pass.
@@ -442,7 +429,8 @@ impl Renderer {
             ),
         ]
         .map(|(normals, moments)| {
-            let mut resources: Vec<wgpu::BindingResource<'_>> = blurred
+            let mut resources: Vec<wgpu::BindingResource<'_>> = diffusion
+                .outputs()
                 .iter()
                 .map(wgpu::BindingResource::TextureView)
                 .collect();
