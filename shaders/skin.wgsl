@@ -156,19 +156,21 @@ fn gaussian_of(m: SlopeMoments) -> SlopeGaussian {
     return SlopeGaussian(mean, cov);
 }
 
-// The slope distribution under a pixel whose footprint spans `dx` and `dy`
-// in uv (its screen derivatives), as a grid of up to MAX_TAPS x MAX_TAPS
-// taps, each a Gaussian from the moments filtered over its share of the
+// How the slope distribution under a pixel is sampled: a grid of
+// count.x x count.y taps (up to MAX_TAPS a side) over the footprint, each
+// a Gaussian from the moments filtered at `lod` over its share of the
 // footprint (at most about TAP_TEXELS texels wide). One Gaussian for the
 // whole footprint would flatten the peaky slope distribution of skin
 // (flat cells, steep grooves); a few keep its shape. Anisotropic
-// footprints get more taps along their long axis. Returns the tap count.
-fn footprint_taps(
-    uv: vec2<f32>,
-    dx: vec2<f32>,
-    dy: vec2<f32>,
-    taps: ptr<function, array<SlopeGaussian, 16>>,
-) -> i32 {
+// footprints get more taps along their long axis.
+struct Footprint {
+    count: vec2<i32>,
+    lod: f32,
+};
+
+// The footprint of a pixel spanning `dx` and `dy` in uv (its screen
+// derivatives).
+fn footprint(dx: vec2<f32>, dy: vec2<f32>) -> Footprint {
     let size = vec2<f32>(textureDimensions(moments_a, 0));
     let top = f32(textureNumLevels(moments_a) - 1u);
     let lx = length(dx * size);
@@ -180,16 +182,21 @@ fn footprint_taps(
     // over a tent of the same half-width: its standard deviation, 2^L / 2,
     // equals a box of `width`'s (width / sqrt(12)) at L = log2(width) - 0.79.
     let lod = clamp(log2(max(width, 1.0)) - LOD_BIAS, 0.0, top);
-    var k = 0;
-    for (var j = 0; j < ny; j++) {
-        for (var i = 0; i < nx; i++) {
-            let p = uv + dx * ((f32(i) + 0.5) / f32(nx) - 0.5)
-                + dy * ((f32(j) + 0.5) / f32(ny) - 0.5);
-            (*taps)[k] = gaussian_of(moments_trilinear(p, lod));
-            k++;
-        }
-    }
-    return k;
+    return Footprint(vec2<i32>(nx, ny), lod);
+}
+
+// Tap (i, j) of the footprint's grid.
+fn footprint_tap(
+    f: Footprint,
+    uv: vec2<f32>,
+    dx: vec2<f32>,
+    dy: vec2<f32>,
+    i: i32,
+    j: i32,
+) -> SlopeGaussian {
+    let p = uv + dx * ((f32(i) + 0.5) / f32(f.count.x) - 0.5)
+        + dy * ((f32(j) + 0.5) / f32(f.count.y) - 0.5);
+    return gaussian_of(moments_trilinear(p, f.lod));
 }
 
 // m(r) / m(1) of the strain-driven roughness model, linear in r.
@@ -257,21 +264,33 @@ fn fs_skin(in: SurfaceVaryings) -> @location(0) vec4<f32> {
     // the slopes' covariance under the pixel (LEAN).
     var ns = n;
     let prefiltered = mode != 0u && !anisotropic && globals.options.x == 1u;
-    var taps: array<SlopeGaussian, 16>;
-    var tap_count = 0;
+    let tangent_frame = mat3x3<f32>(t, b, n);
+    // Prefiltered: each light's BRDF averaged over the footprint's taps
+    // (component k for light k), taps outermost so each is looked up once.
+    var tap_brdf = vec4<f32>(0.0);
     if (prefiltered) {
-        tap_count = footprint_taps(in.uv, duv_dx, duv_dy, &taps);
+        let f = footprint(duv_dx, duv_dy);
         var mean = vec2<f32>(0.0);
-        for (var k = 0; k < tap_count; k++) {
-            mean += taps[k].mean;
+        for (var j = 0; j < f.count.y; j++) {
+            for (var i = 0; i < f.count.x; i++) {
+                let g = footprint_tap(f, in.uv, duv_dx, duv_dy, i, j);
+                mean += g.mean;
+                for (var k = 0u; k < globals.flags.x; k++) {
+                    let l = incident(k, p).dir;
+                    if (dot(n, l) > 0.0) {
+                        tap_brdf[k] += ks_specular_moments(tangent_frame, l, v, lobes, g.mean, g.cov);
+                    }
+                }
+            }
         }
-        mean /= f32(tap_count);
+        let count = f32(f.count.x * f.count.y);
+        mean /= count;
+        tap_brdf /= count;
         ns = normalize(n - mean.x * t - mean.y * b);
     } else if (mode != 0u && !anisotropic) {
         let m = micro_normal(in.uv);
         ns = normalize(m.x * t + m.y * b + m.z * n);
     }
-    let tangent_frame = mat3x3<f32>(t, b, n);
     // Strain frame for anisotropic roughness.
     let s_uv = in.strain.zw;
     var s_axis = t * s_uv.x + b * s_uv.y;
@@ -295,12 +314,7 @@ fn fs_skin(in: SurfaceVaryings) -> @location(0) vec4<f32> {
         if (mode != 0u && anisotropic) {
             brdf = ks_specular_aniso(frame, inc.dir, v, lobes, scale);
         } else if (prefiltered) {
-            brdf = 0.0;
-            for (var j = 0; j < tap_count; j++) {
-                let g = taps[j];
-                brdf += ks_specular_moments(tangent_frame, inc.dir, v, lobes, g.mean, g.cov);
-            }
-            brdf /= f32(tap_count);
+            brdf = tap_brdf[k];
         } else {
             brdf = ks_specular(ns, inc.dir, v, lobes);
         }
