@@ -39,6 +39,7 @@ impl IrradianceStage {
                     targets: &[FORMAT; 4],
                     depth: false,
                     cull: false,
+                    samples: 1,
                 },
             ),
         }

@@ -124,6 +124,8 @@ pub struct RenderSetup {
     pub height: usize,
     /// Supersampling factor per axis.
     pub supersample: usize,
+    /// Multisample count of the camera pass (1 or 4).
+    pub msaa: u32,
     /// Modes rendered per frame.
     pub modes: Vec<Mode>,
     /// Write |dynamic − static| in false colour per rendered frame.

@@ -193,6 +193,8 @@ pub struct Renderer {
     // The skin pass samples the moments with the sampler (f32 filterable).
     filter_moments: bool,
     hdr: wgpu::TextureView,
+    // The camera pass's multisampled target (MSAA on), resolved into `hdr`.
+    multisampled: Option<wgpu::TextureView>,
     depth: wgpu::TextureView,
     resolve: ResolveStage,
     surface: Vertices,
@@ -443,22 +445,42 @@ impl Renderer {
             bind_group(ctx, &diffused_layout, &resources)
         });
 
+        // The camera pass: shaded once a pixel of `f × size`; with MSAA its
+        // samples are averaged into `hdr` at the end of the pass.
         let camera_usage =
             wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
-        let hdr = view(&buffers::texture(
-            ctx,
-            "hdr",
-            (w * f, h * f),
-            HDR_FORMAT,
-            camera_usage,
-        ));
-        let depth = view(&buffers::texture(
-            ctx,
+        let samples = setup.msaa;
+        let camera_target = |label, format, usage, samples| {
+            view(&ctx.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d {
+                    width: (w * f) as u32,
+                    height: (h * f) as u32,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: samples,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            }))
+        };
+        let hdr = camera_target("hdr", HDR_FORMAT, camera_usage, 1);
+        let multisampled = (samples > 1).then(|| {
+            camera_target(
+                "hdr samples",
+                HDR_FORMAT,
+                wgpu::TextureUsages::RENDER_ATTACHMENT,
+                samples,
+            )
+        });
+        let depth = camera_target(
             "depth",
-            (w * f, h * f),
             DEPTH_FORMAT,
             wgpu::TextureUsages::RENDER_ATTACHMENT,
-        ));
+            samples,
+        );
         let resolve = ResolveStage::new(ctx, &hdr, w, h, f);
         let renderer = Renderer {
             setup: setup.clone(),
@@ -474,12 +496,13 @@ impl Renderer {
             irradiance: IrradianceStage::new(ctx, &lighting_layout),
             irradiance_views,
             diffusion,
-            skin: SkinStage::new(ctx, [&lighting_layout, &diffused_layout]),
+            skin: SkinStage::new(ctx, [&lighting_layout, &diffused_layout], samples),
             diffused,
             moment_stage,
             dynamic_moments,
             filter_moments,
             hdr,
+            multisampled,
             depth,
             resolve,
             surface: Vertices::new(ctx, "surface vertices"),
@@ -606,10 +629,14 @@ impl Renderer {
             }
             FrameStage::Skin => {
                 let normals = &self.diffused[(mode == Mode::Dynamic) as usize];
+                let target = match &self.multisampled {
+                    Some(samples) => (samples, Some(&self.hdr)),
+                    None => (&self.hdr, None),
+                };
                 self.skin.encode(
                     enc,
                     [&self.lighting, normals],
-                    &self.hdr,
+                    target,
                     &self.depth,
                     &FrameBuffers {
                         surface: (&self.surface.buffer, self.surface.count),

@@ -53,6 +53,7 @@ impl ShadowStage {
                 targets: &[FORMAT],
                 depth: true,
                 cull: false,
+                samples: 1,
             },
         );
         ShadowStage { layout, pipeline }

@@ -35,8 +35,8 @@ pub struct FrameBuffers<'a> {
 
 impl SkinStage {
     /// Compiles the pipelines against the lighting (group 0) and diffused
-    /// light (group 1) layouts.
-    pub fn new(ctx: &Context, layouts: [&wgpu::BindGroupLayout; 2]) -> SkinStage {
+    /// light (group 1) layouts for targets of `samples` samples a pixel.
+    pub fn new(ctx: &Context, layouts: [&wgpu::BindGroupLayout; 2], samples: u32) -> SkinStage {
         let source = source();
         let make = |vertex: (&str, wgpu::VertexBufferLayout<'static>), fragment: &str, cull| {
             render_pipeline(
@@ -50,6 +50,7 @@ impl SkinStage {
                     targets: &[HDR_FORMAT],
                     depth: true,
                     cull,
+                    samples,
                 },
             )
         };
@@ -60,12 +61,13 @@ impl SkinStage {
         }
     }
 
-    /// Records the pass into `hdr` with `depth`.
+    /// Records the pass into `hdr` with `depth`; a multisampled `hdr` is
+    /// resolved into `resolve`.
     pub fn encode(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         binds: [&wgpu::BindGroup; 2],
-        hdr: &wgpu::TextureView,
+        (hdr, resolve): (&wgpu::TextureView, Option<&wgpu::TextureView>),
         depth: &wgpu::TextureView,
         frame: &FrameBuffers<'_>,
     ) {
@@ -78,7 +80,7 @@ impl SkinStage {
         };
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("skin"),
-            color_attachments: &[super::stage::color_attachment(hdr, clear)],
+            color_attachments: &[super::stage::resolved_attachment(hdr, resolve, clear)],
             depth_stencil_attachment: Some(super::stage::depth_attachment(depth)),
             ..Default::default()
         });

@@ -103,6 +103,8 @@ pub struct PipelineSpec<'a> {
     pub depth: bool,
     /// Cull back faces (counter-clockwise front).
     pub cull: bool,
+    /// Samples a pixel of the targets (1: no multisampling).
+    pub samples: u32,
 }
 
 /// Builds a render pipeline from `spec`.
@@ -153,7 +155,10 @@ pub fn render_pipeline(ctx: &Context, spec: &PipelineSpec<'_>) -> wgpu::RenderPi
                 stencil: Default::default(),
                 bias: Default::default(),
             }),
-            multisample: wgpu::MultisampleState::default(),
+            multisample: wgpu::MultisampleState {
+                count: spec.samples,
+                ..Default::default()
+            },
             fragment: Some(wgpu::FragmentState {
                 module: &module,
                 entry_point: Some(spec.fragment),
@@ -182,10 +187,20 @@ pub fn color_attachment(
     view: &wgpu::TextureView,
     clear: wgpu::Color,
 ) -> Option<wgpu::RenderPassColorAttachment<'_>> {
+    resolved_attachment(view, None, clear)
+}
+
+/// A colour attachment cleared to `clear`, resolved into `resolve` at the
+/// end of the pass when `view` is multisampled.
+pub fn resolved_attachment<'a>(
+    view: &'a wgpu::TextureView,
+    resolve: Option<&'a wgpu::TextureView>,
+    clear: wgpu::Color,
+) -> Option<wgpu::RenderPassColorAttachment<'a>> {
     Some(wgpu::RenderPassColorAttachment {
         view,
         depth_slice: None,
-        resolve_target: None,
+        resolve_target: resolve,
         ops: wgpu::Operations {
             load: wgpu::LoadOp::Clear(clear),
             store: wgpu::StoreOp::Store,
