@@ -162,7 +162,10 @@ fn coarse_wide_gaussians_match_the_full_size_chain() {
     for j in 0..n {
         for i in 0..n {
             let (u, v) = ((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
-            let (a, b) = (profile::combine(&coarse, u, v), profile::combine(&full, u, v));
+            let (a, b) = (
+                profile::combine(&coarse, u, v),
+                profile::combine(&full, u, v),
+            );
             let inside = (margin..n - margin).contains(&i) && (margin..n - margin).contains(&j);
             for c in 0..3 {
                 let d = (a[c] - b[c]).abs();

@@ -175,7 +175,14 @@ impl DiffusionStage {
     /// Records the twelve passes.
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder) {
         for (bind, (width, height)) in &self.passes {
-            dispatch(encoder, "diffusion", &self.pipeline, &[bind], *width, *height);
+            dispatch(
+                encoder,
+                "diffusion",
+                &self.pipeline,
+                &[bind],
+                *width,
+                *height,
+            );
         }
     }
 }

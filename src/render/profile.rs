@@ -149,7 +149,10 @@ pub fn level_sizes(size: usize, texel_mm: f64) -> [usize; 6] {
         let widest = v.sqrt() / TEXELS_PER_SIGMA;
         loop {
             let half = side.div_ceil(2);
-            if half < MIN_LEVEL_SIZE || half == side || texel_mm * size as f64 / half as f64 > widest {
+            if half < MIN_LEVEL_SIZE
+                || half == side
+                || texel_mm * size as f64 / half as f64 > widest
+            {
                 break;
             }
             side = half;
@@ -276,7 +279,10 @@ mod tests {
         assert_eq!(sizes, [100; 6]);
         let sizes = level_sizes(96, 0.001);
         assert!(sizes.windows(2).all(|w| w[1] <= w[0]), "{sizes:?}");
-        assert!(sizes.iter().all(|&s| (MIN_LEVEL_SIZE..=96).contains(&s)), "{sizes:?}");
+        assert!(
+            sizes.iter().all(|&s| (MIN_LEVEL_SIZE..=96).contains(&s)),
+            "{sizes:?}"
+        );
         assert_eq!(sizes[5], 12);
     }
 

@@ -363,9 +363,7 @@ impl Renderer {
         // The slope moments' pyramids (A and B) of the same normals, and
         // their sampler: trilinear and wrapping where the adapter filters
         // f32 textures, else unused (the shader filters by loads).
-        let filter_moments = ctx
-            .features
-            .contains(wgpu::Features::FLOAT32_FILTERABLE);
+        let filter_moments = ctx.features.contains(wgpu::Features::FLOAT32_FILTERABLE);
         diffused_entries.push(texture_entry(9, filter_moments, false));
         diffused_entries.push(texture_entry(10, filter_moments, false));
         diffused_entries.push(wgpu::BindGroupLayoutEntry {
