@@ -23,12 +23,12 @@
 // filters f32 textures).
 @group(1) @binding(11) var moments_sampler: sampler;
 
-// Most taps per footprint axis (footprint_taps).
+// Most taps per footprint axis (footprint).
 const MAX_TAPS: i32 = 4;
 // Footprint width (texels) one tap covers before another is added.
 const TAP_TEXELS: f32 = 1.0;
 // log2(sqrt(3)): the level shift that matches a bilinear tap's spread to
-// its box footprint (footprint_taps).
+// its box footprint (footprint).
 const LOD_BIAS: f32 = 0.7925;
 
 // Mirrors `MeshVertex` in src/render/scene.rs.
