@@ -62,6 +62,8 @@ struct Globals {
 // Per light: x distance to the light (mm) of the nearest surface,
 // y its irradiance factor (cosine x falloff), cleared to 1e9.
 @group(0) @binding(4) var shadow_maps: texture_2d_array<f32>;
+// Nearest, clamp to edge: gathers of the shadow maps (shadow_pcf).
+@group(0) @binding(5) var nearest_clamp: sampler;
 
 const ENERGY_M_MIN: f32 = 0.02;
 const ENERGY_M_MAX: f32 = 1.0;
@@ -178,11 +180,18 @@ fn shadow_pcf(k: u32, p: vec3<f32>, n: vec3<f32>) -> f32 {
     }
     let distance = incident(k, q).distance;
     let bias = 0.5 * texel + 0.005;
+    // The 4 x 4 texels floor(c - 1.5) + (0 ... 3), clamped to the map, as
+    // four gathers of 2 x 2 texels each: a gather at the corner shared by
+    // texels i and i + 1 returns exactly those.
+    let side = globals.params.y;
+    let first = floor(c.xy - 1.5);
+    let reference = vec4<f32>(distance - bias);
     var lit = 0.0;
-    for (var y = -1.5; y <= 1.5; y += 1.0) {
-        for (var x = -1.5; x <= 1.5; x += 1.0) {
-            let stored = shadow_texel(k, c.xy + vec2<f32>(x, y)).x;
-            lit += select(0.0, 1.0, distance - bias <= stored);
+    for (var j = 0; j < 2; j++) {
+        for (var i = 0; i < 2; i++) {
+            let corner = (first + vec2<f32>(f32(2 * i + 1), f32(2 * j + 1))) / side;
+            let stored = textureGather(0, shadow_maps, nearest_clamp, corner, i32(k));
+            lit += dot(select(vec4<f32>(0.0), vec4<f32>(1.0), reference <= stored), vec4<f32>(1.0));
         }
     }
     return lit / 16.0;

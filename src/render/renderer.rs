@@ -296,6 +296,12 @@ impl Renderer {
                         texture_entry(2, true, false),
                         super::stage::sampler_entry(3),
                         texture_entry(4, false, true),
+                        wgpu::BindGroupLayoutEntry {
+                            binding: 5,
+                            visibility: wgpu::ShaderStages::FRAGMENT,
+                            ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::NonFiltering),
+                            count: None,
+                        },
                     ],
                 });
         let energy = upload_texture(
@@ -323,6 +329,10 @@ impl Renderer {
             &albedo_bytes,
         );
         let sampler = linear_sampler(ctx);
+        let nearest = ctx.device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("nearest clamp"),
+            ..Default::default()
+        });
         let lighting = bind_group(
             ctx,
             &lighting_layout,
@@ -332,6 +342,7 @@ impl Renderer {
                 wgpu::BindingResource::TextureView(&view(&albedo_tex)),
                 wgpu::BindingResource::Sampler(&sampler),
                 wgpu::BindingResource::TextureView(&shadow_array),
+                wgpu::BindingResource::Sampler(&nearest),
             ],
         );
 
