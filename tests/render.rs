@@ -895,12 +895,8 @@ fn close_up_of(
     shift_px: f32,
     flat: bool,
 ) -> Vec<[f32; 4]> {
-    use skinpatch::render::albedo::Albedo;
-    use skinpatch::render::{Mode, NormalMap, Renderer};
-    use skinpatch::strain::SurfaceField;
+    use skinpatch::render::{Mode, NormalMap};
 
-    let mesh = skinpatch::mesh::io::read_mesh(&root().join("meshes/patch_3k.node")).unwrap();
-    let field = SurfaceField::new(&mesh.top, &mesh.positions, &mesh.positions);
     let neutral = skin_512();
     // 4.55 mm over 96 px at the target.
     let dx = shift_px * 2.0 * 8.485 * (15.0f32).to_radians().tan() / 96.0;
@@ -917,15 +913,33 @@ fn close_up_of(
     if flat {
         normals.fill([0.0, 0.0, 1.0]);
     }
+    let neutral = NormalMap {
+        normals: &normals,
+        width: neutral.width,
+        height: neutral.height,
+    };
+    render_patch_3k(ctx, &setup, Some(neutral), Mode::Static)
+}
+
+/// patch_3k at rest rendered once in `mode` with `setup` (a 10 mm patch,
+/// procedural albedo); the linear pixels.
+fn render_patch_3k(
+    ctx: &Context,
+    setup: &skinpatch::render::RenderSetup,
+    neutral: Option<skinpatch::render::NormalMap<'_>>,
+    mode: skinpatch::render::Mode,
+) -> Vec<[f32; 4]> {
+    use skinpatch::render::albedo::Albedo;
+    use skinpatch::render::Renderer;
+    use skinpatch::strain::SurfaceField;
+
+    let mesh = skinpatch::mesh::io::read_mesh(&root().join("meshes/patch_3k.node")).unwrap();
+    let field = SurfaceField::new(&mesh.top, &mesh.positions, &mesh.positions);
     let mut renderer = Renderer::new(
         ctx,
-        &setup,
-        &Albedo::procedural(256, 10.0),
-        Some(NormalMap {
-            normals: &normals,
-            width: neutral.width,
-            height: neutral.height,
-        }),
+        setup,
+        &Albedo::procedural(setup.texture_px, 10.0),
+        neutral,
         None,
         [1.0; 16],
         10.0 / setup.texture_px as f64,
@@ -933,38 +947,24 @@ fn close_up_of(
     .unwrap();
     let geometry = skinpatch::render::scene::build(&mesh, &mesh.positions, &field, None, 1);
     renderer.set_geometry(ctx, &geometry);
-    renderer.render(ctx, Mode::Static).unwrap().pixels
+    renderer.render(ctx, mode).unwrap().pixels
 }
 
 /// The whole patch against the background in mode `none` (smooth shading:
 /// what differs between sample counts is its silhouette), 96² px.
 fn silhouette(ctx: &Context, supersample: usize, msaa: usize) -> Vec<[f32; 4]> {
-    use skinpatch::render::albedo::Albedo;
-    use skinpatch::render::{Mode, Renderer};
-    use skinpatch::strain::SurfaceField;
-
-    let mesh = skinpatch::mesh::io::read_mesh(&root().join("meshes/patch_3k.node")).unwrap();
-    let field = SurfaceField::new(&mesh.top, &mesh.positions, &mesh.positions);
     let text = format!(
         "[render]\nwidth_px = 96\nheight_px = 96\nsupersample = {supersample}\nmsaa = {msaa}\n\
          modes = [\"none\"]\ntexture_px = 128\nshadow_map_px = 256\ndraw_probe = false\n\
          [render.camera]\neye_mm = [9, -14, 9]\ntarget_mm = [0, 0, -1]\nfov_deg = 45\n\
          [[render.lights]]\nkind = \"directional\"\ndirection = [0.3, 0.5, -0.8]\nintensity = 3.0\n"
     );
-    let setup = render_setup(&text);
-    let mut renderer = Renderer::new(
+    render_patch_3k(
         ctx,
-        &setup,
-        &Albedo::procedural(128, 10.0),
+        &render_setup(&text),
         None,
-        None,
-        [1.0; 16],
-        10.0 / setup.texture_px as f64,
+        skinpatch::render::Mode::None,
     )
-    .unwrap();
-    let geometry = skinpatch::render::scene::build(&mesh, &mesh.positions, &field, None, 1);
-    renderer.set_geometry(ctx, &geometry);
-    renderer.render(ctx, Mode::None).unwrap().pixels
 }
 
 /// Four-sample MSAA at one shading sample a pixel against 8 × 8
