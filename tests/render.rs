@@ -626,6 +626,7 @@ fn bad_camera_and_light_parameters_are_named() {
         ("[[render.lights]]\nkind = \"spot\"\nintensity = 1\n", "render.lights[0].kind must be one of"),
         ("[render.environment]\ncoefficients = [[1, 1, 1]]\n", "must hold 9 RGB triples"),
         ("[render]\nsupersample = 9\n", "render.supersample must be in 1 … 8, got 9"),
+        ("[render]\nmsaa = 2\n", "render.msaa must be 1 (off) or 4, got 2"),
         ("[render]\nmodes = [\"dynamic\", \"dynamic\"]\n", "render.modes[1] \"dynamic\" is listed twice"),
         ("[render]\nmix_ratio = 1.5\n", "render.mix_ratio must be in [0, 1]"),
         ("[render]\nregion = \"elbow\"\n", "render.region must be one of"),

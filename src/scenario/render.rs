@@ -531,7 +531,7 @@ impl RenderSection {
         if ![1, 4].contains(&self.msaa) {
             return Err(Error::parameter(
                 "render.msaa",
-                format!("{} samples; must be 1 (off) or 4", self.msaa),
+                format!("must be 1 (off) or 4, got {}", self.msaa),
             ));
         }
         if self.modes.is_empty() {
