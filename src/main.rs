@@ -453,6 +453,26 @@ fn bench_micro(path: &Path, frames: usize, sizes: &[usize]) -> anyhow::Result<()
         Some(a) => println!("GPU: {a}; GPU ms is the mean of {} frames", frames.max(1)),
         None => println!("no GPU adapter: CPU figures only"),
     }
+    let profiled: Vec<_> = bench
+        .rows
+        .iter()
+        .filter_map(|r| r.stages_ms.map(|s| (r.size, s)))
+        .collect();
+    if !profiled.is_empty() {
+        println!("GPU frame by stage, each submitted alone and waited for (wall time, ms):");
+        let mut header = format!("{:>6}", "size");
+        for stage in skinpatch::gpu::micro::MicroStage::ALL {
+            header += &format!(" {:>10}", stage.name());
+        }
+        println!("{header}");
+        for (size, stages) in profiled {
+            let mut line = format!("{size:>6}");
+            for ms in stages {
+                line += &format!(" {ms:>10.2}");
+            }
+            println!("{line}");
+        }
+    }
     Ok(())
 }
 

@@ -447,3 +447,26 @@ fn moment_pyramid_matches_the_cpu_reference() {
         assert!(top[2] - top[0] * top[0] > 1e-3, "{top:?}");
     }
 }
+
+/// `bench micro`'s per-stage profile: every stage timed, the two
+/// convolution passes doing the work, and the frame still equal to the CPU
+/// reference.
+#[test]
+fn bench_micro_profiles_every_stage() {
+    if context().is_none() {
+        return;
+    }
+    let mesh = patch_3k();
+    let model = skinpatch::micro::KernelModel::forehead();
+    let bench = skinpatch::bench::bench_micro(&mesh, &model, &[128], 1, |_| {}).unwrap();
+    let row = &bench.rows[0];
+    let stages = row.stages_ms.expect("a GPU row has its stages");
+    println!("stages (ms): {stages:?}");
+    assert!(
+        stages.iter().all(|t| t.is_finite() && *t >= 0.0),
+        "{stages:?}"
+    );
+    // Raster, pass s, pass t and normals each submit real work.
+    assert!(stages[1..5].iter().all(|&t| t > 0.0), "{stages:?}");
+    assert!(row.max_difference.unwrap() <= 1e-4, "{row:?}");
+}

@@ -32,6 +32,50 @@ pub struct DeformedFrame {
     pub normals: Option<Vec<[f32; 3]>>,
 }
 
+/// The stages of one microstructure frame, in order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MicroStage {
+    /// The surface's positions and strains written to the device.
+    Upload,
+    /// Strain raster over the map (`raster.wgsl`).
+    Raster,
+    /// The convolution along the first strain axis, each texel's 2 × 2 SVD
+    /// of the raster included (`convolve.wgsl` with `svd2.wgsl`).
+    PassS,
+    /// The convolution along the second strain axis (SVD again).
+    PassT,
+    /// Normals of D′ (`normals.wgsl`).
+    Normals,
+    /// D′ (and its normals) read back to the host.
+    ReadBack,
+}
+
+impl MicroStage {
+    /// Number of stages.
+    pub const COUNT: usize = 6;
+    /// Every stage, in order.
+    pub const ALL: [MicroStage; MicroStage::COUNT] = [
+        MicroStage::Upload,
+        MicroStage::Raster,
+        MicroStage::PassS,
+        MicroStage::PassT,
+        MicroStage::Normals,
+        MicroStage::ReadBack,
+    ];
+
+    /// Short name for tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            MicroStage::Upload => "upload",
+            MicroStage::Raster => "raster",
+            MicroStage::PassS => "pass s",
+            MicroStage::PassT => "pass t",
+            MicroStage::Normals => "normals",
+            MicroStage::ReadBack => "read-back",
+        }
+    }
+}
+
 /// The resident per-frame chain.
 pub struct GpuMicro {
     ctx: Context,
@@ -122,26 +166,69 @@ impl GpuMicro {
     /// Uploads `field` and submits the whole chain (normals too when
     /// `normals`), without waiting.
     pub fn submit(&mut self, field: &SurfaceField, normals: bool) {
+        self.upload(field);
+        let mut enc = encoder(&self.ctx);
+        for stage in [MicroStage::Raster, MicroStage::PassS, MicroStage::PassT] {
+            self.encode_stage(&mut enc, stage);
+        }
+        if normals {
+            self.encode_stage(&mut enc, MicroStage::Normals);
+        }
+        self.ctx.queue.submit([enc.finish()]);
+    }
+
+    /// One frame stage by stage, each submitted alone and waited for; the
+    /// wall time of each in ms, in [`MicroStage::ALL`] order (the read-back
+    /// fetches D′, and its normals where one buffer holds them). A profile:
+    /// the sum is a little above a frame's time.
+    pub fn time_stages(&mut self, field: &SurfaceField) -> Result<[f64; MicroStage::COUNT]> {
+        self.ctx.finish()?;
+        let mut times = [0.0; MicroStage::COUNT];
+        for (k, stage) in MicroStage::ALL.into_iter().enumerate() {
+            let start = std::time::Instant::now();
+            match stage {
+                MicroStage::Upload => self.upload(field),
+                MicroStage::ReadBack => {
+                    self.out.download(&self.ctx)?;
+                    let bytes = (self.width * self.height * 16) as u64;
+                    if bytes <= self.ctx.limits.max_buffer_size {
+                        read_normals(&self.ctx, &self.normals, self.width, self.height)?;
+                    }
+                }
+                _ => {
+                    let mut enc = encoder(&self.ctx);
+                    self.encode_stage(&mut enc, stage);
+                    self.ctx.queue.submit([enc.finish()]);
+                }
+            }
+            self.ctx.finish()?;
+            times[k] = start.elapsed().as_secs_f64() * 1e3;
+        }
+        Ok(times)
+    }
+
+    fn upload(&mut self, field: &SurfaceField) {
         match &self.surface {
             Some(s) if s.fits(field) => s.update(&self.ctx, field),
             _ => self.surface = Some(SurfaceBuffers::new(&self.ctx, field)),
         }
-        let surface = self
-            .surface
-            .as_ref()
-            .expect("surface buffers were just made");
+    }
+
+    fn encode_stage(&self, enc: &mut wgpu::CommandEncoder, stage: MicroStage) {
         let (w, h) = (self.width, self.height);
-        let mut enc = encoder(&self.ctx);
-        self.raster.encode(&mut enc, surface, &self.targets);
-        for bind in &self.pass_binds {
-            let binds = [bind, &self.strain_inputs];
-            self.convolve.encode(&mut enc, Params::Strain, &binds, w, h);
+        match stage {
+            MicroStage::Raster => {
+                let surface = self.surface.as_ref().expect("upload runs first");
+                self.raster.encode(enc, surface, &self.targets);
+            }
+            MicroStage::PassS | MicroStage::PassT => {
+                let bind = &self.pass_binds[(stage == MicroStage::PassT) as usize];
+                let binds = [bind, &self.strain_inputs];
+                self.convolve.encode(enc, Params::Strain, &binds, w, h);
+            }
+            MicroStage::Normals => self.normals_stage.encode(enc, &self.normals_bind, w, h),
+            MicroStage::Upload | MicroStage::ReadBack => {}
         }
-        if normals {
-            self.normals_stage
-                .encode(&mut enc, &self.normals_bind, w, h);
-        }
-        self.ctx.queue.submit([enc.finish()]);
     }
 
     /// Runs one frame and waits for it (for timing: nothing is read back).
