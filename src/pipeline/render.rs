@@ -88,7 +88,7 @@ impl RenderEngine {
         };
         let (lo, hi) = mesh.bounds();
         let albedo = Albedo::from_source(&setup.albedo, setup.texture_px, hi.x - lo.x)?;
-        let texel_mm = texel_mm(mesh, setup.texture_px);
+        let texel_mm = texel_mm((lo, hi), setup.texture_px);
         let neutral_normals = micro.map(|m| crate::micro::normals::normal_map(&m.neutral));
         let neutral = match (micro, &neutral_normals) {
             (Some(m), Some(n)) => Some(NormalMap {
@@ -207,10 +207,9 @@ impl RenderEngine {
 }
 
 /// Millimetres a texel of the texture-space targets covers on the patch at
-/// rest (the wider of the two axes: the UVs stretch the top surface's
-/// bounding rectangle over the unit square).
-fn texel_mm(mesh: &TetMesh, texture_px: usize) -> f64 {
-    let (lo, hi) = mesh.bounds();
+/// rest, from the mesh's bounds (the wider of the two axes: the UVs
+/// stretch the top surface's bounding rectangle over the unit square).
+fn texel_mm((lo, hi): (Vec3, Vec3), texture_px: usize) -> f64 {
     (hi.x - lo.x).max(hi.y - lo.y) / texture_px as f64
 }
 
@@ -311,7 +310,7 @@ pub fn bench_render(
             None,
             chain.as_ref().map(|c| c.normals_texture()),
             [1.0; 16],
-            texel_mm(&setup.mesh, render.texture_px),
+            texel_mm((lo, hi), render.texture_px),
         )?
     };
     let mut figures = RenderBench {

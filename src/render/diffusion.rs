@@ -124,22 +124,23 @@ impl DiffusionStage {
         let mut plan = Vec::with_capacity(6);
         for &side in &sizes {
             let [along_u, done] = pass_sizes(rows, side);
-            if !scratch.iter().any(|(s, _)| *s == along_u) {
-                let texture = buffers::texture(ctx, "blur scratch", along_u, FORMAT, usage);
-                scratch.push((along_u, view(&texture)));
-            }
-            plan.push((along_u, done));
+            let middle = match scratch.iter().position(|(s, _)| *s == along_u) {
+                Some(k) => k,
+                None => {
+                    let texture = buffers::texture(ctx, "blur scratch", along_u, FORMAT, usage);
+                    scratch.push((along_u, view(&texture)));
+                    scratch.len() - 1
+                }
+            };
+            plan.push((middle, along_u, done));
             rows = side;
         }
         let sampler = super::stage::linear_sampler(ctx);
         let mut passes = Vec::with_capacity(12);
-        for (i, (dv, (along_u, done))) in variance_steps().into_iter().zip(plan).enumerate() {
+        for (i, (dv, (middle, along_u, done))) in variance_steps().into_iter().zip(plan).enumerate()
+        {
             let source = if i == 0 { irradiance } else { &views[i - 1] };
-            let middle = &scratch
-                .iter()
-                .find(|(s, _)| *s == along_u)
-                .expect("a scratch for every size")
-                .1;
+            let middle = &scratch[middle].1;
             for (axis, (src, dst, size)) in [(source, middle, along_u), (middle, &views[i], done)]
                 .into_iter()
                 .enumerate()

@@ -149,10 +149,8 @@ pub fn level_sizes(size: usize, texel_mm: f64) -> [usize; 6] {
         let widest = v.sqrt() / TEXELS_PER_SIGMA;
         loop {
             let half = side.div_ceil(2);
-            if half < MIN_LEVEL_SIZE
-                || half == side
-                || texel_mm * size as f64 / half as f64 > widest
-            {
+            // (half ≥ MIN_LEVEL_SIZE implies half < side.)
+            if half < MIN_LEVEL_SIZE || texel_mm * size as f64 / half as f64 > widest {
                 break;
             }
             side = half;
