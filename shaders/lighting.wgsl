@@ -50,7 +50,9 @@ struct Globals {
     // z: roughness (0 microgeometry, 1 anisotropic); w: translucency on.
     flags: vec4<u32>,
     // x: microstructure filter (0 bilinear normals, 1 slope moments);
-    // yzw unused.
+    // y: moments sampled with the sampler (f32 filterable); z: strain
+    // overlay (0 none, 1 r_s, 2 r_t, 3 axes; overlay.wgsl); w: the
+    // overlay's saturating range, as f32 bits.
     options: vec4<u32>,
 };
 

@@ -2,7 +2,7 @@
 // light from the six blurred irradiance textures, pre/post-scatter albedo,
 // energy conservation and two-lobe Kelemen/Szirmay-Kalos specular from the
 // microstructure normals; plus the cut sides of the patch and the probe.
-// Rust side: src/render/skin.rs. Prepended: lighting.wgsl.
+// Rust side: src/render/skin.rs. Prepended: lighting.wgsl, overlay.wgsl.
 
 @group(1) @binding(0) var blur0: texture_2d<f32>;
 @group(1) @binding(1) var blur1: texture_2d<f32>;
@@ -258,6 +258,14 @@ fn fs_skin(in: SurfaceVaryings) -> @location(0) vec4<f32> {
     let albedo = textureSampleLevel(albedo_map, linear_clamp, in.uv, 0.0).rgb;
     diffuse *= pow(albedo, vec3<f32>(1.0 - globals.params.x));
     diffuse *= energy_factor(max(dot(n, v), 0.0), lobes);
+    // A strain overlay (options.z, range in options.w) recolours the
+    // diffuse light: its colour times the light's brightness.
+    let overlay = globals.options.z;
+    if (overlay != 0u) {
+        let luma = vec3<f32>(0.2126, 0.7152, 0.0722);
+        let light = dot(diffuse, luma) / max(dot(albedo, luma), 1e-3);
+        diffuse = strain_overlay(overlay, in.strain, bitcast<f32>(globals.options.w)) * light;
+    }
 
     // Specular normal: the microstructure's in static and dynamic modes,
     // either looked up bilinearly or, prefiltered, as the mean slope with
@@ -324,6 +332,10 @@ fn fs_skin(in: SurfaceVaryings) -> @location(0) vec4<f32> {
     // for the glossy environment reflection.
     let r = reflect(-v, ns);
     specular += rho_s * schlick(max(dot(ns, v), 0.0), 0.028) * sh_irradiance(r) / PI;
+    // Under an overlay the sheen is dimmed so the colours read.
+    if (overlay != 0u) {
+        specular *= 0.25;
+    }
     return vec4<f32>(diffuse + specular, 1.0);
 }
 

@@ -32,5 +32,7 @@ pub mod pipeline;
 pub mod render;
 pub mod scenario;
 pub mod strain;
+#[cfg(feature = "viewer")]
+pub mod viewer;
 
 pub use error::{Error, Result};

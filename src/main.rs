@@ -115,6 +115,45 @@ enum Command {
     /// List the GPU adapters (Vulkan) with the limits the stages depend on,
     /// and the one `run` would use (`SKINPATCH_ADAPTER` picks by name).
     GpuInfo,
+    /// Open a window on a scenario: press and drag the skin with the mouse
+    /// and watch its microstructure respond.
+    ///
+    /// Mouse: left drag orbits, right or middle drag pans, the wheel zooms;
+    /// ctrl + left drag (or the panel's "mouse drives probe") presses the
+    /// probe where the cursor points and slides it; shift + wheel sets the
+    /// depth. The FEM runs in its own thread on the latest probe target.
+    /// Screenshots, recorded frames (PNG, and MP4 with ffmpeg) and the saved
+    /// probe path (a scenario that `skinpatch run` replays) go to
+    /// --record-dir. Needs a display (X11 or Wayland; `xvfb-run -a` for none).
+    #[cfg(feature = "viewer")]
+    View(Box<ViewArgs>),
+}
+
+#[cfg(feature = "viewer")]
+#[derive(Args)]
+struct ViewArgs {
+    /// Scenario file (TOML).
+    scenario: PathBuf,
+    /// Play these input steps (TOML, see the README) as the window runs.
+    #[arg(long)]
+    script: Option<PathBuf>,
+    /// Close the window after this many seconds (an error if a script has
+    /// not finished by then).
+    #[arg(long, value_name = "SECONDS")]
+    exit_after: Option<f64>,
+    /// Window width (px).
+    #[arg(long, default_value_t = 1600)]
+    width: u32,
+    /// Window height (px).
+    #[arg(long, default_value_t = 900)]
+    height: u32,
+    /// Folder for screenshots, recordings and saved paths [default
+    /// out/<scenario name>/view].
+    #[arg(long)]
+    record_dir: Option<PathBuf>,
+    /// Override a scenario key, as for `run` (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
 }
 
 #[derive(Args)]
@@ -281,6 +320,8 @@ fn main() -> ExitCode {
         } => run(&scenario, output, force, &set, quiet),
         Command::Mesh(args) => mesh(*args),
         Command::Fit { samples } => fit(&samples),
+        #[cfg(feature = "viewer")]
+        Command::View(args) => view(*args),
         Command::Bench {
             stage,
             scenario,
@@ -722,4 +763,45 @@ fn write_mesh_files(mesh: &TetMesh, base: &Path, poly: Option<&str>) -> anyhow::
         .iter()
         .map(|p| format!("wrote {}\n", p.display()))
         .collect())
+}
+
+/// `skinpatch view`.
+#[cfg(feature = "viewer")]
+fn view(args: ViewArgs) -> anyhow::Result<()> {
+    use skinpatch::viewer::{run, ViewOptions};
+    let name = args
+        .scenario
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "scenario".into());
+    let record_dir = args
+        .record_dir
+        .unwrap_or_else(|| Path::new("out").join(name).join("view"));
+    let summary = run(ViewOptions {
+        scenario: args.scenario,
+        overrides: args.set,
+        script: args.script,
+        exit_after: args.exit_after,
+        size: (args.width.max(64), args.height.max(64)),
+        record_dir,
+    })?;
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    println!(
+        "viewer: {} frames shown ({:.1} frames/s over the session), {} FEM frames (last {:.3} s)",
+        summary.frames_shown, summary.display_fps, summary.fem_frames, summary.fem_frame_s
+    );
+    if !summary.latencies_ms.is_empty() {
+        println!(
+            "probe move to first frame showing it: mean {:.0} ms over {} moves",
+            mean(&summary.latencies_ms),
+            summary.latencies_ms.len()
+        );
+    }
+    if let Some(f) = summary.final_force_n {
+        println!("final probe force: [{:e}, {:e}, {:e}] N", f[0], f[1], f[2]);
+    }
+    for file in &summary.written {
+        println!("wrote {}", file.display());
+    }
+    Ok(())
 }

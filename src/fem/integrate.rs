@@ -310,6 +310,19 @@ impl Simulation {
         }
     }
 
+    /// Replaces the materials (one per tet of `mesh`, the mesh this
+    /// simulation was built on) and keeps the deformed state: the rest
+    /// elements, the lumped masses and the force floor follow the new
+    /// moduli, and the preconditioners are rebuilt at the next solve.
+    pub fn set_materials(&mut self, mesh: &TetMesh, tet_material: &[Material]) {
+        let fresh = Simulation::new(mesh, tet_material);
+        self.elements = fresh.elements;
+        self.mass = fresh.mass;
+        self.force_floor = fresh.force_floor;
+        self.factor = fresh.factor;
+        self.coarse_stale = true;
+    }
+
     /// Number of nodes.
     pub fn num_nodes(&self) -> usize {
         self.x.len()

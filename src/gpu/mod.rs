@@ -126,7 +126,58 @@ impl Context {
 
     /// Opens the adapter whose name contains `name` (any if `None`).
     pub fn with_adapter(name: Option<&str>) -> Result<Context> {
-        let adapter = select_adapter(name)?;
+        Context::open(select_adapter(name)?)
+    }
+
+    /// Creates a surface for `window` and opens an adapter that can present
+    /// to it (the one `SKINPATCH_ADAPTER` names, else the best by device
+    /// type), with the surface's capabilities on that adapter.
+    pub fn for_window<W>(
+        window: W,
+    ) -> Result<(Context, wgpu::Surface<'static>, wgpu::SurfaceCapabilities)>
+    where
+        W: wgpu::WindowHandle + wgpu::wgt::WgpuHasDisplayHandle + Clone + 'static,
+    {
+        // The instance knows the window system it presents to.
+        let mut desc = wgpu::InstanceDescriptor::new_with_display_handle(Box::new(window.clone()));
+        desc.backends = wgpu::Backends::VULKAN;
+        let instance = wgpu::Instance::new(desc);
+        let surface = instance
+            .create_surface(window)
+            .map_err(|e| Error::Gpu(format!("creating a Vulkan surface for the window: {e}")))?;
+        let all = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::VULKAN));
+        if all.is_empty() {
+            return Err(Error::Gpu(vulkan::explain(&vulkan::look())));
+        }
+        let names: Vec<String> = all.iter().map(|a| a.get_info().name).collect();
+        let wanted = std::env::var(ADAPTER_VAR)
+            .ok()
+            .filter(|n| !n.is_empty())
+            .map(|n| n.to_lowercase());
+        let adapter = all
+            .into_iter()
+            .filter(|a| a.is_surface_supported(&surface))
+            .filter(|a| {
+                wanted
+                    .as_ref()
+                    .is_none_or(|w| a.get_info().name.to_lowercase().contains(w))
+            })
+            .min_by_key(|a| rank(a.get_info().device_type))
+            .ok_or_else(|| {
+                Error::Gpu(format!(
+                    "no Vulkan adapter{} can present to this window (adapters: {})",
+                    wanted
+                        .as_ref()
+                        .map(|w| format!(" matching {ADAPTER_VAR}={w:?}"))
+                        .unwrap_or_default(),
+                    names.join(", ")
+                ))
+            })?;
+        let capabilities = surface.get_capabilities(&adapter);
+        Ok((Context::open(adapter)?, surface, capabilities))
+    }
+
+    fn open(adapter: wgpu::Adapter) -> Result<Context> {
         let info = adapter.get_info();
         let limits = adapter.limits();
         let features = adapter.features() & OPTIONAL_FEATURES;
@@ -178,6 +229,12 @@ impl Context {
         self.device
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| Error::Gpu(format!("waiting for {}: {e}", self.info.name)))?;
+        self.take_errors()
+    }
+
+    /// The first error the device reported since the last call, without
+    /// waiting for submitted work.
+    pub fn take_device_errors(&self) -> Result<()> {
         self.take_errors()
     }
 

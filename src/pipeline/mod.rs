@@ -18,7 +18,7 @@ pub mod plan;
 mod render;
 mod vtkhdf;
 
-pub use render::{bench_render, RenderBench};
+pub use render::{bench_render, roughness_curve, texel_mm, RenderBench};
 
 use crate::error::{Error, Result};
 use crate::export::{self, FrameMetrics, MetricsWriter};
@@ -413,20 +413,81 @@ fn simulate(
     mut emit: impl FnMut(&FrameMetrics, &Simulation) -> Result<()>,
 ) -> Result<crate::fem::integrate::Timings> {
     let s = &setup.simulation;
-    let mesh = &setup.mesh;
-    let mut sim = Simulation::new(mesh, &s.tet_material);
-    sim.settings = s.newton;
-    sim.dynamics = s.dynamics;
-    let sides: Vec<usize> = s.sets.sides.iter().flatten().copied().collect();
-    let mut contact = ContactState::new(mesh, &sides);
-    let no_loads = vec![Vec3::zeros(); mesh.num_vertices()];
-    let mut t_prev = 0.0;
-    // The last solved state and its time, for the predicted start of the
-    // next solve.
-    let mut last_solved: Option<(Vec<Vec3>, f64)> = None;
-    let mut inverted_before = 0;
-    let mut split_before = false;
-    for frame in 0..=s.frames {
+    let mut stepper = Stepper::new(s, &setup.mesh);
+    for _ in 0..=s.frames {
+        let m = stepper.step(s, &setup.mesh, s.probe.as_ref())?;
+        emit(&m, stepper.simulation())?;
+    }
+    Ok(stepper.simulation().timings)
+}
+
+/// The state carried from one frame to the next: the simulation, the
+/// contact set, the last solved state (for the predicted start of the next
+/// solve) and the warnings already given. [`simulate`] steps it through a
+/// scenario's frames; the viewer steps it frame by frame with a probe path
+/// that grows as the user drives it — the same frames, so a recorded path
+/// replays to the same states.
+#[derive(Clone)]
+pub struct Stepper {
+    sim: Simulation,
+    contact: ContactState,
+    no_loads: Vec<Vec3>,
+    frame: usize,
+    t_prev: f64,
+    // The last solved state and its time.
+    last_solved: Option<(Vec<Vec3>, f64)>,
+    inverted_before: usize,
+    split_before: bool,
+}
+
+impl Stepper {
+    /// The patch at rest, before frame 0.
+    pub fn new(s: &crate::scenario::SimulationSetup, mesh: &crate::mesh::TetMesh) -> Stepper {
+        let mut sim = Simulation::new(mesh, &s.tet_material);
+        sim.settings = s.newton;
+        sim.dynamics = s.dynamics;
+        let sides: Vec<usize> = s.sets.sides.iter().flatten().copied().collect();
+        Stepper {
+            sim,
+            contact: ContactState::new(mesh, &sides),
+            no_loads: vec![Vec3::zeros(); mesh.num_vertices()],
+            frame: 0,
+            t_prev: 0.0,
+            last_solved: None,
+            inverted_before: 0,
+            split_before: false,
+        }
+    }
+
+    /// The frame [`Stepper::step`] solves next.
+    pub fn next_frame(&self) -> usize {
+        self.frame
+    }
+
+    /// The simulation as last solved.
+    pub fn simulation(&self) -> &Simulation {
+        &self.sim
+    }
+
+    /// New materials (one per tet) from the next frame on; the deformed
+    /// state is kept.
+    pub fn set_materials(&mut self, mesh: &crate::mesh::TetMesh, tet_material: &[crate::fem::material::Material]) {
+        self.sim.set_materials(mesh, tet_material);
+    }
+
+    /// Solves the next frame (at `frame × frame_dt`) with `probe` — the
+    /// scenario's, or one whose path reaches at least that time — and
+    /// returns its metrics. After an error the stepper must not be stepped
+    /// again.
+    pub fn step(
+        &mut self,
+        s: &crate::scenario::SimulationSetup,
+        mesh: &crate::mesh::TetMesh,
+        probe: Option<&crate::fem::contact::Probe>,
+    ) -> Result<FrameMetrics> {
+        let sim = &mut self.sim;
+        let frame = self.frame;
+        let t_prev = self.t_prev;
         let start = Instant::now();
         let t = frame as f64 * s.frame_dt;
         let mut m = FrameMetrics {
@@ -438,19 +499,19 @@ fn simulate(
         // it during frame 0, in steps like any other motion.
         let mut lift = 0.0;
         let substeps = if frame == 0 {
-            let (height, n) = press_in(s.probe.as_ref(), mesh, sim.position_tol());
+            let (height, n) = press_in(probe, mesh, sim.position_tol());
             lift = height;
             n
         } else {
-            let n = load_steps(s.probe.as_ref(), s.substeps, t_prev, t, frame)?;
+            let n = load_steps(probe, s.substeps, t_prev, t, frame)?;
             if n > s.substeps {
-                if !split_before {
+                if !self.split_before {
                     log::warn!(
                         "frame {frame}: the probe moves more than {MAX_PROBE_STEP} of its radius in \
                          a load step; the frame is split into {n} load steps (and so is any later \
                          frame that needs it) so that it cannot pass through the skin"
                     );
-                    split_before = true;
+                    self.split_before = true;
                 }
                 log::info!("frame {frame}: {n} load steps for the probe's motion");
             }
@@ -478,24 +539,24 @@ fn simulate(
             if s.predict {
                 let solved = sim.x.clone();
                 let t_solved = t_prev + (t - t_prev) * (k - 1) as f64 / substeps as f64;
-                if let Some((before, t_before)) = &last_solved {
+                if let Some((before, t_before)) = &self.last_solved {
                     if t_solved > *t_before {
                         let ratio = (ts - t_solved) / (t_solved - t_before);
                         sim.predict(before, ratio.min(MAX_PREDICTION_RATIO));
                     }
                 }
-                last_solved = Some((solved, t_solved));
+                self.last_solved = Some((solved, t_solved));
             }
-            match &s.probe {
+            match probe {
                 Some(probe) => {
                     let r = solve_with_contact(
-                        &mut sim,
-                        (&filters, &targets, &no_loads),
+                        sim,
+                        (&filters, &targets, &self.no_loads),
                         &probe
                             .pose(ts)
                             .lifted(lift * (1.0 - k as f64 / substeps as f64)),
                         probe.mode,
-                        &mut contact,
+                        &mut self.contact,
                         &context,
                     )?;
                     m.probe_force_n = r.probe_force.into();
@@ -517,7 +578,8 @@ fn simulate(
             }
             sim.end_step();
         }
-        t_prev = t;
+        self.t_prev = t;
+        self.frame += 1;
         let inversion = sim.inversion();
         m.inverted_tets = inversion.inverted;
         m.min_volume_ratio = inversion.min_volume_ratio;
@@ -525,7 +587,7 @@ fn simulate(
             &m,
             mesh.num_tets(),
             s.max_inverted_fraction,
-            &mut inverted_before,
+            &mut self.inverted_before,
         )?;
         m.step_wall_s = start.elapsed().as_secs_f64();
         log::info!(
@@ -535,9 +597,8 @@ fn simulate(
             m.newton_iterations,
             m.linear_iterations
         );
-        emit(&m, &sim)?;
+        Ok(m)
     }
-    Ok(sim.timings)
 }
 
 /// Frame 0's load steps and the height (mm) its probe starts above its

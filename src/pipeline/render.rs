@@ -37,8 +37,9 @@ fn no_gpu() -> Error {
     )
 }
 
-/// m(r)/m(1) of the map under the kernel model at the curve's ratios.
-fn roughness_curve(setup: &RenderSetup, micro: Option<&MicroSetup>) -> [f32; 16] {
+/// m(r)/m(1) of the map under the kernel model at the curve's ratios
+/// (ones unless `setup` asks for anisotropic roughness).
+pub fn roughness_curve(setup: &RenderSetup, micro: Option<&MicroSetup>) -> [f32; 16] {
     let ratios = crate::render::lighting::curve_ratios();
     match micro {
         Some(m) if setup.roughness == Roughness::Anisotropic => {
@@ -209,7 +210,7 @@ impl RenderEngine {
 /// Millimetres a texel of the texture-space targets covers on the patch at
 /// rest, from the mesh's bounds (the wider of the two axes: the UVs
 /// stretch the top surface's bounding rectangle over the unit square).
-fn texel_mm((lo, hi): (Vec3, Vec3), texture_px: usize) -> f64 {
+pub fn texel_mm((lo, hi): (Vec3, Vec3), texture_px: usize) -> f64 {
     (hi.x - lo.x).max(hi.y - lo.y) / texture_px as f64
 }
 

@@ -53,7 +53,8 @@ pub struct Globals {
     /// Light count, mode, roughness kind, translucency.
     pub flags: [u32; 4],
     /// Microstructure filter (0 bilinear normals, 1 slope moments); the
-    /// moments sampled with the sampler (1) or by loads (0); unused ×2.
+    /// moments sampled with the sampler (1) or by loads (0); the strain
+    /// overlay ([`super::overlay::OverlayKind`]); its range as f32 bits.
     pub options: [u32; 4],
 }
 

@@ -28,6 +28,7 @@ pub mod diffusion;
 pub mod irradiance;
 pub mod light;
 pub mod lighting;
+pub mod overlay;
 pub mod profile;
 pub mod renderer;
 pub mod resolve;

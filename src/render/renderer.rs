@@ -6,9 +6,12 @@
 use glam::Vec3;
 
 use super::albedo::{linear_to_srgb, Albedo};
+use super::camera::Camera;
 use super::diffusion::DiffusionStage;
 use super::irradiance::IrradianceStage;
+use super::light::Light;
 use super::lighting::{Bounds, Globals};
+use super::overlay::OverlayKind;
 use super::resolve::ResolveStage;
 use super::scene::FrameGeometry;
 use super::shadow::{ShadowInfo, ShadowStage};
@@ -202,6 +205,8 @@ pub struct Renderer {
     sides: Vertices,
     probe: Vertices,
     bounds: Bounds,
+    // Strain overlay and its saturating range.
+    overlay: (OverlayKind, f32),
 }
 
 impl Renderer {
@@ -519,6 +524,7 @@ impl Renderer {
             sides: Vertices::new(ctx, "side vertices"),
             probe: Vertices::new(ctx, "probe vertices"),
             bounds: (Vec3::ZERO, 1.0),
+            overlay: (OverlayKind::Off, 0.25),
         };
         ctx.finish()?;
         Ok(renderer)
@@ -537,6 +543,41 @@ impl Renderer {
         };
         self.probe.upload(ctx, "probe vertices", probe);
         self.bounds = bounds(geometry);
+    }
+
+    /// The camera and lights of the next frames (interactive views). The
+    /// number of lights is fixed when the renderer is built: `lights` must
+    /// have as many.
+    pub fn set_view(&mut self, camera: Camera, lights: &[Light]) -> Result<()> {
+        if lights.len() != self.setup.lights.len() {
+            return Err(crate::error::Error::Gpu(format!(
+                "the renderer was built for {} lights, got {}",
+                self.setup.lights.len(),
+                lights.len()
+            )));
+        }
+        self.setup.camera = camera;
+        self.setup.lights = lights.to_vec();
+        Ok(())
+    }
+
+    /// The roughness model of the next frames (its curve is the one given
+    /// to [`Renderer::new`]).
+    pub fn set_roughness(&mut self, roughness: Roughness) {
+        self.setup.roughness = roughness;
+    }
+
+    /// Draws a strain overlay on the skin in place of its albedo; stretch
+    /// ratios `1 ± range` saturate its colours.
+    pub fn set_overlay(&mut self, kind: OverlayKind, range: f32) {
+        self.overlay = (kind, range);
+    }
+
+    /// The resolved image of the last frame: `width × height` linear RGBA
+    /// f32 texels, row 0 at the top (a storage buffer, for presenting it
+    /// without a read-back).
+    pub fn pixels(&self) -> (&wgpu::Buffer, usize, usize) {
+        (&self.resolve.pixels, self.setup.width, self.setup.height)
     }
 
     /// Records and submits the frame in `mode` without waiting.
@@ -582,6 +623,8 @@ impl Renderer {
             self.curve,
         );
         globals.options[1] = self.filter_moments as u32;
+        globals.options[2] = self.overlay.0 as u32;
+        globals.options[3] = self.overlay.1.to_bits();
         ctx.queue
             .write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
         // The shadow passes use the lights exactly as the shading sees them.

@@ -13,7 +13,12 @@ pub const HDR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 
 /// The whole module as compiled.
 pub fn source() -> String {
-    format!("{}\n{}", super::lighting::SHADER, SHADER)
+    format!(
+        "{}\n{}\n{}",
+        super::lighting::SHADER,
+        super::overlay::SHADER,
+        SHADER
+    )
 }
 
 /// The three pipelines of the pass.

@@ -1,0 +1,843 @@
+//! What the viewer shows and drives, without a window: the orbit camera,
+//! the probe control, the shading mode, the overlay, the lights and the
+//! material edits. Window input and script steps become [`Command`]s
+//! applied here, so every interaction is unit-tested headless; the window
+//! loop reads the state back (camera, probe target, versions) each frame.
+
+use glam::{Mat4, Vec3, Vec4};
+
+use crate::fem::contact::{Probe, ProbePose};
+use crate::render::camera::{Camera, Projection};
+use crate::render::light::{Light, LightKind};
+use crate::render::{Mode, Roughness};
+
+/// What the skin shows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ViewMode {
+    /// Mesoscale normals only.
+    None,
+    /// The neutral microstructure.
+    Static,
+    /// The microstructure deformed by the strain (D′).
+    Dynamic,
+    /// The neutral normals with roughness stretched along the strain axes
+    /// (the anisotropic-roughness approximation).
+    Anisotropic,
+}
+
+impl ViewMode {
+    /// Every mode, in panel order.
+    pub const ALL: [ViewMode; 4] = [
+        ViewMode::None,
+        ViewMode::Static,
+        ViewMode::Dynamic,
+        ViewMode::Anisotropic,
+    ];
+
+    /// Name in the panel and in scripts.
+    pub fn name(self) -> &'static str {
+        match self {
+            ViewMode::None => "none",
+            ViewMode::Static => "static",
+            ViewMode::Dynamic => "dynamic",
+            ViewMode::Anisotropic => "anisotropic",
+        }
+    }
+
+    /// The mode of that name.
+    pub fn from_name(name: &str) -> Option<ViewMode> {
+        ViewMode::ALL.into_iter().find(|m| m.name() == name)
+    }
+
+    /// The renderer's mode and roughness model for this view.
+    pub fn render(self) -> (Mode, Roughness) {
+        match self {
+            ViewMode::None => (Mode::None, Roughness::Microgeometry),
+            ViewMode::Static => (Mode::Static, Roughness::Microgeometry),
+            ViewMode::Dynamic => (Mode::Dynamic, Roughness::Microgeometry),
+            ViewMode::Anisotropic => (Mode::Dynamic, Roughness::Anisotropic),
+        }
+    }
+
+    /// Whether frames in this mode need the deformed microstructure.
+    pub fn needs_deformed_map(self) -> bool {
+        self == ViewMode::Dynamic
+    }
+}
+
+/// A strain colour map drawn on the skin in place of its albedo.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Overlay {
+    /// The skin's own albedo.
+    Off,
+    /// The larger stretch ratio r_s (diverging: blue compression, red stretch).
+    Rs,
+    /// The smaller stretch ratio r_t.
+    Rt,
+    /// The s axis as hue, anisotropy r_s − r_t as saturation.
+    Axes,
+}
+
+impl Overlay {
+    /// Every overlay, in panel order.
+    pub const ALL: [Overlay; 4] = [Overlay::Off, Overlay::Rs, Overlay::Rt, Overlay::Axes];
+
+    /// Name in the panel and in scripts.
+    pub fn name(self) -> &'static str {
+        match self {
+            Overlay::Off => "off",
+            Overlay::Rs => "rs",
+            Overlay::Rt => "rt",
+            Overlay::Axes => "axes",
+        }
+    }
+
+    /// The overlay of that name.
+    pub fn from_name(name: &str) -> Option<Overlay> {
+        Overlay::ALL.into_iter().find(|m| m.name() == name)
+    }
+
+    /// The shader's code for it (`globals.options.z`).
+    pub fn code(self) -> u32 {
+        self as u32
+    }
+}
+
+/// An orbit camera around a target point, z up.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OrbitCamera {
+    /// The point orbited and looked at (mm).
+    pub target: Vec3,
+    /// Distance from the target (mm).
+    pub distance: f32,
+    /// Angle of the eye around z from +x (degrees).
+    pub azimuth_deg: f32,
+    /// Angle of the eye above the xy plane (degrees, within ±89).
+    pub elevation_deg: f32,
+    /// The scenario's projection (an orthographic height scales with zoom).
+    pub projection: Projection,
+    // Target, distance, azimuth, elevation and projection to reset to.
+    home: (Vec3, f32, f32, f32, Projection),
+}
+
+/// Closest the camera may come to its target (mm) and furthest it may go.
+const DISTANCE_RANGE: (f32, f32) = (0.5, 2000.0);
+/// Steepest elevation (degrees): the view never looks straight down the up axis.
+const MAX_ELEVATION: f32 = 89.0;
+
+impl OrbitCamera {
+    /// The orbit that reproduces `camera` (its eye, target and projection),
+    /// which [`OrbitCamera::reset`] returns to.
+    pub fn from_camera(camera: &Camera) -> OrbitCamera {
+        let d = camera.eye - camera.target;
+        let distance = d.length().max(DISTANCE_RANGE.0);
+        let azimuth_deg = d.y.atan2(d.x).to_degrees();
+        let elevation_deg = (d.z / distance)
+            .clamp(-1.0, 1.0)
+            .asin()
+            .to_degrees()
+            .clamp(-MAX_ELEVATION, MAX_ELEVATION);
+        OrbitCamera {
+            target: camera.target,
+            distance,
+            azimuth_deg,
+            elevation_deg,
+            projection: camera.projection,
+            home: (
+                camera.target,
+                distance,
+                azimuth_deg,
+                elevation_deg,
+                camera.projection,
+            ),
+        }
+    }
+
+    /// The renderer's camera.
+    pub fn camera(&self) -> Camera {
+        let (az, el) = (self.azimuth_deg.to_radians(), self.elevation_deg.to_radians());
+        let dir = Vec3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
+        Camera {
+            eye: self.target + dir * self.distance,
+            target: self.target,
+            up: Vec3::Z,
+            projection: self.projection,
+        }
+    }
+
+    /// Turns the eye around the target.
+    pub fn orbit(&mut self, d_azimuth_deg: f32, d_elevation_deg: f32) {
+        self.azimuth_deg = (self.azimuth_deg + d_azimuth_deg).rem_euclid(360.0);
+        self.elevation_deg =
+            (self.elevation_deg + d_elevation_deg).clamp(-MAX_ELEVATION, MAX_ELEVATION);
+    }
+
+    /// Moves target and eye together in the view plane, by fractions of
+    /// the view's height (right and up positive).
+    pub fn pan(&mut self, right: f32, up: f32) {
+        let cam = self.camera();
+        let forward = (cam.target - cam.eye).normalize();
+        let side = forward.cross(Vec3::Z).normalize();
+        let above = side.cross(forward);
+        let height = self.view_height();
+        self.target += (side * right + above * up) * height;
+    }
+
+    /// Moves the eye towards the target (`factor` < 1) or away (> 1).
+    pub fn zoom(&mut self, factor: f32) {
+        if !(factor.is_finite() && factor > 0.0) {
+            return;
+        }
+        self.distance = (self.distance * factor).clamp(DISTANCE_RANGE.0, DISTANCE_RANGE.1);
+        if let Projection::Orthographic { height_mm } = &mut self.projection {
+            *height_mm = (*height_mm * factor).max(1e-3);
+        }
+    }
+
+    /// Back to the scenario's camera.
+    pub fn reset(&mut self) {
+        (
+            self.target,
+            self.distance,
+            self.azimuth_deg,
+            self.elevation_deg,
+            self.projection,
+        ) = self.home;
+    }
+
+    /// Height of the view at the target (mm).
+    fn view_height(&self) -> f32 {
+        match self.projection {
+            Projection::Perspective { fov_deg } => {
+                2.0 * self.distance * (0.5 * fov_deg.to_radians()).tan()
+            }
+            Projection::Orthographic { height_mm } => height_mm,
+        }
+    }
+
+    /// The ray through pixel (`x`, `y`) of a `width × height` view (origin
+    /// top left): origin and unit direction.
+    pub fn ray(&self, x: f32, y: f32, width: f32, height: f32) -> (Vec3, Vec3) {
+        let cam = self.camera();
+        let radius = self.distance.max(1.0) * 4.0;
+        let m = cam.view_projection(width / height.max(1.0), cam.target, radius);
+        let inverse = m.inverse();
+        let ndc_x = 2.0 * x / width.max(1.0) - 1.0;
+        let ndc_y = 1.0 - 2.0 * y / height.max(1.0);
+        let unproject = |z: f32| {
+            let p: Vec4 = inverse * Vec4::new(ndc_x, ndc_y, z, 1.0);
+            p.truncate() / p.w
+        };
+        let (near, far) = (unproject(0.0), unproject(1.0));
+        (near, (far - near).normalize())
+    }
+}
+
+/// Where the probe goes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ProbeDrive {
+    /// Follows the mouse (or script): pressed to a depth at a point of the
+    /// patch, or lifted above it.
+    Live,
+    /// Follows the scenario's keyframed path at a playback time.
+    Path {
+        /// Playback time (s).
+        t_s: f64,
+        /// Whether the time advances with the display.
+        playing: bool,
+        /// Whether playback wraps to the start at the end.
+        looping: bool,
+    },
+}
+
+/// The probe as the user drives it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ProbeControl {
+    /// The scenario's probe: its shape, contact mode and keyframed path.
+    pub scenario: Probe,
+    /// Live or path playback.
+    pub drive: ProbeDrive,
+    /// Point of the patch (x, y in mm) the probe is over.
+    pub at_mm: [f64; 2],
+    /// How far it presses below the touching height while pressed (mm).
+    pub depth_mm: f64,
+    /// Whether it presses (else it hovers above the skin).
+    pub pressed: bool,
+    /// The top of the patch at rest (mm).
+    top_z: f64,
+    /// The patch's rest bounds in x and y (mm): the probe stays over it.
+    extent: ([f64; 2], [f64; 2]),
+    /// Deepest press allowed (mm).
+    pub max_depth_mm: f64,
+}
+
+/// Height above the touching position a lifted probe hovers at, as a
+/// fraction of its radius.
+const HOVER: f64 = 0.5;
+
+impl ProbeControl {
+    /// The control of `probe` over a patch with rest bounds `lo`..`hi`
+    /// (mm), starting live, lifted, over the probe's position at t = 0.
+    pub fn new(probe: Probe, lo: [f64; 3], hi: [f64; 3]) -> ProbeControl {
+        let start = probe.pose(0.0).centre;
+        let thickness = hi[2] - lo[2];
+        ProbeControl {
+            drive: ProbeDrive::Live,
+            at_mm: [start.x, start.y],
+            depth_mm: (0.5 * probe.radius_mm()).min(0.25 * thickness),
+            pressed: false,
+            top_z: hi[2],
+            extent: ([lo[0], lo[1]], [hi[0], hi[1]]),
+            max_depth_mm: (2.0 * probe.radius_mm()).min(0.6 * thickness),
+            scenario: probe,
+        }
+    }
+
+    /// The probe's pose target now.
+    pub fn target(&self) -> ProbePose {
+        match self.drive {
+            ProbeDrive::Path { t_s, .. } => self.scenario.pose(t_s),
+            ProbeDrive::Live => {
+                let mut pose = self.scenario.pose(0.0);
+                pose.centre.x = self.at_mm[0];
+                pose.centre.y = self.at_mm[1];
+                // Touching: the lowest point of the probe on the rest top.
+                let touching = pose.centre.z - pose.lowest_z() + self.top_z;
+                pose.centre.z = if self.pressed {
+                    touching - self.depth_mm
+                } else {
+                    touching + HOVER * self.scenario.radius_mm()
+                };
+                pose
+            }
+        }
+    }
+
+    /// Duration of the scenario's path (its last keyframe's time, s).
+    pub fn path_duration(&self) -> f64 {
+        self.scenario.path.points.last().map_or(0.0, |p| p.0)
+    }
+
+    fn clamp_to_patch(&self, at: [f64; 2]) -> [f64; 2] {
+        let (lo, hi) = self.extent;
+        [at[0].clamp(lo[0], hi[0]), at[1].clamp(lo[1], hi[1])]
+    }
+
+    /// Advances path playback by `dt` seconds of display time.
+    pub fn advance(&mut self, dt: f64) {
+        let end = self.path_duration();
+        if let ProbeDrive::Path {
+            t_s,
+            playing: true,
+            looping,
+        } = &mut self.drive
+        {
+            *t_s += dt;
+            if *t_s > end {
+                *t_s = if *looping && end > 0.0 {
+                    t_s.rem_euclid(end)
+                } else {
+                    end
+                };
+            }
+        }
+    }
+}
+
+/// A change to the view or the simulation's inputs.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Command {
+    /// Orbit by these angles (degrees).
+    Orbit(f32, f32),
+    /// Pan by fractions of the view height (right, up).
+    Pan(f32, f32),
+    /// Scale the camera distance.
+    Zoom(f32),
+    /// Back to the scenario's camera.
+    ResetCamera,
+    /// Press the probe down at this point of the patch (mm).
+    Press([f64; 2]),
+    /// Press at the patch point under this pixel (x, y from the top left).
+    PressPixel([f32; 2]),
+    /// Slide the probe to this point of the patch (mm), pressed or not.
+    MoveTo([f64; 2]),
+    /// Slide to the patch point under this pixel.
+    MovePixel([f32; 2]),
+    /// Set the press depth (mm).
+    Depth(f64),
+    /// Lift the probe off the skin.
+    Release,
+    /// Drive the probe live (mouse and script).
+    Live,
+    /// Play the scenario's path from this time (s).
+    Play(f64),
+    /// Pause or resume path playback.
+    Pause(bool),
+    /// Jump along the path to this time (s), paused.
+    Scrub(f64),
+    /// Loop path playback.
+    Loop(bool),
+    /// Shading mode.
+    Mode(ViewMode),
+    /// Strain overlay.
+    Overlay(Overlay),
+    /// Key light direction: azimuth and elevation of where it comes from (degrees).
+    LightDirection(f32, f32),
+    /// Scale of every light's intensity.
+    LightIntensity(f32),
+    /// Young's modulus (kPa) and Poisson ratio of a region (by name).
+    Material(String, f64, f64),
+    /// Coulomb friction coefficient of the probe.
+    Friction(f64),
+}
+
+/// Everything the viewer shows and drives.
+#[derive(Clone, Debug)]
+pub struct ViewerState {
+    /// The camera.
+    pub camera: OrbitCamera,
+    /// The probe, if the scenario has one.
+    pub probe: Option<ProbeControl>,
+    /// Shading mode.
+    pub mode: ViewMode,
+    /// Strain overlay.
+    pub overlay: Overlay,
+    /// Stretch ratios `1 ± overlay_range` saturate the overlay colours.
+    pub overlay_range: f64,
+    /// The scenario's lights; the first directional one is the key light
+    /// the panel turns.
+    base_lights: Vec<Light>,
+    /// Key light: where it comes from (azimuth, elevation, degrees).
+    pub key_light: Option<(f32, f32)>,
+    /// Scale of every light's intensity.
+    pub light_scale: f32,
+    /// Materials by region: Young's modulus (kPa) and Poisson ratio.
+    pub materials: Vec<(String, f64, f64)>,
+    /// Coulomb friction (None: the scenario's contact is not Coulomb).
+    pub friction: Option<f64>,
+    /// Bumped by every material or friction edit (the simulation follows).
+    pub materials_version: u64,
+    /// The last rejected command and why (shown in the panel).
+    pub rejected: Option<String>,
+    /// The view's size in pixels (for picking).
+    pub viewport: [f32; 2],
+    /// Whether the scenario has a microstructure (modes other than `none`
+    /// need one).
+    pub has_micro: bool,
+}
+
+impl ViewerState {
+    /// The state a scenario starts in.
+    pub fn new(
+        camera: &Camera,
+        lights: &[Light],
+        probe: Option<ProbeControl>,
+        materials: Vec<(String, f64, f64)>,
+        friction: Option<f64>,
+        viewport: [f32; 2],
+    ) -> ViewerState {
+        let key_light = lights.iter().find_map(|l| match l.kind {
+            LightKind::Directional(d) => Some(from_direction(-d)),
+            LightKind::Point(_) => None,
+        });
+        ViewerState {
+            camera: OrbitCamera::from_camera(camera),
+            probe,
+            mode: ViewMode::Dynamic,
+            overlay: Overlay::Off,
+            overlay_range: 0.25,
+            base_lights: lights.to_vec(),
+            key_light,
+            light_scale: 1.0,
+            materials,
+            friction,
+            materials_version: 0,
+            rejected: None,
+            viewport,
+            has_micro: true,
+        }
+    }
+
+    /// The lights as the panel sets them.
+    pub fn lights(&self) -> Vec<Light> {
+        let mut key_done = false;
+        self.base_lights
+            .iter()
+            .map(|l| {
+                let mut l = *l;
+                l.intensity *= self.light_scale;
+                if let (LightKind::Directional(_), Some((az, el)), false) =
+                    (l.kind, self.key_light, key_done)
+                {
+                    l.kind = LightKind::Directional(-to_direction(az, el));
+                    key_done = true;
+                }
+                l
+            })
+            .collect()
+    }
+
+    /// The point of the patch's rest top (x, y in mm) under pixel `px`,
+    /// or `None` when the ray misses the top's plane.
+    pub fn pick(&self, px: [f32; 2]) -> Option<[f64; 2]> {
+        let probe = self.probe.as_ref()?;
+        let (origin, dir) = self
+            .camera
+            .ray(px[0], px[1], self.viewport[0], self.viewport[1]);
+        let top = probe.top_z as f32;
+        if dir.z.abs() < 1e-6 {
+            return None;
+        }
+        let s = (top - origin.z) / dir.z;
+        if s <= 0.0 {
+            return None;
+        }
+        let p = origin + dir * s;
+        Some([p.x as f64, p.y as f64])
+    }
+
+    /// Applies `command`. A command that cannot apply (a probe command
+    /// without a probe, a bad value) changes nothing and is noted in
+    /// [`ViewerState::rejected`].
+    pub fn apply(&mut self, command: Command) {
+        if let Err(why) = self.try_apply(command) {
+            log::warn!("{why}");
+            self.rejected = Some(why);
+        }
+    }
+
+    fn try_apply(&mut self, command: Command) -> std::result::Result<(), String> {
+        match command {
+            Command::Orbit(a, e) => self.camera.orbit(a, e),
+            Command::Pan(r, u) => self.camera.pan(r, u),
+            Command::Zoom(f) => self.camera.zoom(f),
+            Command::ResetCamera => self.camera.reset(),
+            Command::Mode(m) => {
+                if m != ViewMode::None && !self.has_micro {
+                    return Err(format!(
+                        "mode {} needs a [microstructure] section in the scenario",
+                        m.name()
+                    ));
+                }
+                self.mode = m;
+            }
+            Command::Overlay(o) => self.overlay = o,
+            Command::LightDirection(az, el) => {
+                if self.key_light.is_none() {
+                    return Err("the scenario has no directional light to turn".into());
+                }
+                self.key_light = Some((az.rem_euclid(360.0), el.clamp(-90.0, 90.0)));
+            }
+            Command::LightIntensity(s) => {
+                if !(s.is_finite() && s >= 0.0) {
+                    return Err(format!("light intensity scale must be ≥ 0, got {s}"));
+                }
+                self.light_scale = s;
+            }
+            Command::Material(region, e, nu) => {
+                if !(e.is_finite() && e > 0.0) {
+                    return Err(format!(
+                        "material.{region}: Young's modulus must be > 0 kPa, got {e}"
+                    ));
+                }
+                let most = crate::fem::material::MAX_POISSON;
+                if !(nu.is_finite() && (0.0..=most).contains(&nu)) {
+                    return Err(format!(
+                        "material.{region}: Poisson ratio must be in [0, {most}], got {nu}"
+                    ));
+                }
+                let known: Vec<String> = self.materials.iter().map(|m| m.0.clone()).collect();
+                let slot = self
+                    .materials
+                    .iter_mut()
+                    .find(|m| m.0 == region)
+                    .ok_or_else(|| {
+                        format!("no region {region} (regions: {})", known.join(", "))
+                    })?;
+                if (slot.1, slot.2) != (e, nu) {
+                    slot.1 = e;
+                    slot.2 = nu;
+                    self.materials_version += 1;
+                }
+            }
+            Command::Friction(mu) => {
+                if self.friction.is_none() {
+                    return Err("the probe's contact is not Coulomb: no friction to set".into());
+                }
+                if !(mu.is_finite() && mu >= 0.0) {
+                    return Err(format!("friction must be ≥ 0, got {mu}"));
+                }
+                if self.friction != Some(mu) {
+                    self.friction = Some(mu);
+                    self.materials_version += 1;
+                }
+            }
+            probe_command => {
+                let picked = match probe_command {
+                    Command::PressPixel(px) | Command::MovePixel(px) => Some(
+                        self.pick(px)
+                            .ok_or_else(|| format!("pixel {px:?} does not point at the patch"))?,
+                    ),
+                    _ => None,
+                };
+                let probe = self
+                    .probe
+                    .as_mut()
+                    .ok_or("the scenario has no [probe] to drive")?;
+                match probe_command {
+                    Command::Press(at) | Command::MoveTo(at) => {
+                        if !(at[0].is_finite() && at[1].is_finite()) {
+                            return Err(format!("probe position must be finite, got {at:?}"));
+                        }
+                        probe.drive = ProbeDrive::Live;
+                        probe.at_mm = probe.clamp_to_patch(at);
+                        if matches!(probe_command, Command::Press(_)) {
+                            probe.pressed = true;
+                        }
+                    }
+                    Command::PressPixel(_) | Command::MovePixel(_) => {
+                        probe.drive = ProbeDrive::Live;
+                        probe.at_mm = probe.clamp_to_patch(picked.expect("picked above"));
+                        if matches!(probe_command, Command::PressPixel(_)) {
+                            probe.pressed = true;
+                        }
+                    }
+                    Command::Depth(d) => {
+                        if !(d.is_finite() && d >= 0.0) {
+                            return Err(format!("probe depth must be ≥ 0 mm, got {d}"));
+                        }
+                        probe.depth_mm = d.min(probe.max_depth_mm);
+                    }
+                    Command::Release => probe.pressed = false,
+                    Command::Live => probe.drive = ProbeDrive::Live,
+                    Command::Play(t) => {
+                        probe.drive = ProbeDrive::Path {
+                            t_s: t.clamp(0.0, probe.path_duration()),
+                            playing: true,
+                            looping: matches!(
+                                probe.drive,
+                                ProbeDrive::Path { looping: true, .. }
+                            ),
+                        }
+                    }
+                    Command::Pause(paused) => {
+                        if let ProbeDrive::Path { playing, .. } = &mut probe.drive {
+                            *playing = !paused;
+                        }
+                    }
+                    Command::Scrub(t) => {
+                        let looping =
+                            matches!(probe.drive, ProbeDrive::Path { looping: true, .. });
+                        probe.drive = ProbeDrive::Path {
+                            t_s: t.clamp(0.0, probe.path_duration()),
+                            playing: false,
+                            looping,
+                        };
+                    }
+                    Command::Loop(on) => {
+                        if let ProbeDrive::Path { looping, .. } = &mut probe.drive {
+                            *looping = on;
+                        }
+                    }
+                    _ => unreachable!("view commands are handled above"),
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Unit vector towards azimuth/elevation (degrees), z up.
+fn to_direction(azimuth_deg: f32, elevation_deg: f32) -> Vec3 {
+    let (a, e) = (azimuth_deg.to_radians(), elevation_deg.to_radians());
+    Vec3::new(e.cos() * a.cos(), e.cos() * a.sin(), e.sin())
+}
+
+/// Azimuth and elevation (degrees) of a direction.
+fn from_direction(d: Vec3) -> (f32, f32) {
+    let d = d.normalize_or(Vec3::Z);
+    (
+        d.y.atan2(d.x).to_degrees().rem_euclid(360.0),
+        d.z.clamp(-1.0, 1.0).asin().to_degrees(),
+    )
+}
+
+/// The projection matrix of the camera for a view of `viewport` pixels
+/// (for tests and picking).
+pub fn view_projection(camera: &OrbitCamera, viewport: [f32; 2]) -> Mat4 {
+    let cam = camera.camera();
+    cam.view_projection(
+        viewport[0] / viewport[1].max(1.0),
+        cam.target,
+        camera.distance * 4.0,
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fem::boundary::Keyframes;
+    use crate::fem::contact::{ContactMode, ProbeShape};
+    use nalgebra::Vector3;
+
+    fn probe() -> Probe {
+        Probe {
+            shape: ProbeShape::Sphere { radius_mm: 1.5 },
+            path: Keyframes {
+                points: vec![
+                    (0.0, Vector3::new(-1.0, 0.0, 1.5)),
+                    (0.4, Vector3::new(-1.0, 0.0, 0.5)),
+                    (1.0, Vector3::new(1.0, 0.0, 0.5)),
+                ],
+            },
+            axis: Keyframes {
+                points: vec![(0.0, Vector3::x())],
+            },
+            mode: ContactMode::Coulomb(0.8),
+        }
+    }
+
+    fn state() -> ViewerState {
+        let camera = Camera {
+            eye: Vec3::new(0.0, -13.0, 8.0),
+            target: Vec3::new(0.0, 0.5, -1.0),
+            up: Vec3::Z,
+            projection: Projection::Perspective { fov_deg: 40.0 },
+        };
+        let light = Light {
+            kind: LightKind::Directional(Vec3::new(-0.25, -0.75, -0.6).normalize()),
+            color: Vec3::ONE,
+            intensity: 2.0,
+        };
+        let control = ProbeControl::new(probe(), [-5.0, -5.0, -5.0], [5.0, 5.0, 0.0]);
+        ViewerState::new(
+            &camera,
+            &[light],
+            Some(control),
+            vec![("dermis".into(), 150.0, 0.45)],
+            Some(0.8),
+            [640.0, 360.0],
+        )
+    }
+
+    #[test]
+    fn orbit_camera_reproduces_the_scenario_camera_and_resets_to_it() {
+        let mut s = state();
+        let start = s.camera.camera();
+        assert!((start.eye - Vec3::new(0.0, -13.0, 8.0)).length() < 1e-4, "{start:?}");
+        s.apply(Command::Orbit(30.0, -10.0));
+        s.apply(Command::Pan(0.1, 0.2));
+        s.apply(Command::Zoom(0.5));
+        let moved = s.camera.camera();
+        assert!((moved.eye - start.eye).length() > 1.0);
+        // Zoom halves the distance to the (panned) target.
+        let d0 = (start.eye - start.target).length();
+        assert!(((moved.eye - moved.target).length() - 0.5 * d0).abs() < 1e-3);
+        s.apply(Command::ResetCamera);
+        assert_eq!(s.camera.camera(), start);
+        // Elevation stays short of the pole, so the view never degenerates.
+        s.apply(Command::Orbit(0.0, 500.0));
+        assert!(s.camera.elevation_deg <= MAX_ELEVATION);
+    }
+
+    #[test]
+    fn picking_inverts_the_projection_on_the_top_plane() {
+        let s = state();
+        let m = view_projection(&s.camera, s.viewport);
+        for p in [[0.0f32, 0.0], [1.5, -2.0], [-3.0, 2.5]] {
+            let ndc = m.project_point3(Vec3::new(p[0], p[1], 0.0));
+            let px = [
+                (ndc.x + 1.0) * 0.5 * s.viewport[0],
+                (1.0 - ndc.y) * 0.5 * s.viewport[1],
+            ];
+            let back = s.pick(px).expect("the patch is in view");
+            assert!(
+                (back[0] - p[0] as f64).abs() < 1e-3 && (back[1] - p[1] as f64).abs() < 1e-3,
+                "{p:?} -> {px:?} -> {back:?}"
+            );
+        }
+        // Above the horizon: no point of the plane.
+        assert!(s.pick([320.0, -5000.0]).is_none());
+    }
+
+    #[test]
+    fn probe_presses_to_its_depth_slides_and_lifts() {
+        let mut s = state();
+        let hover = s.probe.as_ref().unwrap().target().centre.z;
+        assert!((hover - (1.5 + 0.75)).abs() < 1e-12, "hovers half a radius above: {hover}");
+        s.apply(Command::Depth(1.0));
+        s.apply(Command::Press([0.5, -0.5]));
+        let pressed = s.probe.as_ref().unwrap().target();
+        assert_eq!((pressed.centre.x, pressed.centre.y), (0.5, -0.5));
+        assert!((pressed.centre.z - 0.5).abs() < 1e-12, "{pressed:?}");
+        s.apply(Command::MoveTo([2.0, 0.0]));
+        assert_eq!(s.probe.as_ref().unwrap().target().centre.x, 2.0);
+        // Off the patch: held at its edge.
+        s.apply(Command::MoveTo([50.0, 0.0]));
+        assert_eq!(s.probe.as_ref().unwrap().target().centre.x, 5.0);
+        // Too deep: held at the limit (two radii, or 60% of the thickness).
+        s.apply(Command::Depth(100.0));
+        assert_eq!(s.probe.as_ref().unwrap().depth_mm, 3.0);
+        s.apply(Command::Release);
+        assert!((s.probe.as_ref().unwrap().target().centre.z - hover).abs() < 1e-12);
+        // Bad values change nothing and say why.
+        s.apply(Command::Depth(f64::NAN));
+        assert!(s.rejected.as_deref().unwrap().contains("depth"));
+        assert_eq!(s.probe.as_ref().unwrap().depth_mm, 3.0);
+    }
+
+    #[test]
+    fn path_playback_follows_the_keyframes_and_loops() {
+        let mut s = state();
+        s.apply(Command::Play(0.0));
+        let p = s.probe.as_mut().unwrap();
+        p.advance(0.4);
+        assert!((p.target().centre - Vector3::new(-1.0, 0.0, 0.5)).norm() < 1e-12);
+        p.advance(1.0);
+        assert_eq!(p.target().centre, Vector3::new(1.0, 0.0, 0.5), "held at the end");
+        s.apply(Command::Loop(true));
+        s.apply(Command::Scrub(0.9));
+        let p = s.probe.as_mut().unwrap();
+        p.advance(0.5);
+        assert!(matches!(p.drive, ProbeDrive::Path { t_s, playing: false, .. } if (t_s - 0.9).abs() < 1e-12),
+            "scrubbing pauses");
+        s.apply(Command::Pause(false));
+        let p = s.probe.as_mut().unwrap();
+        p.advance(0.3);
+        assert!(matches!(p.drive, ProbeDrive::Path { t_s, .. } if (t_s - 0.2).abs() < 1e-9), "{:?}", p.drive);
+    }
+
+    #[test]
+    fn material_and_friction_edits_bump_the_version_once() {
+        let mut s = state();
+        s.apply(Command::Material("dermis".into(), 200.0, 0.4));
+        s.apply(Command::Material("dermis".into(), 200.0, 0.4));
+        assert_eq!(s.materials_version, 1);
+        s.apply(Command::Friction(0.3));
+        assert_eq!((s.materials_version, s.friction), (2, Some(0.3)));
+        s.apply(Command::Material("dermis".into(), 200.0, 0.5));
+        assert!(s.rejected.as_deref().unwrap().contains("Poisson"));
+        s.apply(Command::Material("bone".into(), 200.0, 0.3));
+        assert!(s.rejected.as_deref().unwrap().contains("regions: dermis"));
+        assert_eq!(s.materials_version, 2);
+    }
+
+    #[test]
+    fn key_light_turns_and_scales() {
+        let mut s = state();
+        let (az, el) = s.key_light.unwrap();
+        // The scenario's direction comes back unchanged.
+        let LightKind::Directional(d) = s.lights()[0].kind else {
+            panic!("directional")
+        };
+        assert!((d - Vec3::new(-0.25, -0.75, -0.6).normalize()).length() < 1e-5);
+        s.apply(Command::LightDirection(az + 90.0, el));
+        s.apply(Command::LightIntensity(0.5));
+        let l = s.lights()[0];
+        assert_eq!(l.intensity, 1.0);
+        let LightKind::Directional(turned) = l.kind else {
+            panic!("directional")
+        };
+        assert!(turned.dot(d).abs() < 0.7, "turned by 90° in azimuth: {turned} vs {d}");
+    }
+}
