@@ -264,7 +264,7 @@ fn per_texel_svd_and_kernel_parameters_match_the_cpu_reference() {
 /// texels, some identity texels.
 fn random_field(width: usize, height: usize, rng: &mut Rng) -> KernelField {
     let mut pass = |k: usize| {
-        if k % 13 == 0 {
+        if k.is_multiple_of(13) {
             return PassParams::IDENTITY;
         }
         let angle = rng.next(0.0, std::f64::consts::TAU);

@@ -1168,3 +1168,31 @@ fn a_flat_map_gives_the_base_lobes() {
     );
     assert!(mean < 1e-4, "flat map: mean difference {mean:e}");
 }
+
+#[test]
+fn strain_overlay_colours_match_the_strain_images() {
+    use skinpatch::render::overlay::{evaluate_gpu, reference, OverlayKind};
+    let Some(ctx) = common::context() else {
+        return;
+    };
+    // Stretch ratios across and beyond the saturating range, axes all round.
+    let strains: Vec<[f32; 4]> = (0..400)
+        .map(|k| {
+            let a = k as f32 * 0.77;
+            let rs = 0.6 + 0.002 * k as f32;
+            [rs, 0.9 * rs - 0.05 * (k % 7) as f32, a.cos(), a.sin()]
+        })
+        .collect();
+    for kind in [OverlayKind::Rs, OverlayKind::Rt, OverlayKind::Axes] {
+        let gpu = evaluate_gpu(&ctx, kind, &strains, 0.25).unwrap();
+        for (s, g) in strains.iter().zip(&gpu) {
+            let want = reference(kind, *s, 0.25);
+            for c in 0..3 {
+                // The images round to 8 bits: half a level, compared encoded.
+                let encode = skinpatch::render::albedo::linear_to_srgb;
+                let diff = (encode(g[c]) - encode(want[c])).abs() * 255.0;
+                assert!(diff < 0.51, "{kind:?} {s:?}: {g:?} vs {want:?}");
+            }
+        }
+    }
+}

@@ -471,7 +471,11 @@ impl Stepper {
 
     /// New materials (one per tet) from the next frame on; the deformed
     /// state is kept.
-    pub fn set_materials(&mut self, mesh: &crate::mesh::TetMesh, tet_material: &[crate::fem::material::Material]) {
+    pub fn set_materials(
+        &mut self,
+        mesh: &crate::mesh::TetMesh,
+        tet_material: &[crate::fem::material::Material],
+    ) {
         self.sim.set_materials(mesh, tet_material);
     }
 

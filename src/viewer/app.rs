@@ -458,13 +458,17 @@ impl App {
         if rendered {
             if let Some((sent, target)) = self.rates.pending {
                 if self.shown.as_ref().and_then(|s| s.pose) == Some(target) {
-                    self.rates.latencies_ms.push(sent.elapsed().as_secs_f64() * 1e3);
+                    self.rates
+                        .latencies_ms
+                        .push(sent.elapsed().as_secs_f64() * 1e3);
                     self.rates.pending = None;
                 }
             }
-            if self.recorder.is_some() {
-                let image = self.read_image()?;
-                let recorder = self.recorder.as_mut().expect("checked");
+            let image = match self.recorder {
+                Some(_) => Some(self.read_image()?),
+                None => None,
+            };
+            if let (Some(recorder), Some(image)) = (self.recorder.as_mut(), image) {
                 recorder.push(&image)?;
             }
         }
@@ -494,7 +498,10 @@ impl App {
             self.state.probe.as_ref().map(|p| p.drive),
             Some(ProbeDrive::Path { playing: true, .. })
         );
-        let scripted = self.script.as_ref().is_some_and(|s| s.next < s.steps.len() || s.waiting.is_some());
+        let scripted = self
+            .script
+            .as_ref()
+            .is_some_and(|s| s.next < s.steps.len() || s.waiting.is_some());
         if playing || scripted || self.dirty || self.worker().status().busy {
             self.gpu.as_ref().expect("started").window.request_redraw();
         }
@@ -524,7 +531,8 @@ impl App {
         let ppp = output.pixels_per_point;
         let jobs = egui_ctx.tessellate(output.shapes, ppp);
         let frame = match gpu.surface.get_current_texture() {
-            wgpu::CurrentSurfaceTexture::Success(f) | wgpu::CurrentSurfaceTexture::Suboptimal(f) => f,
+            wgpu::CurrentSurfaceTexture::Success(f)
+            | wgpu::CurrentSurfaceTexture::Suboptimal(f) => f,
             wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
                 let size = gpu.window.inner_size();
                 gpu.config.width = size.width.max(1);
@@ -557,9 +565,9 @@ impl App {
         let mut enc = ctx
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
-        let extra = gpu
-            .egui_renderer
-            .update_buffers(&ctx.device, &ctx.queue, &mut enc, &jobs, &screen);
+        let extra =
+            gpu.egui_renderer
+                .update_buffers(&ctx.device, &ctx.queue, &mut enc, &jobs, &screen);
         {
             let pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("window"),
@@ -759,10 +767,19 @@ impl App {
             ui.horizontal(|ui| {
                 ui.label(region);
                 let a = ui
-                    .add(egui::DragValue::new(&mut e2).range(0.1..=1e6).suffix(" kPa"))
+                    .add(
+                        egui::DragValue::new(&mut e2)
+                            .range(0.1..=1e6)
+                            .suffix(" kPa"),
+                    )
                     .changed();
                 let b = ui
-                    .add(egui::DragValue::new(&mut nu2).range(0.0..=crate::fem::material::MAX_POISSON).speed(0.005).prefix("ν "))
+                    .add(
+                        egui::DragValue::new(&mut nu2)
+                            .range(0.0..=crate::fem::material::MAX_POISSON)
+                            .speed(0.005)
+                            .prefix("ν "),
+                    )
                     .changed();
                 if a || b {
                     commands.push(Command::Material(region.clone(), e2, nu2));
@@ -858,8 +875,11 @@ impl App {
             },
             KeyAction::Screenshot => {
                 let k = self.written.len();
-                self.screenshots
-                    .push(self.options.record_dir.join(format!("screenshot_{k:04}.png")));
+                self.screenshots.push(
+                    self.options
+                        .record_dir
+                        .join(format!("screenshot_{k:04}.png")),
+                );
             }
             KeyAction::ToggleRecord => self.toggle_record()?,
             KeyAction::SavePath => {
@@ -885,7 +905,9 @@ impl App {
                 self.written.extend(files);
             }
             None => {
-                self.recorder = Some(FrameRecorder::start(&self.options.record_dir.join("frames"))?);
+                self.recorder = Some(FrameRecorder::start(
+                    &self.options.record_dir.join("frames"),
+                )?);
                 self.dirty = true;
             }
         }
@@ -932,6 +954,10 @@ impl App {
 
     /// Runs script steps until one has to wait.
     fn run_script(&mut self, event_loop: &ActiveEventLoop) -> Result<()> {
+        // Scripts start on the first frame shown.
+        if self.shown.is_none() {
+            return Ok(());
+        }
         loop {
             let Some(run) = self.script.as_mut() else {
                 return Ok(());
@@ -1270,6 +1296,20 @@ impl ApplicationHandler<Wake> for App {
                 self.error.get_or_insert(e);
             }
         }
+        // The session's frames as `skinpatch run` would list them.
+        let metrics = self
+            .worker
+            .as_ref()
+            .map(|w| w.metrics())
+            .unwrap_or_default();
+        if !metrics.is_empty() {
+            if let Err(e) = write_metrics(&self.options.record_dir, &metrics) {
+                self.error.get_or_insert(e);
+            } else {
+                self.written
+                    .push(self.options.record_dir.join("metrics.csv"));
+            }
+        }
         let status = self.worker.as_ref().map(|w| w.status()).unwrap_or_default();
         let s = &mut self.summary;
         s.frames_shown = self.rates.frames;
@@ -1285,6 +1325,16 @@ impl ApplicationHandler<Wake> for App {
         s.final_force_n = self.shown.as_ref().map(|x| x.metrics.probe_force_n);
         s.written = std::mem::take(&mut self.written);
     }
+}
+
+/// Writes `metrics.csv` of the solved frames into `dir`.
+fn write_metrics(dir: &std::path::Path, metrics: &[crate::export::FrameMetrics]) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let mut writer = crate::export::MetricsWriter::create(&dir.join("metrics.csv"))?;
+    for m in metrics {
+        writer.push(m)?;
+    }
+    Ok(())
 }
 
 /// Size of the 3D view: the window less the panel.
@@ -1329,7 +1379,8 @@ fn build_renderer(
 /// The overlay's colour bar: 1 − range … 1 + range (r_s, r_t) or the hue
 /// circle of the axes.
 fn legend(ui: &mut egui::Ui, overlay: Overlay, range: f64) {
-    let (rect, _) = ui.allocate_exact_size(egui::vec2(PANEL_POINTS - 30.0, 14.0), egui::Sense::hover());
+    let (rect, _) =
+        ui.allocate_exact_size(egui::vec2(PANEL_POINTS - 30.0, 14.0), egui::Sense::hover());
     let painter = ui.painter();
     let steps = 64;
     for k in 0..steps {

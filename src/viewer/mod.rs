@@ -157,7 +157,10 @@ pub fn run(options: ViewOptions) -> Result<ViewSummary> {
     }
     if let Some(s) = options.exit_after {
         if !(s.is_finite() && s > 0.0) {
-            return Err(Error::parameter("--exit-after", format!("must be > 0 s, got {s}")));
+            return Err(Error::parameter(
+                "--exit-after",
+                format!("must be > 0 s, got {s}"),
+            ));
         }
     }
     let script = options

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use crate::error::{Error, Result};
 use crate::export::frames;
 use crate::render::{FrameFormat, Image};
-use crate::scenario::{MaterialSection, Scenario};
+use crate::scenario::Scenario;
 
 /// The scenario that replays a viewer session: `original` (loaded from a
 /// file in `base`) with its probe path replaced by the solved frames'
@@ -44,10 +44,7 @@ pub fn recorded_scenario(
     // Frame k of the replay is at k / rate, where the viewer solved it.
     s.time.duration_s = (path.len() - 1) as f64 / s.time.frame_rate_hz;
     for (region, e, nu) in materials {
-        let m = s
-            .material
-            .entry(region.clone())
-            .or_insert_with(MaterialSection::default);
+        let m = s.material.entry(region.clone()).or_default();
         m.youngs_modulus_kpa = Some(*e);
         m.poisson_ratio = Some(*nu);
     }

@@ -235,15 +235,19 @@ impl Step {
                 finite(to_mm[0], "to_mm")?;
                 finite(to_mm[1], "to_mm")?;
                 if moves.is_some_and(|m| m == 0 || m > 10_000) {
-                    return Err(format!("moves must be 1 to 10000, got {}", moves.unwrap_or(0)));
+                    return Err(format!(
+                        "moves must be 1 to 10000, got {}",
+                        moves.unwrap_or(0)
+                    ));
                 }
             }
             Step::Depth { mm } if !(mm.is_finite() && *mm >= 0.0) => {
                 return Err(format!("mm must be ≥ 0, got {mm}"));
             }
-            Step::Wait { seconds: Some(s) } | Step::Play { seconds: Some(s), .. }
-                if !(s.is_finite() && *s >= 0.0) =>
-            {
+            Step::Wait { seconds: Some(s) }
+            | Step::Play {
+                seconds: Some(s), ..
+            } if !(s.is_finite() && *s >= 0.0) => {
                 return Err(format!("seconds must be ≥ 0, got {s}"));
             }
             Step::Mode { mode } if ViewMode::from_name(mode).is_none() => {
@@ -354,7 +358,10 @@ mod tests {
             s.step[0].commands().unwrap(),
             vec![Command::Depth(0.5), Command::Press([-1.0, 0.0])]
         );
-        assert_eq!(s.step[1].commands().unwrap(), vec![Command::Mode(ViewMode::Static)]);
+        assert_eq!(
+            s.step[1].commands().unwrap(),
+            vec![Command::Mode(ViewMode::Static)]
+        );
         assert!(s.step[2].commands().is_none() && s.step[2].moves_the_simulation());
         assert!(!s.step[3].moves_the_simulation());
     }
@@ -362,10 +369,19 @@ mod tests {
     #[test]
     fn bad_steps_name_their_step_and_reason() {
         for (text, needle) in [
-            ("[[step]]\naction = \"press\"\n", "step 1 (press): give exactly one"),
-            ("[[step]]\naction = \"mode\"\nmode = \"shiny\"\n", "unknown mode \"shiny\""),
+            (
+                "[[step]]\naction = \"press\"\n",
+                "step 1 (press): give exactly one",
+            ),
+            (
+                "[[step]]\naction = \"mode\"\nmode = \"shiny\"\n",
+                "unknown mode \"shiny\"",
+            ),
             ("[[step]]\naction = \"jump\"\n", "jump"),
-            ("[[step]]\naction = \"zoom\"\nfactor = -1.0\n", "factor must be > 0"),
+            (
+                "[[step]]\naction = \"zoom\"\nfactor = -1.0\n",
+                "factor must be > 0",
+            ),
             ("[[step]]\naction = \"release\"\nextra = 1\n", "extra"),
             ("[[step]]\naction = \"key\"\nkey = \"f13\"\n", "unknown key"),
         ] {

@@ -155,7 +155,10 @@ impl OrbitCamera {
 
     /// The renderer's camera.
     pub fn camera(&self) -> Camera {
-        let (az, el) = (self.azimuth_deg.to_radians(), self.elevation_deg.to_radians());
+        let (az, el) = (
+            self.azimuth_deg.to_radians(),
+            self.elevation_deg.to_radians(),
+        );
         let dir = Vec3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
         Camera {
             eye: self.target + dir * self.distance,
@@ -551,9 +554,7 @@ impl ViewerState {
                     .materials
                     .iter_mut()
                     .find(|m| m.0 == region)
-                    .ok_or_else(|| {
-                        format!("no region {region} (regions: {})", known.join(", "))
-                    })?;
+                    .ok_or_else(|| format!("no region {region} (regions: {})", known.join(", ")))?;
                 if (slot.1, slot.2) != (e, nu) {
                     slot.1 = e;
                     slot.2 = nu;
@@ -614,10 +615,7 @@ impl ViewerState {
                         probe.drive = ProbeDrive::Path {
                             t_s: t.clamp(0.0, probe.path_duration()),
                             playing: true,
-                            looping: matches!(
-                                probe.drive,
-                                ProbeDrive::Path { looping: true, .. }
-                            ),
+                            looping: matches!(probe.drive, ProbeDrive::Path { looping: true, .. }),
                         }
                     }
                     Command::Pause(paused) => {
@@ -626,8 +624,7 @@ impl ViewerState {
                         }
                     }
                     Command::Scrub(t) => {
-                        let looping =
-                            matches!(probe.drive, ProbeDrive::Path { looping: true, .. });
+                        let looping = matches!(probe.drive, ProbeDrive::Path { looping: true, .. });
                         probe.drive = ProbeDrive::Path {
                             t_s: t.clamp(0.0, probe.path_duration()),
                             playing: false,
@@ -724,7 +721,10 @@ mod tests {
     fn orbit_camera_reproduces_the_scenario_camera_and_resets_to_it() {
         let mut s = state();
         let start = s.camera.camera();
-        assert!((start.eye - Vec3::new(0.0, -13.0, 8.0)).length() < 1e-4, "{start:?}");
+        assert!(
+            (start.eye - Vec3::new(0.0, -13.0, 8.0)).length() < 1e-4,
+            "{start:?}"
+        );
         s.apply(Command::Orbit(30.0, -10.0));
         s.apply(Command::Pan(0.1, 0.2));
         s.apply(Command::Zoom(0.5));
@@ -764,7 +764,10 @@ mod tests {
     fn probe_presses_to_its_depth_slides_and_lifts() {
         let mut s = state();
         let hover = s.probe.as_ref().unwrap().target().centre.z;
-        assert!((hover - (1.5 + 0.75)).abs() < 1e-12, "hovers half a radius above: {hover}");
+        assert!(
+            (hover - (1.5 + 0.75)).abs() < 1e-12,
+            "hovers half a radius above: {hover}"
+        );
         s.apply(Command::Depth(1.0));
         s.apply(Command::Press([0.5, -0.5]));
         let pressed = s.probe.as_ref().unwrap().target();
@@ -794,17 +797,27 @@ mod tests {
         p.advance(0.4);
         assert!((p.target().centre - Vector3::new(-1.0, 0.0, 0.5)).norm() < 1e-12);
         p.advance(1.0);
-        assert_eq!(p.target().centre, Vector3::new(1.0, 0.0, 0.5), "held at the end");
+        assert_eq!(
+            p.target().centre,
+            Vector3::new(1.0, 0.0, 0.5),
+            "held at the end"
+        );
         s.apply(Command::Loop(true));
         s.apply(Command::Scrub(0.9));
         let p = s.probe.as_mut().unwrap();
         p.advance(0.5);
-        assert!(matches!(p.drive, ProbeDrive::Path { t_s, playing: false, .. } if (t_s - 0.9).abs() < 1e-12),
-            "scrubbing pauses");
+        assert!(
+            matches!(p.drive, ProbeDrive::Path { t_s, playing: false, .. } if (t_s - 0.9).abs() < 1e-12),
+            "scrubbing pauses"
+        );
         s.apply(Command::Pause(false));
         let p = s.probe.as_mut().unwrap();
         p.advance(0.3);
-        assert!(matches!(p.drive, ProbeDrive::Path { t_s, .. } if (t_s - 0.2).abs() < 1e-9), "{:?}", p.drive);
+        assert!(
+            matches!(p.drive, ProbeDrive::Path { t_s, .. } if (t_s - 0.2).abs() < 1e-9),
+            "{:?}",
+            p.drive
+        );
     }
 
     #[test]
@@ -838,6 +851,9 @@ mod tests {
         let LightKind::Directional(turned) = l.kind else {
             panic!("directional")
         };
-        assert!(turned.dot(d).abs() < 0.7, "turned by 90° in azimuth: {turned} vs {d}");
+        assert!(
+            turned.dot(d).abs() < 0.7,
+            "turned by 90° in azimuth: {turned} vs {d}"
+        );
     }
 }

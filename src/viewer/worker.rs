@@ -52,13 +52,18 @@ struct Inbox {
     quit: bool,
 }
 
+/// A solved frame's keyframe: time (s), probe centre and axis.
+type Keyframe = (f64, Vector3<f64>, Vector3<f64>);
+
 struct Shared {
     inbox: Mutex<Inbox>,
     wake: Condvar,
     latest: Mutex<Option<Arc<Solved>>>,
     status: Mutex<WorkerStatus>,
     // Keyframes of the solved frames: (time, centre, axis).
-    path: Mutex<Vec<(f64, Vector3<f64>, Vector3<f64>)>>,
+    path: Mutex<Vec<Keyframe>>,
+    // Metrics of the solved frames, in order.
+    metrics: Mutex<Vec<FrameMetrics>>,
     done: Condvar,
 }
 
@@ -98,6 +103,7 @@ impl FemWorker {
                 ..Default::default()
             }),
             path: Mutex::new(Vec::new()),
+            metrics: Mutex::new(Vec::new()),
             done: Condvar::new(),
         });
         let inner = shared.clone();
@@ -149,6 +155,11 @@ impl FemWorker {
             path.iter().map(|(t, c, _)| [*t, c.x, c.y, c.z]).collect(),
             path.iter().map(|(t, _, a)| [*t, a.x, a.y, a.z]).collect(),
         )
+    }
+
+    /// Metrics of every solved frame, in order.
+    pub fn metrics(&self) -> Vec<FrameMetrics> {
+        lock(&self.shared.metrics).clone()
     }
 
     /// Waits until the worker has nothing left to do (the last target
@@ -231,6 +242,7 @@ fn run(shared: &Shared, setup: SimulationSetup, mesh: TetMesh, notify: Box<dyn F
                     let (_, axis) = *p.axis.points.last().expect("pushed above");
                     lock(&shared.path).push((t, centre, axis));
                 }
+                lock(&shared.metrics).push(metrics);
                 let solved = Solved {
                     metrics,
                     positions: stepper.simulation().x.clone(),
@@ -284,10 +296,17 @@ mod tests {
         assert!(status.failure.is_none());
         let latest = worker.latest().unwrap();
         assert_eq!(latest.metrics.frame, 1);
-        assert!(latest.metrics.probe_force_n[2] > rest_force + 1e-3, "{:?}", latest.metrics);
+        assert!(
+            latest.metrics.probe_force_n[2] > rest_force + 1e-3,
+            "{:?}",
+            latest.metrics
+        );
         let (path, _) = worker.path();
         let dt = setup.simulation.frame_dt;
         assert_eq!(path.len(), 2);
-        assert_eq!(path[1], [dt, pressed.centre.x, pressed.centre.y, pressed.centre.z]);
+        assert_eq!(
+            path[1],
+            [dt, pressed.centre.x, pressed.centre.y, pressed.centre.z]
+        );
     }
 }
