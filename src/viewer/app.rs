@@ -1084,13 +1084,13 @@ impl App {
                     self.screenshots.push(file.clone());
                     return Ok(());
                 }
-                Step::RecordStart => {
+                Step::RecordStart {} => {
                     if self.recorder.is_none() {
                         self.toggle_record()?;
                     }
                     None
                 }
-                Step::RecordStop => {
+                Step::RecordStop {} => {
                     if self.recorder.is_some() {
                         self.toggle_record()?;
                     }
@@ -1106,7 +1106,7 @@ impl App {
                     }
                     None
                 }
-                Step::Quit => {
+                Step::Quit {} => {
                     self.summary.quit = true;
                     event_loop.exit();
                     return Ok(());

@@ -54,7 +54,7 @@ pub enum Step {
         mm: f64,
     },
     /// Lift the probe.
-    Release,
+    Release {},
     /// Play the scenario's probe path from `from_s` for `seconds` of
     /// display time (or until its end).
     Play {
@@ -103,7 +103,7 @@ pub enum Step {
         up: f32,
     },
     /// Back to the scenario's camera.
-    ResetCamera,
+    ResetCamera {},
     /// The key light: where it comes from, and the scale of all lights.
     Light {
         /// Azimuth (degrees).
@@ -139,16 +139,16 @@ pub enum Step {
         file: PathBuf,
     },
     /// Start writing the frames shown.
-    RecordStart,
+    RecordStart {},
     /// Stop writing frames (and encode the MP4 when ffmpeg is present).
-    RecordStop,
+    RecordStop {},
     /// Write the probe path driven so far as a scenario file.
     SavePath {
         /// Output file (TOML).
         file: PathBuf,
     },
     /// Close the viewer.
-    Quit,
+    Quit {},
 }
 
 /// A parsed script.
@@ -181,7 +181,7 @@ impl Step {
             Step::Press { .. } => "press",
             Step::Drag { .. } => "drag",
             Step::Depth { .. } => "depth",
-            Step::Release => "release",
+            Step::Release {} => "release",
             Step::Play { .. } => "play",
             Step::Scrub { .. } => "scrub",
             Step::Wait { .. } => "wait",
@@ -190,16 +190,16 @@ impl Step {
             Step::Orbit { .. } => "orbit",
             Step::Zoom { .. } => "zoom",
             Step::Pan { .. } => "pan",
-            Step::ResetCamera => "reset_camera",
+            Step::ResetCamera {} => "reset_camera",
             Step::Light { .. } => "light",
             Step::Material { .. } => "material",
             Step::Friction { .. } => "friction",
             Step::Key { .. } => "key",
             Step::Screenshot { .. } => "screenshot",
-            Step::RecordStart => "record_start",
-            Step::RecordStop => "record_stop",
+            Step::RecordStart {} => "record_start",
+            Step::RecordStop {} => "record_stop",
             Step::SavePath { .. } => "save_path",
-            Step::Quit => "quit",
+            Step::Quit {} => "quit",
         }
     }
 
@@ -293,7 +293,7 @@ impl Step {
                 c
             }
             Step::Depth { mm } => vec![Command::Depth(*mm)],
-            Step::Release => vec![Command::Release],
+            Step::Release {} => vec![Command::Release],
             Step::Mode { mode } => vec![Command::Mode(ViewMode::from_name(mode)?)],
             Step::Overlay { overlay } => vec![Command::Overlay(Overlay::from_name(overlay)?)],
             Step::Orbit {
@@ -302,7 +302,7 @@ impl Step {
             } => vec![Command::Orbit(*azimuth_deg, *elevation_deg)],
             Step::Zoom { factor } => vec![Command::Zoom(*factor)],
             Step::Pan { right, up } => vec![Command::Pan(*right, *up)],
-            Step::ResetCamera => vec![Command::ResetCamera],
+            Step::ResetCamera {} => vec![Command::ResetCamera],
             Step::Material {
                 region,
                 youngs_modulus_kpa,
@@ -325,7 +325,7 @@ impl Step {
             Step::Press { .. }
                 | Step::Drag { .. }
                 | Step::Depth { .. }
-                | Step::Release
+                | Step::Release {}
                 | Step::Scrub { .. }
                 | Step::Material { .. }
                 | Step::Friction { .. }

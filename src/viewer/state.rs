@@ -4,7 +4,7 @@
 //! applied here, so every interaction is unit-tested headless; the window
 //! loop reads the state back (camera, probe target, versions) each frame.
 
-use glam::{Mat4, Vec3, Vec4};
+use glam::{Mat4, Vec3};
 
 use crate::fem::contact::{Probe, ProbePose};
 use crate::render::camera::{Camera, Projection};
@@ -222,17 +222,23 @@ impl OrbitCamera {
     /// top left): origin and unit direction.
     pub fn ray(&self, x: f32, y: f32, width: f32, height: f32) -> (Vec3, Vec3) {
         let cam = self.camera();
-        let radius = self.distance.max(1.0) * 4.0;
-        let m = cam.view_projection(width / height.max(1.0), cam.target, radius);
-        let inverse = m.inverse();
-        let ndc_x = 2.0 * x / width.max(1.0) - 1.0;
-        let ndc_y = 1.0 - 2.0 * y / height.max(1.0);
-        let unproject = |z: f32| {
-            let p: Vec4 = inverse * Vec4::new(ndc_x, ndc_y, z, 1.0);
-            p.truncate() / p.w
-        };
-        let (near, far) = (unproject(0.0), unproject(1.0));
-        (near, (far - near).normalize())
+        let forward = (cam.target - cam.eye).normalize();
+        let right = forward.cross(Vec3::Z).normalize();
+        let up = right.cross(forward);
+        // The pixel's offset from the view's centre, in view heights.
+        let sx = (2.0 * x / width.max(1.0) - 1.0) * 0.5 * width / height.max(1.0);
+        let sy = (1.0 - 2.0 * y / height.max(1.0)) * 0.5;
+        match self.projection {
+            Projection::Perspective { fov_deg } => {
+                let h = 2.0 * (0.5 * fov_deg.to_radians()).tan();
+                let dir = forward + (right * sx + up * sy) * h;
+                (cam.eye, dir.normalize())
+            }
+            Projection::Orthographic { height_mm } => {
+                let origin = cam.eye + (right * sx + up * sy) * height_mm;
+                (origin, forward)
+            }
+        }
     }
 }
 
