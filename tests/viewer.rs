@@ -158,6 +158,10 @@ overlay = "rs"
 action = "screenshot"
 file = "{overlay}"
 [[step]]
+action = "screenshot"
+file = "{window}"
+window = true
+[[step]]
 action = "save_path"
 file = "{recorded}"
 [[step]]
@@ -168,6 +172,7 @@ action = "quit"
         none = shot("none").display(),
         stat = shot("static").display(),
         overlay = shot("overlay").display(),
+        window = shot("window").display(),
         recorded = d.join("recorded.toml").display(),
     );
     let script_path = d.join("script.toml");
@@ -241,6 +246,27 @@ action = "quit"
         "none vs static: {modes} of the skin's pixels changed"
     );
     assert!(coloured > 5.0, "overlay: {coloured}");
+
+    // The window capture has the window's size, the view on the left and
+    // the panel (text on a flat background) on the right.
+    let (ww, wh, window) = read_rgb(&shot("window"));
+    assert_eq!((ww, wh), (700, 400));
+    let view_part: Vec<u8> = window
+        .chunks(3 * ww)
+        .flat_map(|row| row[..3 * w].to_vec())
+        .collect();
+    // Encoded by the present shader instead of on the CPU: within a level.
+    let same = mean_diff(&view_part, &overlay, w, |_, _| true);
+    assert!(same < 0.5, "the window shows the view: {same}");
+    let panel_levels: std::collections::BTreeSet<&[u8]> = window
+        .chunks(3 * ww)
+        .flat_map(|row| row[3 * w..].chunks(3))
+        .collect();
+    assert!(
+        panel_levels.len() > 20,
+        "the panel has text: {} colours",
+        panel_levels.len()
+    );
 
     // The saved path replays to the viewer's final force.
     let replay = d.join("replay");

@@ -9,6 +9,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use image::ImageEncoder;
 use winit::application::ApplicationHandler;
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
 use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoopProxy};
@@ -133,6 +134,8 @@ pub(super) struct App {
     materials_sent: u64,
     recorder: Option<FrameRecorder>,
     screenshots: Vec<PathBuf>,
+    // Files for captures of the whole window (panel included).
+    window_shots: Vec<PathBuf>,
     written: Vec<PathBuf>,
     message: Option<String>,
     modifiers: ModifiersState,
@@ -190,6 +193,7 @@ impl App {
             materials_sent: 0,
             recorder: None,
             screenshots: Vec::new(),
+            window_shots: Vec::new(),
             written: Vec::new(),
             message: None,
             modifiers: ModifiersState::empty(),
@@ -231,8 +235,11 @@ impl App {
             .or_else(|| caps.formats.first().copied())
             .ok_or_else(|| Error::Gpu("the window's surface offers no format".into()))?;
         let size = window.inner_size();
+        // Copies out of the window's frames, where allowed, for window
+        // screenshots.
+        let copy = caps.usages & wgpu::TextureUsages::COPY_SRC;
         let config = wgpu::SurfaceConfiguration {
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | copy,
             format,
             width: size.width.max(1),
             height: size.height.max(1),
@@ -609,8 +616,35 @@ impl App {
             );
             gpu.egui_renderer.render(&mut pass, &jobs, &screen);
         }
+        let capture = if self.window_shots.is_empty() {
+            None
+        } else {
+            Some(capture_window(ctx, &mut enc, &frame.texture, &gpu.config)?)
+        };
         ctx.queue
             .submit(extra.into_iter().chain(std::iter::once(enc.finish())));
+        if let Some((staging, row)) = capture {
+            let (w, h) = (gpu.config.width as usize, gpu.config.height as usize);
+            let bytes: Vec<u8> = crate::gpu::buffers::map_read(ctx, &staging, row * h)?;
+            let bgra = matches!(
+                gpu.config.format,
+                wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Bgra8UnormSrgb
+            );
+            let mut rgb = Vec::with_capacity(w * h * 3);
+            for y in 0..h {
+                for px in bytes[y * row..y * row + 4 * w].chunks(4) {
+                    if bgra {
+                        rgb.extend_from_slice(&[px[2], px[1], px[0]]);
+                    } else {
+                        rgb.extend_from_slice(&px[..3]);
+                    }
+                }
+            }
+            for path in std::mem::take(&mut self.window_shots) {
+                write_rgb_png(&path, w, h, &rgb)?;
+                self.written.push(path);
+            }
+        }
         gpu.window.pre_present_notify();
         ctx.queue.present(frame);
         for id in &output.textures_delta.free {
@@ -814,7 +848,7 @@ impl App {
             self.rates.micro_ms, self.rates.render_ms
         ));
         if let Some(l) = self.rates.latencies_ms.last() {
-            ui.label(format!("input → frame {l:.0} ms"));
+            ui.label(format!("probe move to frame shown: {l:.0} ms"));
         }
         ui.separator();
         ui.horizontal_wrapped(|ui| {
@@ -1078,10 +1112,14 @@ impl App {
                     }
                     None
                 }
-                Step::Screenshot { file } => {
+                Step::Screenshot { file, window } => {
                     // Taken after this redraw's render, so it shows every
                     // step before it.
-                    self.screenshots.push(file.clone());
+                    if *window {
+                        self.window_shots.push(file.clone());
+                    } else {
+                        self.screenshots.push(file.clone());
+                    }
                     return Ok(());
                 }
                 Step::RecordStart {} => {
@@ -1325,6 +1363,67 @@ impl ApplicationHandler<Wake> for App {
         s.final_force_n = self.shown.as_ref().map(|x| x.metrics.probe_force_n);
         s.written = std::mem::take(&mut self.written);
     }
+}
+
+/// Records a copy of the window's frame into a read-back buffer; returns it
+/// with its padded row length (bytes). Needs an 8-bit RGBA or BGRA window
+/// format that allows copies.
+fn capture_window(
+    ctx: &Context,
+    enc: &mut wgpu::CommandEncoder,
+    texture: &wgpu::Texture,
+    config: &wgpu::SurfaceConfiguration,
+) -> Result<(wgpu::Buffer, usize)> {
+    use wgpu::TextureFormat as F;
+    if !config.usage.contains(wgpu::TextureUsages::COPY_SRC)
+        || !matches!(
+            config.format,
+            F::Bgra8Unorm | F::Bgra8UnormSrgb | F::Rgba8Unorm | F::Rgba8UnormSrgb
+        )
+    {
+        return Err(Error::Gpu(format!(
+            "window screenshots need a window that allows copies in 8-bit RGBA or BGRA; this one \
+             is {:?} ({:?}): take view screenshots instead",
+            config.format, config.usage
+        )));
+    }
+    let row =
+        (4 * config.width as usize).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as usize);
+    let staging = crate::gpu::buffers::staging(ctx, (row * config.height as usize) as u64);
+    enc.copy_texture_to_buffer(
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
+        wgpu::TexelCopyBufferInfo {
+            buffer: &staging,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(row as u32),
+                rows_per_image: None,
+            },
+        },
+        wgpu::Extent3d {
+            width: config.width,
+            height: config.height,
+            depth_or_array_layers: 1,
+        },
+    );
+    Ok((staging, row))
+}
+
+/// Writes 8-bit sRGB pixels as a PNG (atomically).
+fn write_rgb_png(path: &std::path::Path, w: usize, h: usize, rgb: &[u8]) -> Result<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    }
+    let mut out = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut out)
+        .write_image(rgb, w as u32, h as u32, image::ExtendedColorType::Rgb8)
+        .map_err(|e| Error::io(path, std::io::Error::other(e)))?;
+    crate::mesh::io::write_atomically(path, &out)
 }
 
 /// Writes `metrics.csv` of the solved frames into `dir`.

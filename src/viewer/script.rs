@@ -12,7 +12,7 @@
 //! moves = 4
 //! [[step]]
 //! action = "screenshot"     # the view as shown, 8-bit PNG
-//! file = "pressed.png"
+//! file = "pressed.png"       # (window = true: the whole window)
 //! ```
 //!
 //! A step that moves the probe or edits a material waits until the
@@ -133,10 +133,14 @@ pub enum Step {
         /// `plus`, `minus`, `escape`.
         key: String,
     },
-    /// Save the view as shown (8-bit PNG).
+    /// Save the view as shown (8-bit PNG); with `window = true` the whole
+    /// window, panel included.
     Screenshot {
         /// Output file.
         file: PathBuf,
+        /// Capture the window instead of the view. Default false.
+        #[serde(default)]
+        window: bool,
     },
     /// Start writing the frames shown.
     RecordStart {},

@@ -309,4 +309,46 @@ mod tests {
             [dt, pressed.centre.x, pressed.centre.y, pressed.centre.z]
         );
     }
+
+    #[test]
+    fn a_failed_frame_keeps_the_last_good_state_and_the_next_target_retries() {
+        let mut setup =
+            Setup::load(std::path::Path::new("tests/fixtures/press_small.toml")).unwrap();
+        // One Newton iteration: the hovering frame needs none, a press
+        // cannot converge in one.
+        setup.simulation.newton.max_iterations = 1;
+        let start = setup
+            .simulation
+            .probe
+            .as_ref()
+            .unwrap()
+            .pose(0.0)
+            .lifted(0.5);
+        let worker = FemWorker::spawn(
+            setup.simulation.clone(),
+            setup.mesh.clone(),
+            Some(start),
+            Box::new(|| {}),
+        );
+        assert!(worker.wait_idle(Duration::from_secs(120)));
+        assert!(worker.status().failure.is_none());
+        worker.set_target(start.lifted(-1.5));
+        assert!(worker.wait_idle(Duration::from_secs(120)));
+        let status = worker.status();
+        let failure = status.failure.as_deref().expect("the press fails");
+        assert!(failure.contains("frame 1"), "{failure}");
+        assert_eq!(status.solved, 1);
+        // The state shown is still frame 0, and the path has no keyframe
+        // for the failed frame.
+        assert_eq!(worker.latest().unwrap().metrics.frame, 0);
+        assert_eq!(worker.path().0.len(), 1);
+        // A reachable target afterwards is solved as frame 1 from the kept
+        // state.
+        worker.set_target(start.lifted(0.1));
+        assert!(worker.wait_idle(Duration::from_secs(120)));
+        let status = worker.status();
+        assert!(status.failure.is_none(), "{status:?}");
+        assert_eq!(worker.latest().unwrap().metrics.frame, 1);
+        assert_eq!(worker.path().0.len(), 2);
+    }
 }
