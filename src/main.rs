@@ -790,6 +790,17 @@ fn view(args: ViewArgs) -> anyhow::Result<()> {
         "viewer: {} frames shown ({:.1} frames/s over the session), {} FEM frames (last {:.3} s)",
         summary.frames_shown, summary.display_fps, summary.fem_frames, summary.fem_frame_s
     );
+    if !summary.render_ms.is_empty() {
+        println!(
+            "3D view {} × {} px: {} renders, mean {:.1} ms; microstructure chain: {} runs, mean {:.1} ms",
+            summary.view_size.0,
+            summary.view_size.1,
+            summary.render_ms.len(),
+            mean(&summary.render_ms),
+            summary.micro_ms.len(),
+            mean(&summary.micro_ms)
+        );
+    }
     if !summary.latencies_ms.is_empty() {
         println!(
             "probe move to first frame showing it: mean {:.0} ms over {} moves",

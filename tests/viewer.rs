@@ -296,3 +296,20 @@ action = "quit"
         }
     }
 }
+
+/// The shipped viewer scripts parse and pass their checks.
+#[test]
+fn shipped_scripts_load() {
+    let dir = common::root().join("examples/scripts");
+    let mut count = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            let script = skinpatch::viewer::script::Script::load(&path)
+                .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            assert!(!script.step.is_empty(), "{}", path.display());
+            count += 1;
+        }
+    }
+    assert!(count >= 1);
+}

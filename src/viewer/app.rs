@@ -109,6 +109,9 @@ struct Rates {
     display_fps: f64,
     micro_ms: f64,
     render_ms: f64,
+    // Every chain run and 3D render (ms), for the summary.
+    micro_all: Vec<f64>,
+    render_all: Vec<f64>,
     // Target sent and when, until a shown frame reflects it.
     pending: Option<(Instant, crate::fem::contact::ProbePose)>,
     latencies_ms: Vec<f64>,
@@ -388,6 +391,7 @@ impl App {
                 chain.submit(field, true);
                 chain.context().finish()?;
                 self.rates.micro_ms = start.elapsed().as_secs_f64() * 1e3;
+                self.rates.micro_all.push(self.rates.micro_ms);
                 self.chain_on = Some(frame);
                 self.dirty = true;
             }
@@ -433,6 +437,7 @@ impl App {
         renderer.submit(ctx, mode);
         ctx.finish()?;
         self.rates.render_ms = start.elapsed().as_secs_f64() * 1e3;
+        self.rates.render_all.push(self.rates.render_ms);
         self.dirty = false;
         Ok(true)
     }
@@ -1360,6 +1365,9 @@ impl ApplicationHandler<Wake> for App {
         s.fem_frames = status.solved;
         s.fem_frame_s = status.last_frame_s;
         s.latencies_ms = self.rates.latencies_ms.clone();
+        s.micro_ms = self.rates.micro_all.clone();
+        s.render_ms = self.rates.render_all.clone();
+        s.view_size = self.gpu.as_ref().map_or((0, 0), |g| g.render_size);
         s.final_force_n = self.shown.as_ref().map(|x| x.metrics.probe_force_n);
         s.written = std::mem::take(&mut self.written);
     }

@@ -54,6 +54,12 @@ pub struct ViewSummary {
     pub fem_frame_s: f64,
     /// From each probe move to the first frame shown that reflects it (ms).
     pub latencies_ms: Vec<f64>,
+    /// Wall time of each microstructure chain run (ms).
+    pub micro_ms: Vec<f64>,
+    /// Wall time of each render of the 3D view (ms).
+    pub render_ms: Vec<f64>,
+    /// Size of the 3D view (pixels).
+    pub view_size: (usize, usize),
     /// Probe force of the frame shown last (N).
     pub final_force_n: Option<[f64; 3]>,
     /// Files written (screenshots, recordings, saved paths).
