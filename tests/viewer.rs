@@ -139,9 +139,13 @@ depth_mm = 0.7
 action = "screenshot"
 file = "{pressed}"
 [[step]]
+action = "record_start"
+[[step]]
 action = "drag"
 to_mm = [1.0, 0.0]
 moves = 2
+[[step]]
+action = "record_stop"
 [[step]]
 action = "screenshot"
 file = "{none}"
@@ -267,6 +271,27 @@ action = "quit"
         "the panel has text: {} colours",
         panel_levels.len()
     );
+
+    // The recording holds the frames shown during the drag (one per new
+    // state at least) and, with ffmpeg, their MP4.
+    let frames = record.join("frames");
+    let pngs = std::fs::read_dir(&frames)
+        .unwrap()
+        .filter(|e| {
+            e.as_ref()
+                .unwrap()
+                .path()
+                .extension()
+                .is_some_and(|x| x == "png")
+        })
+        .count();
+    assert!(pngs >= 2, "{pngs} recorded frames");
+    let (rw, rh, _) = read_rgb(&frames.join("frame_0000.png"));
+    assert_eq!((rw, rh), (w, h));
+    let has_ffmpeg = Command::new("ffmpeg").arg("-version").output().is_ok();
+    if has_ffmpeg {
+        assert!(frames.join("frames.mp4").metadata().unwrap().len() > 0);
+    }
 
     // The saved path replays to the viewer's final force.
     let replay = d.join("replay");
