@@ -14,7 +14,7 @@
 use std::time::Instant;
 
 use crate::error::Result;
-use crate::gpu::micro::{GpuMicro, MicroStage};
+use crate::gpu::micro::{GpuMicro, StageTimes};
 use crate::mesh::{TetMesh, Vec3};
 use crate::micro::procedural::{generate, SkinParams};
 use crate::micro::{DisplacementMap, Edge, KernelModel};
@@ -34,9 +34,9 @@ pub struct MicroRow {
     pub gpu_readback_ms: Option<f64>,
     /// Largest |GPU − CPU| of D′ relative to the height range.
     pub max_difference: Option<f64>,
-    /// Each stage of a GPU frame submitted alone and waited for (wall
-    /// time, ms), in [`MicroStage::ALL`] order.
-    pub stages_ms: Option<[f64; MicroStage::COUNT]>,
+    /// Each stage of a GPU frame submitted alone and waited for: wall
+    /// time and, where the adapter has timestamp queries, GPU time (ms).
+    pub stages: Option<StageTimes>,
 }
 
 /// What the bench ran on.
@@ -112,7 +112,7 @@ pub fn bench_micro(
             gpu_ms: None,
             gpu_readback_ms: None,
             max_difference: None,
-            stages_ms: None,
+            stages: None,
         };
         if let Some(c) = ctx.take() {
             let mut chain = GpuMicro::new(c, &neutral, model, DILATE_TEXELS)?;
@@ -129,7 +129,7 @@ pub fn bench_micro(
             let frame = chain.deform(&field, normals)?;
             row.gpu_readback_ms = Some(start.elapsed().as_secs_f64() * 1e3);
             row.max_difference = Some(cpu.max_difference(&frame.map));
-            row.stages_ms = Some(chain.time_stages(&field)?);
+            row.stages = Some(chain.time_stages(&field)?);
             ctx = Some(chain.into_context());
         }
         on_row(&row);

@@ -497,21 +497,39 @@ fn bench_micro(path: &Path, frames: usize, sizes: &[usize]) -> anyhow::Result<()
     let profiled: Vec<_> = bench
         .rows
         .iter()
-        .filter_map(|r| r.stages_ms.map(|s| (r.size, s)))
+        .filter_map(|r| r.stages.map(|s| (r.size, s)))
         .collect();
     if !profiled.is_empty() {
-        println!("GPU frame by stage, each submitted alone and waited for (wall time, ms):");
-        let mut header = format!("{:>6}", "size");
-        for stage in skinpatch::gpu::micro::MicroStage::ALL {
-            header += &format!(" {:>10}", stage.name());
-        }
-        println!("{header}");
-        for (size, stages) in profiled {
-            let mut line = format!("{size:>6}");
-            for ms in stages {
-                line += &format!(" {ms:>10.2}");
-            }
-            println!("{line}");
+        let stage_table =
+            |title: &str, cell: &dyn Fn(&skinpatch::gpu::micro::StageTimes, usize) -> String| {
+                println!("{title}");
+                let mut header = format!("{:>6}", "size");
+                for stage in skinpatch::gpu::micro::MicroStage::ALL {
+                    header += &format!(" {:>10}", stage.name());
+                }
+                println!("{header}");
+                for (size, stages) in &profiled {
+                    let mut line = format!("{size:>6}");
+                    for k in 0..skinpatch::gpu::micro::MicroStage::COUNT {
+                        line += &format!(" {:>10}", cell(stages, k));
+                    }
+                    println!("{line}");
+                }
+            };
+        stage_table(
+            "GPU frame by stage, each submitted alone and waited for (wall time, ms):",
+            &|s, k| format!("{:.2}", s.wall_ms[k]),
+        );
+        if profiled
+            .iter()
+            .any(|(_, s)| s.gpu_ms.iter().any(Option::is_some))
+        {
+            stage_table(
+                "GPU time of the shader stages from timestamp queries (ms):",
+                &|s, k| s.gpu_ms[k].map_or("-".into(), |ms| format!("{ms:.3}")),
+            );
+        } else {
+            println!("(the adapter has no timestamp queries: wall times only)");
         }
     }
     Ok(())
@@ -586,11 +604,18 @@ fn gpu_info() -> anyhow::Result<()> {
             l.max_compute_invocations_per_workgroup,
             l.max_compute_workgroups_per_dimension,
         );
-        let names: Vec<&str> = [(wgpu::Features::FLOAT32_FILTERABLE, "FLOAT32_FILTERABLE")]
-            .into_iter()
-            .filter(|(f, _)| a.features.contains(*f))
-            .map(|(_, name)| name)
-            .collect();
+        let names: Vec<&str> = [
+            (wgpu::Features::FLOAT32_FILTERABLE, "FLOAT32_FILTERABLE"),
+            (wgpu::Features::TIMESTAMP_QUERY, "TIMESTAMP_QUERY"),
+            (
+                wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS,
+                "TIMESTAMP_QUERY_INSIDE_ENCODERS",
+            ),
+        ]
+        .into_iter()
+        .filter(|(f, _)| a.features.contains(*f))
+        .map(|(_, name)| name)
+        .collect();
         let features = if names.is_empty() {
             "none".to_string()
         } else {

@@ -460,13 +460,47 @@ fn bench_micro_profiles_every_stage() {
     let model = skinpatch::micro::KernelModel::forehead();
     let bench = skinpatch::bench::bench_micro(&mesh, &model, &[128], 1, |_| {}).unwrap();
     let row = &bench.rows[0];
-    let stages = row.stages_ms.expect("a GPU row has its stages");
-    println!("stages (ms): {stages:?}");
+    let times = row.stages.expect("a GPU row has its stages");
+    let stages = times.wall_ms;
+    println!("stages (ms): {times:?}");
     assert!(
         stages.iter().all(|t| t.is_finite() && *t >= 0.0),
         "{stages:?}"
     );
     // Raster, pass s, pass t and normals each submit real work.
     assert!(stages[1..5].iter().all(|&t| t > 0.0), "{stages:?}");
+    // With timestamp queries, each shader stage has a GPU time within its
+    // wall time (which adds the submission and the wait); the transfers
+    // have none.
+    let ctx = context().unwrap();
+    let timestamps =
+        wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS;
+    if ctx.features.contains(timestamps) {
+        for (k, stage) in skinpatch::gpu::micro::MicroStage::ALL
+            .into_iter()
+            .enumerate()
+        {
+            match times.gpu_ms[k] {
+                Some(g) => {
+                    assert!(stage.runs_shaders(), "{stage:?}");
+                    // Some drivers (lavapipe) write a stage's end stamp
+                    // before its last work finishes: 0 is possible.
+                    assert!(
+                        g >= 0.0 && g <= stages[k] * 1.05 + 0.05,
+                        "{stage:?}: {g} vs {}",
+                        stages[k]
+                    );
+                }
+                None => assert!(!stage.runs_shaders(), "{stage:?} has no GPU time"),
+            }
+        }
+        let passes = times.gpu_ms[2].unwrap() + times.gpu_ms[3].unwrap();
+        assert!(
+            passes > 0.0,
+            "the convolution passes take GPU time: {times:?}"
+        );
+    } else {
+        assert!(times.gpu_ms.iter().all(Option::is_none));
+    }
     assert!(row.max_difference.unwrap() <= 1e-4, "{row:?}");
 }

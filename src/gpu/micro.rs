@@ -50,7 +50,23 @@ pub enum MicroStage {
     ReadBack,
 }
 
+/// A profile of one frame ([`GpuMicro::time_stages`]), stages in
+/// [`MicroStage::ALL`] order.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StageTimes {
+    /// Wall time of each stage submitted alone and waited for (ms).
+    pub wall_ms: [f64; MicroStage::COUNT],
+    /// GPU time of each shader stage from timestamp queries (ms); `None`
+    /// for the transfers and where the adapter has no timestamp queries.
+    pub gpu_ms: [Option<f64>; MicroStage::COUNT],
+}
+
 impl MicroStage {
+    /// Whether the stage runs shaders (the others are transfers).
+    pub fn runs_shaders(self) -> bool {
+        !matches!(self, MicroStage::Upload | MicroStage::ReadBack)
+    }
+
     /// Number of stages.
     pub const COUNT: usize = 6;
     /// Every stage, in order.
@@ -181,9 +197,10 @@ impl GpuMicro {
     /// wall time of each in ms, in [`MicroStage::ALL`] order (the read-back
     /// fetches D′, and its normals where one buffer holds them). A profile:
     /// the sum is a little above a frame's time.
-    pub fn time_stages(&mut self, field: &SurfaceField) -> Result<[f64; MicroStage::COUNT]> {
+    pub fn time_stages(&mut self, field: &SurfaceField) -> Result<StageTimes> {
         self.ctx.finish()?;
-        let mut times = [0.0; MicroStage::COUNT];
+        let timer = super::timing::GpuTimer::new(&self.ctx, MicroStage::COUNT);
+        let mut times = StageTimes::default();
         for (k, stage) in MicroStage::ALL.into_iter().enumerate() {
             let start = std::time::Instant::now();
             match stage {
@@ -197,12 +214,26 @@ impl GpuMicro {
                 }
                 _ => {
                     let mut enc = encoder(&self.ctx);
+                    if let Some(t) = &timer {
+                        t.begin(&mut enc, k);
+                    }
                     self.encode_stage(&mut enc, stage);
+                    if let Some(t) = &timer {
+                        t.end(&mut enc, k);
+                    }
                     self.ctx.queue.submit([enc.finish()]);
                 }
             }
             self.ctx.finish()?;
-            times[k] = start.elapsed().as_secs_f64() * 1e3;
+            times.wall_ms[k] = start.elapsed().as_secs_f64() * 1e3;
+        }
+        if let Some(t) = &timer {
+            let gpu = t.read(&self.ctx)?;
+            for (k, stage) in MicroStage::ALL.into_iter().enumerate() {
+                if stage.runs_shaders() {
+                    times.gpu_ms[k] = Some(gpu[k]);
+                }
+            }
         }
         Ok(times)
     }

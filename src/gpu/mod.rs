@@ -39,6 +39,7 @@ pub mod moments;
 pub mod normals;
 pub mod raster;
 pub mod svd2;
+pub mod timing;
 pub mod vulkan;
 
 use std::sync::{Arc, Mutex};
@@ -91,8 +92,11 @@ fn instance() -> wgpu::Instance {
 
 /// Features used where the adapter offers them: `FLOAT32_FILTERABLE` lets
 /// the skin pass filter the f32 slope-moment pyramid with the sampler
-/// instead of eight loads a lookup.
-pub const OPTIONAL_FEATURES: wgpu::Features = wgpu::Features::FLOAT32_FILTERABLE;
+/// instead of eight loads a lookup; the timestamp queries give profiles
+/// GPU time ([`timing`]).
+pub const OPTIONAL_FEATURES: wgpu::Features = wgpu::Features::FLOAT32_FILTERABLE
+    .union(wgpu::Features::TIMESTAMP_QUERY)
+    .union(wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS);
 
 /// Every Vulkan adapter with its limits.
 pub fn adapters() -> Vec<AdapterReport> {
