@@ -10,6 +10,13 @@
 //! data, the four dispatches and the wait for them;
 //! read-back of D′ and the normals is timed separately. The CPU reference
 //! runs once per size (it takes seconds at 4096²).
+//!
+//! Two layouts of the map ([`MapLayout`]): the fixed patch (the map spans
+//! the patch, so its texels shrink as the size grows and the kernels widen
+//! in texels) and the fixed texel (a real user's case: the texel stays at
+//! the measurement resolution, e.g. 10 µm, and the map covers a growing
+//! area with the patch's strain field mapped onto its centre; outside it
+//! the skin is at rest).
 
 use std::time::Instant;
 
@@ -21,13 +28,31 @@ use crate::micro::{DisplacementMap, Edge, KernelModel};
 use crate::strain::raster::DILATE_TEXELS;
 use crate::strain::SurfaceField;
 
+/// How the bench's map relates to the patch.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum MapLayout {
+    /// The map spans the patch at every size.
+    FixedPatch,
+    /// Texels of `texel_um`; the map spans `size × texel_um` with the
+    /// patch at its centre. The CPU reference runs up to `cpu_up_to`
+    /// texels a side (it takes minutes beyond a few thousand).
+    FixedTexel {
+        /// Texel size (µm).
+        texel_um: f64,
+        /// Largest side the CPU reference runs at.
+        cpu_up_to: usize,
+    },
+}
+
 /// Figures at one map size.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MicroRow {
     /// Map side (texels).
     pub size: usize,
-    /// CPU reference frame (ms).
-    pub cpu_ms: f64,
+    /// Texel size (µm).
+    pub texel_um: f64,
+    /// CPU reference frame (ms), where it ran.
+    pub cpu_ms: Option<f64>,
     /// GPU frame without read-back, mean over the repetitions (ms).
     pub gpu_ms: Option<f64>,
     /// GPU frame with read-back of D′ and normals (ms).
@@ -92,22 +117,38 @@ pub fn bench_micro(
     model: &KernelModel,
     sizes: &[usize],
     repetitions: usize,
+    layout: MapLayout,
     mut on_row: impl FnMut(&MicroRow),
 ) -> Result<MicroBench> {
-    let field = SurfaceField::new(&mesh.top, &mesh.positions, &bench_deformation(mesh));
+    let deformed = bench_deformation(mesh);
     let (lo, hi) = mesh.bounds();
+    let patch_mm = hi.x - lo.x;
     let mut ctx = crate::gpu::acquire()?;
     let adapter = ctx.as_ref().map(|c| c.describe());
     let mut rows = Vec::new();
     for &size in sizes {
-        let neutral = bench_map(size, hi.x - lo.x)?;
-        let start = Instant::now();
-        let cpu = crate::micro::convolve::deform(&neutral, model, &field);
-        let cpu_normals = crate::micro::normals::normal_map(&cpu);
-        let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
-        drop(cpu_normals);
+        let (extent_mm, run_cpu) = match layout {
+            MapLayout::FixedPatch => (patch_mm, true),
+            MapLayout::FixedTexel {
+                texel_um,
+                cpu_up_to,
+            } => (size as f64 * texel_um / 1000.0, size <= cpu_up_to),
+        };
+        let field = centred_field(mesh, &deformed, patch_mm / extent_mm)?;
+        let neutral = bench_map(size, extent_mm)?;
+        let mut cpu = None;
+        let mut cpu_ms = None;
+        if run_cpu {
+            let start = Instant::now();
+            let map = crate::micro::convolve::deform(&neutral, model, &field);
+            let normals = crate::micro::normals::normal_map(&map);
+            cpu_ms = Some(start.elapsed().as_secs_f64() * 1e3);
+            drop(normals);
+            cpu = Some(map);
+        }
         let mut row = MicroRow {
             size,
+            texel_um: neutral.texel_um,
             cpu_ms,
             gpu_ms: None,
             gpu_readback_ms: None,
@@ -128,7 +169,7 @@ pub fn bench_micro(
             let start = Instant::now();
             let frame = chain.deform(&field, normals)?;
             row.gpu_readback_ms = Some(start.elapsed().as_secs_f64() * 1e3);
-            row.max_difference = Some(cpu.max_difference(&frame.map));
+            row.max_difference = cpu.as_ref().map(|c| c.max_difference(&frame.map));
             row.stages = Some(chain.time_stages(&field)?);
             ctx = Some(chain.into_context());
         }
@@ -136,4 +177,60 @@ pub fn bench_micro(
         rows.push(row);
     }
     Ok(MicroBench { adapter, rows })
+}
+
+/// The field of `mesh` deformed to `deformed` with its UVs shrunk by
+/// `scale` (≤ 1) about the centre of the map: the patch on the centre of a
+/// larger map.
+fn centred_field(mesh: &TetMesh, deformed: &[Vec3], scale: f64) -> Result<SurfaceField> {
+    if !(scale.is_finite() && scale > 0.0 && scale <= 1.0 + 1e-12) {
+        return Err(crate::error::Error::parameter(
+            "bench micro --texel-um",
+            format!(
+                "the map must be at least as large as the patch: at this texel size it is {:.3} of \
+                 the patch's width; use larger sizes or a larger texel",
+                1.0 / scale
+            ),
+        ));
+    }
+    if scale == 1.0 {
+        return Ok(SurfaceField::new(&mesh.top, &mesh.positions, deformed));
+    }
+    let mut top = mesh.top.clone();
+    for uv in &mut top.uvs {
+        *uv = uv.map(|c| 0.5 + (c - 0.5) * scale);
+    }
+    Ok(SurfaceField::new(&top, &mesh.positions, deformed))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_centred_field_has_the_same_strain_and_leaves_the_rest_of_the_map_at_rest() {
+        let mesh =
+            crate::mesh::io::read_mesh(std::path::Path::new("meshes/patch_3k.node")).unwrap();
+        let deformed = bench_deformation(&mesh);
+        let plain = SurfaceField::new(&mesh.top, &mesh.positions, &deformed);
+        let centred = centred_field(&mesh, &deformed, 0.5).unwrap();
+        // Shrinking the UVs does not change the stretch ratios.
+        let (a, b) = (plain.extremes(), centred.extremes());
+        assert!((a.0 .0 - b.0 .0).abs() < 1e-12 && (a.0 .1 - b.0 .1).abs() < 1e-12);
+        assert!((a.1 .0 - b.1 .0).abs() < 1e-12 && (a.1 .1 - b.1 .1).abs() < 1e-12);
+        // Outside the centre half (and its dilation) the map is unchanged.
+        let (lo, hi) = mesh.bounds();
+        let neutral = bench_map(128, 2.0 * (hi.x - lo.x)).unwrap();
+        let out = crate::micro::convolve::deform(&neutral, &KernelModel::forehead(), &centred);
+        for j in 0..128 {
+            for i in 0..128 {
+                let border = !(24..104).contains(&i) || !(24..104).contains(&j);
+                if border {
+                    let k = j * 128 + i;
+                    assert_eq!(out.data[k], neutral.data[k], "texel ({i}, {j})");
+                }
+            }
+        }
+        assert!(centred_field(&mesh, &deformed, 1.5).is_err());
+    }
 }

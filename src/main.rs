@@ -105,6 +105,14 @@ enum Command {
         /// Map sides for `micro` (texels).
         #[arg(long, value_delimiter = ',', default_value = "1024,2048,4096")]
         sizes: Vec<usize>,
+        /// `micro` with fixed texels of this size (µm, e.g. 10): the map
+        /// covers size × texel with the patch's strain on its centre,
+        /// instead of spanning the patch at every size.
+        #[arg(long, value_name = "UM")]
+        texel_um: Option<f64>,
+        /// With --texel-um, the largest side the CPU reference runs at.
+        #[arg(long, default_value_t = 2048)]
+        cpu_up_to: usize,
         /// Image width for `render` (px).
         #[arg(long, default_value_t = 1920)]
         width: usize,
@@ -327,10 +335,12 @@ fn main() -> ExitCode {
             scenario,
             frames,
             sizes,
+            texel_um,
+            cpu_up_to,
             width,
             height,
         } => match stage.as_str() {
-            "micro" => bench_micro(&scenario, frames, &sizes),
+            "micro" => bench_micro(&scenario, frames, &sizes, texel_um, cpu_up_to),
             "render" => bench_render(&scenario, frames, width, height),
             _ => bench(&stage, &scenario, frames),
         },
@@ -459,10 +469,24 @@ fn bench(stage: &str, path: &Path, frames: usize) -> anyhow::Result<()> {
     print_stdout(&report)
 }
 
-fn bench_micro(path: &Path, frames: usize, sizes: &[usize]) -> anyhow::Result<()> {
+fn bench_micro(
+    path: &Path,
+    frames: usize,
+    sizes: &[usize],
+    texel_um: Option<f64>,
+    cpu_up_to: usize,
+) -> anyhow::Result<()> {
     if sizes.is_empty() || sizes.contains(&0) {
         bail!("--sizes needs positive map sides, e.g. 1024,2048,4096");
     }
+    let layout = match texel_um {
+        None => skinpatch::bench::MapLayout::FixedPatch,
+        Some(t) if t.is_finite() && t > 0.0 => skinpatch::bench::MapLayout::FixedTexel {
+            texel_um: t,
+            cpu_up_to,
+        },
+        Some(t) => bail!("--texel-um must be > 0, got {t}"),
+    };
     let setup = Setup::load(path).with_context(|| format!("scenario {}", path.display()))?;
     let model = setup
         .micro
@@ -473,19 +497,28 @@ fn bench_micro(path: &Path, frames: usize, sizes: &[usize]) -> anyhow::Result<()
         path.display(),
         setup.mesh.top.triangles.len()
     );
+    match layout {
+        skinpatch::bench::MapLayout::FixedPatch => {
+            println!("map spans the patch at every size (texels shrink as the size grows)")
+        }
+        skinpatch::bench::MapLayout::FixedTexel { texel_um, .. } => println!(
+            "fixed {texel_um} µm texels: the map covers size × {texel_um} µm, the patch's strain on its centre"
+        ),
+    }
     println!(
-        "{:>6} {:>12} {:>12} {:>16} {:>10} {:>12}",
-        "size", "CPU ms", "GPU ms", "GPU+readback ms", "CPU/GPU", "max |Δ|"
+        "{:>6} {:>9} {:>12} {:>12} {:>16} {:>10} {:>12}",
+        "size", "texel µm", "CPU ms", "GPU ms", "GPU+readback ms", "CPU/GPU", "max |Δ|"
     );
     let fmt = |x: Option<f64>, p: usize| x.map_or("-".to_string(), |v| format!("{v:.p$}"));
-    let bench = skinpatch::bench::bench_micro(&setup.mesh, &model, sizes, frames, |r| {
+    let bench = skinpatch::bench::bench_micro(&setup.mesh, &model, sizes, frames, layout, |r| {
         println!(
-            "{:>6} {:>12.1} {:>12} {:>16} {:>10} {:>12}",
+            "{:>6} {:>9.3} {:>12} {:>12} {:>16} {:>10} {:>12}",
             r.size,
-            r.cpu_ms,
+            r.texel_um,
+            fmt(r.cpu_ms, 1),
             fmt(r.gpu_ms, 2),
             fmt(r.gpu_readback_ms, 1),
-            fmt(r.gpu_ms.map(|g| r.cpu_ms / g), 1),
+            fmt(r.cpu_ms.zip(r.gpu_ms).map(|(c, g)| c / g), 1),
             r.max_difference
                 .map_or("-".to_string(), |d| format!("{d:.1e}")),
         );

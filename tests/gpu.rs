@@ -458,7 +458,8 @@ fn bench_micro_profiles_every_stage() {
     }
     let mesh = patch_3k();
     let model = skinpatch::micro::KernelModel::forehead();
-    let bench = skinpatch::bench::bench_micro(&mesh, &model, &[128], 1, |_| {}).unwrap();
+    let layout = skinpatch::bench::MapLayout::FixedPatch;
+    let bench = skinpatch::bench::bench_micro(&mesh, &model, &[128], 1, layout, |_| {}).unwrap();
     let row = &bench.rows[0];
     let times = row.stages.expect("a GPU row has its stages");
     let stages = times.wall_ms;
@@ -503,4 +504,38 @@ fn bench_micro_profiles_every_stage() {
         assert!(times.gpu_ms.iter().all(Option::is_none));
     }
     assert!(row.max_difference.unwrap() <= 1e-4, "{row:?}");
+}
+
+#[test]
+fn bench_micro_fixed_texel_puts_the_patch_on_a_larger_map() {
+    use skinpatch::bench::{bench_micro, MapLayout};
+    if context().is_none() {
+        return;
+    }
+    let mesh = patch_3k();
+    let model = skinpatch::micro::KernelModel::forehead();
+    let (lo, hi) = mesh.bounds();
+    // At 256 texels the map is twice the patch's width.
+    let texel_um = 2.0 * (hi.x - lo.x) * 1000.0 / 256.0;
+    let layout = MapLayout::FixedTexel {
+        texel_um,
+        cpu_up_to: 256,
+    };
+    let bench = bench_micro(&mesh, &model, &[256, 512], 1, layout, |_| {}).unwrap();
+    let (small, large) = (&bench.rows[0], &bench.rows[1]);
+    assert!(
+        (small.texel_um - texel_um).abs() < 1e-9 * texel_um,
+        "{small:?}"
+    );
+    assert!(
+        (large.texel_um - texel_um).abs() < 1e-9 * texel_um,
+        "{large:?}"
+    );
+    assert!(small.max_difference.unwrap() <= 1e-4, "{small:?}");
+    // Beyond cpu_up_to only the GPU runs.
+    assert!(large.cpu_ms.is_none() && large.max_difference.is_none());
+    assert!(large.gpu_ms.is_some() && large.stages.is_some());
+    // A map smaller than the patch at that texel size is refused.
+    let err = bench_micro(&mesh, &model, &[64], 1, layout, |_| {}).unwrap_err();
+    assert!(err.to_string().contains("--texel-um"), "{err}");
 }
