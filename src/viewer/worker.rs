@@ -273,24 +273,32 @@ mod tests {
     use super::*;
     use crate::scenario::Setup;
 
-    #[test]
-    fn worker_solves_each_new_target_and_records_its_path() {
-        let setup = Setup::load(std::path::Path::new("tests/fixtures/press_small.toml")).unwrap();
-        let probe = setup.simulation.probe.clone().unwrap();
-        let start = probe.pose(0.0);
+    const WAIT: Duration = Duration::from_secs(120);
+
+    /// A worker on `setup` started at `start`, with its first frame solved.
+    fn started(setup: &Setup, start: ProbePose) -> FemWorker {
         let worker = FemWorker::spawn(
             setup.simulation.clone(),
             setup.mesh.clone(),
             Some(start),
             Box::new(|| {}),
         );
-        assert!(worker.wait_idle(Duration::from_secs(120)));
+        assert!(worker.wait_idle(WAIT));
         assert_eq!(worker.status().solved, 1);
+        worker
+    }
+
+    #[test]
+    fn worker_solves_each_new_target_and_records_its_path() {
+        let setup = Setup::load(std::path::Path::new("tests/fixtures/press_small.toml")).unwrap();
+        let probe = setup.simulation.probe.clone().unwrap();
+        let start = probe.pose(0.0);
+        let worker = started(&setup, start);
         let rest_force = worker.latest().unwrap().metrics.probe_force_n[2];
         let pressed = start.lifted(-1.0);
         worker.set_target(pressed);
         worker.set_target(pressed); // the same target: no second frame
-        assert!(worker.wait_idle(Duration::from_secs(120)));
+        assert!(worker.wait_idle(WAIT));
         let status = worker.status();
         assert_eq!(status.solved, 2, "{status:?}");
         assert!(status.failure.is_none());
@@ -324,16 +332,10 @@ mod tests {
             .unwrap()
             .pose(0.0)
             .lifted(0.5);
-        let worker = FemWorker::spawn(
-            setup.simulation.clone(),
-            setup.mesh.clone(),
-            Some(start),
-            Box::new(|| {}),
-        );
-        assert!(worker.wait_idle(Duration::from_secs(120)));
+        let worker = started(&setup, start);
         assert!(worker.status().failure.is_none());
         worker.set_target(start.lifted(-1.5));
-        assert!(worker.wait_idle(Duration::from_secs(120)));
+        assert!(worker.wait_idle(WAIT));
         let status = worker.status();
         let failure = status.failure.as_deref().expect("the press fails");
         assert!(failure.contains("frame 1"), "{failure}");
@@ -345,7 +347,7 @@ mod tests {
         // A reachable target afterwards is solved as frame 1 from the kept
         // state.
         worker.set_target(start.lifted(0.1));
-        assert!(worker.wait_idle(Duration::from_secs(120)));
+        assert!(worker.wait_idle(WAIT));
         let status = worker.status();
         assert!(status.failure.is_none(), "{status:?}");
         assert_eq!(worker.latest().unwrap().metrics.frame, 1);
