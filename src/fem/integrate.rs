@@ -255,23 +255,36 @@ pub struct Simulation {
     tangent_kind: TangentKind,
 }
 
+/// What depends on the materials: the rest elements, the lumped nodal
+/// masses and the force floor (round-off of the forces at rest).
+fn material_data(mesh: &TetMesh, tet_material: &[Material]) -> (Vec<RestElement>, Vec<f64>, f64) {
+    let elements: Vec<RestElement> = (0..mesh.num_tets())
+        .into_par_iter()
+        .map(|t| RestElement::new(mesh.tet_points(t), &tet_material[t]))
+        .collect();
+    let (lo, hi) = mesh.bounds();
+    let size = (hi - lo).norm();
+    // The largest modulus an element has: λ + 2μ (uniaxial strain),
+    // which grows without bound as ν → 0.5, and with it the round-off
+    // of the forces at rest.
+    let stiffest = tet_material
+        .iter()
+        .map(|m| m.lambda() + 2.0 * m.mu())
+        .fold(0.0, f64::max);
+    (
+        elements,
+        lumped_mass(mesh, tet_material),
+        1e-15 * stiffest * size * size,
+    )
+}
+
 impl Simulation {
     /// Sets up a simulation of `mesh` with one material per tet.
     pub fn new(mesh: &TetMesh, tet_material: &[Material]) -> Simulation {
-        let elements: Vec<RestElement> = (0..mesh.num_tets())
-            .into_par_iter()
-            .map(|t| RestElement::new(mesh.tet_points(t), &tet_material[t]))
-            .collect();
+        let (elements, mass, force_floor) = material_data(mesh, tet_material);
         let n = mesh.num_vertices();
         let (lo, hi) = mesh.bounds();
         let size = (hi - lo).norm();
-        // The largest modulus an element has: λ + 2μ (uniaxial strain),
-        // which grows without bound as ν → 0.5, and with it the round-off
-        // of the forces at rest.
-        let stiffest = tet_material
-            .iter()
-            .map(|m| m.lambda() + 2.0 * m.mu())
-            .fold(0.0, f64::max);
         Simulation {
             tets: mesh.tets.clone(),
             assembly: Assembly::new(n, &mesh.tets),
@@ -288,7 +301,7 @@ impl Simulation {
             timings: Timings::default(),
             dynamics: None,
             v: vec![Vec3::zeros(); n],
-            mass: lumped_mass(mesh, tet_material),
+            mass,
             x_n: mesh.positions.clone(),
             f_elastic: vec![Vec3::zeros(); n],
             f_elastic_n: vec![Vec3::zeros(); n],
@@ -304,7 +317,7 @@ impl Simulation {
             f_slip: vec![Vec3::zeros(); n],
             prescribed: vec![0.0; 3 * n],
             kd: vec![0.0; 3 * n],
-            force_floor: 1e-15 * stiffest * size * size,
+            force_floor,
             position_tol: 1e-7 * size,
             tangent_kind: TangentKind::Exact,
         }
@@ -315,11 +328,8 @@ impl Simulation {
     /// elements, the lumped masses and the force floor follow the new
     /// moduli, and the preconditioners are rebuilt at the next solve.
     pub fn set_materials(&mut self, mesh: &TetMesh, tet_material: &[Material]) {
-        let fresh = Simulation::new(mesh, tet_material);
-        self.elements = fresh.elements;
-        self.mass = fresh.mass;
-        self.force_floor = fresh.force_floor;
-        self.factor = fresh.factor;
+        (self.elements, self.mass, self.force_floor) = material_data(mesh, tet_material);
+        self.factor = Factor::default();
         self.coarse_stale = true;
     }
 

@@ -233,16 +233,12 @@ impl Context {
         self.device
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| Error::Gpu(format!("waiting for {}: {e}", self.info.name)))?;
-        self.take_errors()
+        self.take_device_errors()
     }
 
     /// The first error the device reported since the last call, without
     /// waiting for submitted work.
     pub fn take_device_errors(&self) -> Result<()> {
-        self.take_errors()
-    }
-
-    fn take_errors(&self) -> Result<()> {
         let mut list = self.errors.lock().map_err(|_| {
             Error::Gpu("the GPU error handler panicked; the device is unusable".into())
         })?;

@@ -53,6 +53,15 @@ enum Waiting {
     Until(Instant),
 }
 
+/// What the panel asked for in one frame.
+#[derive(Default)]
+struct PanelOutput {
+    commands: Vec<Command>,
+    actions: Vec<KeyAction>,
+    // The "mouse drives probe" box was clicked.
+    toggle_probe_tool: bool,
+}
+
 struct ScriptRun {
     steps: Vec<Step>,
     next: usize,
@@ -95,7 +104,8 @@ fn device<'a>(chain: &'a Option<GpuMicro>, own: &'a Option<Context>) -> &'a Cont
 struct RenderInputs {
     setup: RenderSetup,
     albedo: Albedo,
-    neutral: Option<Vec<[f32; 3]>>,
+    // The neutral map's normals and its width and height.
+    neutral: Option<(Vec<[f32; 3]>, usize, usize)>,
     curve: [f32; 16],
     texel_mm: f64,
 }
@@ -107,11 +117,9 @@ struct Rates {
     started: Option<Instant>,
     last_frame: Option<Instant>,
     display_fps: f64,
-    micro_ms: f64,
-    render_ms: f64,
-    // Every chain run and 3D render (ms), for the summary.
-    micro_all: Vec<f64>,
-    render_all: Vec<f64>,
+    // Every chain run and 3D render (ms); the panel shows the last.
+    micro_ms: Vec<f64>,
+    render_ms: Vec<f64>,
     // Target sent and when, until a shown frame reflects it.
     pending: Option<(Instant, crate::fem::contact::ProbePose)>,
     latencies_ms: Vec<f64>,
@@ -161,10 +169,14 @@ impl App {
         let render = loaded.render.clone();
         let (lo, hi) = setup.mesh.bounds();
         let albedo = Albedo::from_source(&render.albedo, render.texture_px, hi.x - lo.x)?;
-        let neutral = setup
-            .micro
-            .as_ref()
-            .map(|m| crate::micro::normals::normal_map(&m.neutral));
+        let neutral = setup.micro.as_ref().map(|m| {
+            let map = &m.neutral;
+            (
+                crate::micro::normals::normal_map(map),
+                map.width,
+                map.height,
+            )
+        });
         let mut anisotropic = render.clone();
         anisotropic.roughness = crate::render::Roughness::Anisotropic;
         let curve = crate::pipeline::roughness_curve(&anisotropic, setup.micro.as_ref());
@@ -390,8 +402,9 @@ impl App {
                 let start = Instant::now();
                 chain.submit(field, true);
                 chain.context().finish()?;
-                self.rates.micro_ms = start.elapsed().as_secs_f64() * 1e3;
-                self.rates.micro_all.push(self.rates.micro_ms);
+                self.rates
+                    .micro_ms
+                    .push(start.elapsed().as_secs_f64() * 1e3);
                 self.chain_on = Some(frame);
                 self.dirty = true;
             }
@@ -436,8 +449,9 @@ impl App {
         renderer.set_overlay(overlay, self.state.overlay_range as f32);
         renderer.submit(ctx, mode);
         ctx.finish()?;
-        self.rates.render_ms = start.elapsed().as_secs_f64() * 1e3;
-        self.rates.render_all.push(self.rates.render_ms);
+        self.rates
+            .render_ms
+            .push(start.elapsed().as_secs_f64() * 1e3);
         self.dirty = false;
         Ok(true)
     }
@@ -484,14 +498,22 @@ impl App {
                 recorder.push(&image)?;
             }
         }
-        for path in std::mem::take(&mut self.screenshots) {
+        let shots = std::mem::take(&mut self.screenshots);
+        if !shots.is_empty() {
+            // One read-back for every shot of this redraw.
             let image = self.read_image()?;
-            if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-                std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+            for path in shots {
+                if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+                    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+                }
+                crate::export::frames::write_image(
+                    &path,
+                    &image,
+                    crate::render::FrameFormat::Png8,
+                )?;
+                self.message = Some(format!("saved {}", path.display()));
+                self.written.push(path);
             }
-            crate::export::frames::write_image(&path, &image, crate::render::FrameFormat::Png8)?;
-            self.message = Some(format!("saved {}", path.display()));
-            self.written.push(path);
         }
         self.present()?;
         // Display rate: frames presented, smoothed.
@@ -527,14 +549,17 @@ impl App {
             gpu.egui_state.take_egui_input(&gpu.window)
         };
         let egui_ctx = self.egui.clone();
-        let mut commands = Vec::new();
-        let mut actions = Vec::new();
-        let output = egui_ctx.run_ui(raw, |ui| self.panel(ui, &mut commands, &mut actions));
-        for c in commands {
+        let mut panel = PanelOutput::default();
+        let output = egui_ctx.run_ui(raw, |ui| self.panel(ui, &mut panel));
+        if panel.toggle_probe_tool {
+            self.probe_tool = !self.probe_tool;
+            self.state.apply(Command::Live);
+        }
+        for c in panel.commands {
             self.state.apply(c);
             self.dirty = true;
         }
-        for a in actions {
+        for a in panel.actions {
             self.key_action(a)?;
         }
         let gpu = self.gpu.as_mut().expect("started");
@@ -659,23 +684,18 @@ impl App {
     }
 
     /// The side panel.
-    fn panel(&self, ui: &mut egui::Ui, commands: &mut Vec<Command>, actions: &mut Vec<KeyAction>) {
+    fn panel(&self, ui: &mut egui::Ui, out: &mut PanelOutput) {
         egui::Panel::right("panel")
             .exact_size(PANEL_POINTS)
             .resizable(false)
             .show(ui, |ui| {
                 egui::ScrollArea::vertical().show(ui, |ui| {
-                    self.panel_contents(ui, commands, actions);
+                    self.panel_contents(ui, out);
                 });
             });
     }
 
-    fn panel_contents(
-        &self,
-        ui: &mut egui::Ui,
-        commands: &mut Vec<Command>,
-        actions: &mut Vec<KeyAction>,
-    ) {
+    fn panel_contents(&self, ui: &mut egui::Ui, out: &mut PanelOutput) {
         let s = &self.state;
         ui.heading(format!("skinpatch — {}", self.loaded.setup.name));
         ui.separator();
@@ -683,7 +703,7 @@ impl App {
         ui.horizontal_wrapped(|ui| {
             for m in ViewMode::ALL {
                 if ui.selectable_label(s.mode == m, m.name()).clicked() {
-                    commands.push(Command::Mode(m));
+                    out.commands.push(Command::Mode(m));
                 }
             }
         });
@@ -697,7 +717,7 @@ impl App {
                     Overlay::Axes => "axes",
                 };
                 if ui.selectable_label(s.overlay == o, name).clicked() {
-                    commands.push(Command::Overlay(o));
+                    out.commands.push(Command::Overlay(o));
                 }
             }
         });
@@ -730,25 +750,25 @@ impl App {
                 .add(egui::Slider::new(&mut depth, 0.0..=p.max_depth_mm).text("depth mm"))
                 .changed()
             {
-                commands.push(Command::Depth(depth));
+                out.commands.push(Command::Depth(depth));
             }
             ui.horizontal(|ui| {
                 if p.pressed {
                     if ui.button("lift").clicked() {
-                        commands.push(Command::Release);
+                        out.commands.push(Command::Release);
                     }
                 } else if ui.button("press here").clicked() {
-                    commands.push(Command::Press(p.at_mm));
+                    out.commands.push(Command::Press(p.at_mm));
                 }
                 let mut tool = self.probe_tool;
                 if ui.checkbox(&mut tool, "mouse drives probe").changed() {
-                    actions.push(KeyAction::Command(Command::Live));
+                    out.toggle_probe_tool = true;
                 }
             });
             ui.horizontal(|ui| match p.drive {
                 ProbeDrive::Live => {
                     if ui.button("play path").clicked() {
-                        commands.push(Command::Play(0.0));
+                        out.commands.push(Command::Play(0.0));
                     }
                 }
                 ProbeDrive::Path {
@@ -757,21 +777,21 @@ impl App {
                     looping,
                 } => {
                     if ui.button(if playing { "pause" } else { "play" }).clicked() {
-                        commands.push(Command::Pause(playing));
+                        out.commands.push(Command::Pause(playing));
                     }
                     let mut l = looping;
                     if ui.checkbox(&mut l, "loop").changed() {
-                        commands.push(Command::Loop(l));
+                        out.commands.push(Command::Loop(l));
                     }
                     if ui.button("live").clicked() {
-                        commands.push(Command::Live);
+                        out.commands.push(Command::Live);
                     }
                     let mut t = t_s;
                     if ui
                         .add(egui::Slider::new(&mut t, 0.0..=p.path_duration()).text("s"))
                         .changed()
                     {
-                        commands.push(Command::Scrub(t));
+                        out.commands.push(Command::Scrub(t));
                     }
                 }
             });
@@ -788,7 +808,7 @@ impl App {
                 .add(egui::Slider::new(&mut e, -90.0..=90.0).text("elevation °"))
                 .changed();
             if changed {
-                commands.push(Command::LightDirection(a, e));
+                out.commands.push(Command::LightDirection(a, e));
             }
         }
         let mut scale = s.light_scale;
@@ -796,7 +816,7 @@ impl App {
             .add(egui::Slider::new(&mut scale, 0.0..=4.0).text("intensity ×"))
             .changed()
         {
-            commands.push(Command::LightIntensity(scale));
+            out.commands.push(Command::LightIntensity(scale));
         }
         ui.separator();
         // Materials: edits apply from the next frame.
@@ -821,7 +841,8 @@ impl App {
                     )
                     .changed();
                 if a || b {
-                    commands.push(Command::Material(region.clone(), e2, nu2));
+                    out.commands
+                        .push(Command::Material(region.clone(), e2, nu2));
                 }
             });
         }
@@ -831,7 +852,7 @@ impl App {
                 .add(egui::Slider::new(&mut m, 0.0..=2.0).text("friction μ"))
                 .changed()
             {
-                commands.push(Command::Friction(m));
+                out.commands.push(Command::Friction(m));
             }
         }
         ui.separator();
@@ -850,7 +871,8 @@ impl App {
         ));
         ui.label(format!(
             "microstructure {:.1} ms, render {:.1} ms",
-            self.rates.micro_ms, self.rates.render_ms
+            self.rates.micro_ms.last().unwrap_or(&0.0),
+            self.rates.render_ms.last().unwrap_or(&0.0)
         ));
         if let Some(l) = self.rates.latencies_ms.last() {
             ui.label(format!("probe move to frame shown: {l:.0} ms"));
@@ -863,13 +885,13 @@ impl App {
                 "record"
             };
             if ui.button(label).clicked() {
-                actions.push(KeyAction::ToggleRecord);
+                out.actions.push(KeyAction::ToggleRecord);
             }
             if ui.button("screenshot").clicked() {
-                actions.push(KeyAction::Screenshot);
+                out.actions.push(KeyAction::Screenshot);
             }
             if ui.button("save path").clicked() {
-                actions.push(KeyAction::SavePath);
+                out.actions.push(KeyAction::SavePath);
             }
         });
         if let Some(r) = &self.recorder {
@@ -894,10 +916,6 @@ impl App {
     /// Carries out a key's action.
     fn key_action(&mut self, action: KeyAction) -> Result<()> {
         match action {
-            KeyAction::Command(Command::Live) => {
-                self.probe_tool = !self.probe_tool;
-                self.state.apply(Command::Live);
-            }
             KeyAction::Command(c) => self.state.apply(c),
             KeyAction::CycleOverlay => {
                 let k = Overlay::ALL
@@ -1365,8 +1383,8 @@ impl ApplicationHandler<Wake> for App {
         s.fem_frames = status.solved;
         s.fem_frame_s = status.last_frame_s;
         s.latencies_ms = self.rates.latencies_ms.clone();
-        s.micro_ms = self.rates.micro_all.clone();
-        s.render_ms = self.rates.render_all.clone();
+        s.micro_ms = std::mem::take(&mut self.rates.micro_ms);
+        s.render_ms = std::mem::take(&mut self.rates.render_ms);
         s.view_size = self.gpu.as_ref().map_or((0, 0), |g| g.render_size);
         s.final_force_n = self.shown.as_ref().map(|x| x.metrics.probe_force_n);
         s.written = std::mem::take(&mut self.written);
@@ -1464,14 +1482,14 @@ fn build_renderer(
     setup.width = size.0;
     setup.height = size.1;
     setup.supersample = 1;
-    let neutral = inputs.neutral.as_ref().map(|n| {
-        let side = (n.len() as f64).sqrt() as usize;
-        NormalMap {
-            normals: n,
-            width: side,
-            height: n.len() / side.max(1),
-        }
-    });
+    let neutral = inputs
+        .neutral
+        .as_ref()
+        .map(|(normals, width, height)| NormalMap {
+            normals,
+            width: *width,
+            height: *height,
+        });
     Renderer::new(
         ctx,
         &setup,

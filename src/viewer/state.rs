@@ -4,7 +4,7 @@
 //! applied here, so every interaction is unit-tested headless; the window
 //! loop reads the state back (camera, probe target, versions) each frame.
 
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 
 use crate::fem::contact::{Probe, ProbePose};
 use crate::render::camera::{Camera, Projection};
@@ -665,23 +665,20 @@ fn from_direction(d: Vec3) -> (f32, f32) {
     )
 }
 
-/// The projection matrix of the camera for a view of `viewport` pixels
-/// (for tests and picking).
-pub fn view_projection(camera: &OrbitCamera, viewport: [f32; 2]) -> Mat4 {
-    let cam = camera.camera();
-    cam.view_projection(
-        viewport[0] / viewport[1].max(1.0),
-        cam.target,
-        camera.distance * 4.0,
-    )
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::fem::boundary::Keyframes;
     use crate::fem::contact::{ContactMode, ProbeShape};
+    use glam::Mat4;
     use nalgebra::Vector3;
+
+    /// The camera's view-projection for a view of `viewport` pixels.
+    fn view_projection(camera: &OrbitCamera, viewport: [f32; 2]) -> Mat4 {
+        let cam = camera.camera();
+        let aspect = viewport[0] / viewport[1].max(1.0);
+        cam.view_projection(aspect, cam.target, camera.distance * 4.0)
+    }
 
     fn probe() -> Probe {
         Probe {
