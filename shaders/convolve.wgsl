@@ -5,8 +5,10 @@
 //
 // Three entry points differ only in where a texel's parameters come from:
 // `convolve_strain` computes them from the raster (svd2.wgsl, group 1), as
-// the per-frame chain does; `convolve_field` reads them from a buffer;
-// `convolve_constant` takes one set from the uniform (the fitting search).
+// the per-frame chain does, over the tiles of a list (the others keep their
+// values; src/gpu/tiles.rs says why that is exact); `convolve_field` reads
+// them from a buffer; `convolve_constant` takes one set from the uniform
+// (the fitting search).
 //
 // Texel p with unit axis a (texels), strength alpha and sigma (texels):
 //   (1 - alpha) D(p) + alpha * sum_k g_k D(p - k a) / sum_k g_k,  k = -N..N,
@@ -33,6 +35,8 @@ struct PassInfo {
 // for `convolve_field`.
 @group(0) @binding(3) var<storage, read> field_passes: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read_write> dst: array<f32>;
+// The tiles `convolve_strain` runs on (map.wgsl, tile_index).
+@group(0) @binding(5) var<storage, read> tiles: array<u32>;
 
 fn convolve_texel(i: i32, j: i32, p: vec4<f32>) -> f32 {
     let centre = src[u32(j) * map.width + u32(i)];
@@ -65,7 +69,16 @@ fn convolve_texel(i: i32, j: i32, p: vec4<f32>) -> f32 {
 }
 
 @compute @workgroup_size(16, 16)
-fn convolve_strain(@builtin(global_invocation_id) id: vec3<u32>) {
+fn convolve_strain(
+    @builtin(workgroup_id) group: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_id) local: vec3<u32>,
+) {
+    let k = tile_index(group, groups);
+    if (k >= tiles[0]) {
+        return;
+    }
+    let id = tile_texel(tiles[1u + k], local.xy);
     if (id.x >= map.width || id.y >= map.height) {
         return;
     }

@@ -66,3 +66,15 @@ fn normal_of(s: vec2<f32>) -> vec3<f32> {
     let n = sqrt(s.x * s.x + s.y * s.y + 1.0);
     return vec3<f32>(-s.x / n, -s.y / n, 1.0 / n);
 }
+
+// Tiled dispatches (src/gpu/tiles.rs): one 16 x 16 workgroup per tile of a
+// list holding the count, then each tile as x | y << 16. The list index of
+// a workgroup of a (possibly 2D) dispatch.
+fn tile_index(group: vec3<u32>, groups: vec3<u32>) -> u32 {
+    return group.y * groups.x + group.x;
+}
+
+// The texel of invocation `local` in tile `packed`.
+fn tile_texel(packed: u32, local: vec2<u32>) -> vec2<u32> {
+    return vec2<u32>(packed & 0xffffu, packed >> 16u) * 16u + local;
+}

@@ -12,7 +12,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::map::{with_map_access, GpuMap};
 use super::svd2::{self, Svd2Stage};
-use super::{buffers, compute_pipeline, dispatch, encoder, Context};
+use super::{buffers, compute_pipeline, dispatch, dispatch_tiles, encoder, Context};
 use crate::error::Result;
 use crate::micro::{DisplacementMap, KernelField, PassParams};
 
@@ -97,14 +97,16 @@ impl ConvolveStage {
     }
 
     /// Group 0: convolving `src` into `dst` (same size) with the pass and
-    /// constants of `info`, and for [`Params::Field`] the buffer `passes`.
+    /// constants of `info`; `extra` is the per-texel parameter buffer for
+    /// [`Params::Field`] and the tile list (`tiles.rs`) for
+    /// [`Params::Strain`].
     pub fn bind(
         &self,
         ctx: &Context,
         params: Params,
         src: &GpuMap,
         info: wgpu::BindingResource<'_>,
-        passes: Option<&wgpu::Buffer>,
+        extra: Option<&wgpu::Buffer>,
         dst: &GpuMap,
     ) -> wgpu::BindGroup {
         let layout = self.pipeline(params).get_bind_group_layout(0);
@@ -114,9 +116,16 @@ impl ConvolveStage {
             (2, info),
             (4, dst.heights.as_entire_binding()),
         ];
-        if params == Params::Field {
-            let passes = passes.expect("a per-texel pass needs its parameter buffer");
-            entries.push((3, passes.as_entire_binding()));
+        match params {
+            Params::Field => {
+                let passes = extra.expect("a per-texel pass needs its parameter buffer");
+                entries.push((3, passes.as_entire_binding()));
+            }
+            Params::Strain => {
+                let tiles = extra.expect("a strain pass needs its tile list");
+                entries.push((5, tiles.as_entire_binding()));
+            }
+            Params::Constant => {}
         }
         let entries: Vec<wgpu::BindGroupEntry<'_>> = entries
             .into_iter()
@@ -140,8 +149,19 @@ impl ConvolveStage {
         svd2.inputs(ctx, &self.strain.get_bind_group_layout(1), info, raster)
     }
 
-    /// Records one pass over `width × height` texels with `binds` (group
-    /// 0, and group 1 for [`Params::Strain`]).
+    /// Records a [`Params::Strain`] pass over the first `tiles` tiles of
+    /// the list bound in group 0 (group 1: [`ConvolveStage::strain_inputs`]).
+    pub fn encode_tiles(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        binds: &[&wgpu::BindGroup],
+        tiles: usize,
+    ) {
+        dispatch_tiles(encoder, "convolve", &self.strain, binds, tiles);
+    }
+
+    /// Records one [`Params::Field`] or [`Params::Constant`] pass over
+    /// `width × height` texels with `binds` (group 0).
     pub fn encode(
         &self,
         encoder: &mut wgpu::CommandEncoder,
@@ -150,6 +170,7 @@ impl ConvolveStage {
         width: usize,
         height: usize,
     ) {
+        debug_assert!(params != Params::Strain, "strain passes run over tiles");
         dispatch(
             encoder,
             "convolve",

@@ -6,14 +6,18 @@
 //!
 //! The neutral map, kernel tables, triangle indices, intermediate maps and
 //! bind groups are created once and stay resident; a frame uploads only the
-//! surface's per-vertex matrices (40 bytes a vertex) and records the four
-//! stages into one command buffer.
+//! surface's per-vertex matrices (40 bytes a vertex) and its tile lists, and
+//! records the four stages into one command buffer. The passes and normals
+//! run only on the tiles the surface can change ([`super::tiles`]): the
+//! rest of the map keeps the neutral map's values, exactly what a pass over
+//! every texel would write there.
 
 use super::convolve::{ConvolveStage, Params, PassInfo};
 use super::map::GpuMap;
 use super::normals::{normal_texture, read_normals, NormalsStage};
-use super::raster::{RasterStage, RasterTargets, SurfaceBuffers};
+use super::raster::{vertices, RasterStage, RasterTargets, SurfaceBuffers};
 use super::svd2::Svd2Stage;
+use super::tiles::{TileMask, TilePlanner};
 use super::{buffers, encoder, Context};
 use crate::error::Result;
 use crate::micro::{DisplacementMap, KernelModel};
@@ -92,11 +96,27 @@ impl MicroStage {
     }
 }
 
+/// How many tiles ([`super::tiles::TILE`]² texels) each stage of the last
+/// frame ran on.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FrameTiles {
+    /// Tiles of the pass along s.
+    pub pass_s: usize,
+    /// Tiles of the pass along t.
+    pub pass_t: usize,
+    /// Tiles whose normals were computed (0 in a frame without normals).
+    pub normals: usize,
+    /// Tiles in the map.
+    pub total: usize,
+}
+
 /// The resident per-frame chain.
 pub struct GpuMicro {
     ctx: Context,
     width: usize,
     height: usize,
+    source: GpuMap,
+    mid: GpuMap,
     out: GpuMap,
     normals: wgpu::Texture,
     raster: RasterStage,
@@ -107,11 +127,21 @@ pub struct GpuMicro {
     pass_binds: [wgpu::BindGroup; 2],
     normals_stage: NormalsStage,
     normals_bind: wgpu::BindGroup,
+    /// Tile lists of the s pass, the t pass and the normals.
+    tile_lists: [wgpu::Buffer; 3],
+    dilate: usize,
+    sigma_max_um: f64,
+    tolerance: Option<f32>,
+    planner: Option<TilePlanner>,
+    /// Tiles whose normals changed since they were last computed.
+    normals_due: TileMask,
+    tiles: FrameTiles,
 }
 
 impl GpuMicro {
     /// Uploads `neutral` and `model` and builds the chain, dilating the
-    /// raster by `dilate` texels.
+    /// raster by `dilate` texels. Every frame convolves every tile the
+    /// surface can reach; see [`GpuMicro::set_incremental`].
     pub fn new(
         ctx: Context,
         neutral: &DisplacementMap,
@@ -129,29 +159,31 @@ impl GpuMicro {
         let info = buffers::uniform(&ctx, "field info", &svd2.info(w, h, dilate));
         let convolve = ConvolveStage::new(&ctx);
         let strain_inputs = convolve.strain_inputs(&ctx, &svd2, &info, &targets);
+        let all_tiles = TileMask::full(w, h).total() as u64;
+        let tile_lists =
+            [0, 1, 2].map(|_| buffers::storage_zeroed(&ctx, "tile list", 4 * (1 + all_tiles)));
         let pass_info = [0, 1].map(|k| buffers::uniform(&ctx, "pass info", &PassInfo::pass(k)));
-        let bind = |src, info: &wgpu::Buffer, dst| {
+        let bind = |src, k: usize, dst| {
             convolve.bind(
                 &ctx,
                 Params::Strain,
                 src,
-                info.as_entire_binding(),
-                None,
+                pass_info[k].as_entire_binding(),
+                Some(&tile_lists[k]),
                 dst,
             )
         };
-        let pass_binds = [
-            bind(&source, &pass_info[0], &mid),
-            bind(&mid, &pass_info[1], &out),
-        ];
+        let pass_binds = [bind(&source, 0, &mid), bind(&mid, 1, &out)];
         let normals_stage = NormalsStage::new(&ctx);
-        let normals_bind = normals_stage.bind(&ctx, &out, &normals);
+        let normals_bind = normals_stage.bind(&ctx, &out, &normals, Some(&tile_lists[2]));
         ctx.finish()?;
         Ok(GpuMicro {
             raster: RasterStage::new(&ctx),
             ctx,
             width: w,
             height: h,
+            source,
+            mid,
             out,
             normals,
             targets,
@@ -161,7 +193,31 @@ impl GpuMicro {
             pass_binds,
             normals_stage,
             normals_bind,
+            tile_lists,
+            dilate,
+            sigma_max_um: model.max_sigma_um(),
+            tolerance: None,
+            planner: None,
+            normals_due: TileMask::empty(w, h),
+            tiles: FrameTiles::default(),
         })
+    }
+
+    /// Makes frames incremental (`Some(tolerance)`): a tile is convolved
+    /// again only when the raster values of a vertex it depends on moved by
+    /// more than `tolerance` since they were last convolved (`T − I`
+    /// entries, and `Q Rᵀ` entries relative to the largest; see
+    /// [`super::tiles`]). `Some(0.0)` gives every frame's bits exactly;
+    /// `None` (the default) convolves every tile the surface can reach in
+    /// every frame. The next frame is a full one either way.
+    pub fn set_incremental(&mut self, tolerance: Option<f32>) {
+        self.tolerance = tolerance;
+        self.planner = None;
+    }
+
+    /// The tiles each stage of the last frame ran on.
+    pub fn last_tiles(&self) -> FrameTiles {
+        self.tiles
     }
 
     /// The device in use.
@@ -182,7 +238,7 @@ impl GpuMicro {
     /// Uploads `field` and submits the whole chain (normals too when
     /// `normals`), without waiting.
     pub fn submit(&mut self, field: &SurfaceField, normals: bool) {
-        self.upload(field);
+        self.prepare(field, normals);
         let mut enc = encoder(&self.ctx);
         for stage in [MicroStage::Raster, MicroStage::PassS, MicroStage::PassT] {
             self.encode_stage(&mut enc, stage);
@@ -204,7 +260,7 @@ impl GpuMicro {
         for (k, stage) in MicroStage::ALL.into_iter().enumerate() {
             let start = std::time::Instant::now();
             match stage {
-                MicroStage::Upload => self.upload(field),
+                MicroStage::Upload => self.prepare(field, true),
                 MicroStage::ReadBack => {
                     self.out.download(&self.ctx)?;
                     let bytes = (self.width * self.height * 16) as u64;
@@ -238,26 +294,81 @@ impl GpuMicro {
         Ok(times)
     }
 
-    fn upload(&mut self, field: &SurfaceField) {
+    /// Uploads `field`'s raster vertices and this frame's tile lists (the
+    /// normals' list when `normals`, else they stay due).
+    fn prepare(&mut self, field: &SurfaceField, normals: bool) {
+        let verts = vertices(field);
         match &self.surface {
-            Some(s) if s.fits(field) => s.update(&self.ctx, field),
-            _ => self.surface = Some(SurfaceBuffers::new(&self.ctx, field)),
+            Some(s) if s.fits(field) => s.write(&self.ctx, &verts),
+            _ => {
+                // A new layout: the maps and raster start over.
+                self.surface = Some(SurfaceBuffers::new(&self.ctx, field));
+                self.planner = None;
+                self.reset();
+            }
+        }
+        let planner = self.planner.get_or_insert_with(|| {
+            let (tri, uvs) = field.layout();
+            let uvs: Vec<[f64; 2]> = uvs.iter().map(|uv| [uv.x, uv.y]).collect();
+            TilePlanner::new(
+                (self.width, self.height),
+                tri,
+                &uvs,
+                self.dilate,
+                self.sigma_max_um,
+                self.tolerance,
+            )
+        });
+        let plan = planner.plan(&verts);
+        self.normals_due.add(&plan.normals);
+        let write = |k: usize, mask: &TileMask| {
+            let list = mask.list();
+            self.ctx
+                .queue
+                .write_buffer(&self.tile_lists[k], 0, bytemuck::cast_slice(&list));
+            list.len() - 1
+        };
+        self.tiles = FrameTiles {
+            pass_s: write(0, &plan.pass_s),
+            pass_t: write(1, &plan.pass_t),
+            normals: 0,
+            total: plan.pass_s.total(),
+        };
+        if normals {
+            self.tiles.normals = write(2, &self.normals_due);
+            self.normals_due = TileMask::empty(self.width, self.height);
         }
     }
 
+    /// The intermediate and output maps set to the neutral map (the tiles no
+    /// pass runs on keep it) and the raster cleared (the texels no triangle
+    /// covers stay off the surface); runs before the next frame.
+    fn reset(&mut self) {
+        let mut enc = encoder(&self.ctx);
+        let bytes = 4 * (self.width * self.height) as u64;
+        for dst in [&self.mid, &self.out] {
+            enc.copy_buffer_to_buffer(&self.source.heights, 0, &dst.heights, 0, bytes);
+        }
+        self.raster.clear(&mut enc, &self.targets);
+        self.ctx.queue.submit([enc.finish()]);
+    }
+
     fn encode_stage(&self, enc: &mut wgpu::CommandEncoder, stage: MicroStage) {
-        let (w, h) = (self.width, self.height);
         match stage {
             MicroStage::Raster => {
                 let surface = self.surface.as_ref().expect("upload runs first");
-                self.raster.encode(enc, surface, &self.targets);
+                self.raster.encode(enc, surface, &self.targets, false);
             }
             MicroStage::PassS | MicroStage::PassT => {
-                let bind = &self.pass_binds[(stage == MicroStage::PassT) as usize];
-                let binds = [bind, &self.strain_inputs];
-                self.convolve.encode(enc, Params::Strain, &binds, w, h);
+                let k = (stage == MicroStage::PassT) as usize;
+                let binds = [&self.pass_binds[k], &self.strain_inputs];
+                let tiles = [self.tiles.pass_s, self.tiles.pass_t][k];
+                self.convolve.encode_tiles(enc, &binds, tiles);
             }
-            MicroStage::Normals => self.normals_stage.encode(enc, &self.normals_bind, w, h),
+            MicroStage::Normals => {
+                self.normals_stage
+                    .encode_tiles(enc, &self.normals_bind, self.tiles.normals)
+            }
             MicroStage::Upload | MicroStage::ReadBack => {}
         }
     }

@@ -39,6 +39,7 @@ pub mod moments;
 pub mod normals;
 pub mod raster;
 pub mod svd2;
+pub mod tiles;
 pub mod timing;
 pub mod vulkan;
 
@@ -476,6 +477,32 @@ pub(crate) fn dispatch(
     }
     let (gx, gy) = Context::groups(width, height);
     pass.dispatch_workgroups(gx, gy, 1);
+}
+
+/// Records one compute pass of `pipeline` over `tiles` tiles of a list
+/// (`tiles.rs`): one workgroup each, in rows of at most 65,535 (the
+/// per-dimension limit every adapter has); the shader finds its tile with
+/// `tile_index` (map.wgsl) and skips the indices past the list's count.
+pub(crate) fn dispatch_tiles(
+    encoder: &mut wgpu::CommandEncoder,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    binds: &[&wgpu::BindGroup],
+    tiles: usize,
+) {
+    if tiles == 0 {
+        return;
+    }
+    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+        label: Some(label),
+        timestamp_writes: None,
+    });
+    pass.set_pipeline(pipeline);
+    for (k, bind) in binds.iter().enumerate() {
+        pass.set_bind_group(k as u32, *bind, &[]);
+    }
+    let gx = tiles.min(65_535);
+    pass.dispatch_workgroups(gx as u32, tiles.div_ceil(gx) as u32, 1);
 }
 
 /// A new command encoder.

@@ -4,41 +4,67 @@
 //! binding limit of some adapters at 4096² (128 MiB on lavapipe).
 
 use super::map::{with_map_access, GpuMap};
-use super::{bind_group, buffers, compute_pipeline, dispatch, encoder, Context};
+use super::{bind_group, buffers, compute_pipeline, dispatch, dispatch_tiles, encoder, Context};
 use crate::error::Result;
 use crate::micro::DisplacementMap;
 
 /// The shader source (without the map access functions).
 pub const SHADER: &str = include_str!("../../shaders/normals.wgsl");
 
-/// The compiled stage.
+/// The compiled stage: over every texel, or over the tiles of a list.
 pub struct NormalsStage {
     pipeline: wgpu::ComputePipeline,
+    tiled: wgpu::ComputePipeline,
 }
 
 impl NormalsStage {
     /// Compiles the stage.
     pub fn new(ctx: &Context) -> NormalsStage {
+        let source = with_map_access(SHADER);
         NormalsStage {
-            pipeline: compute_pipeline(ctx, "normals.wgsl", &with_map_access(SHADER), "main"),
+            pipeline: compute_pipeline(ctx, "normals.wgsl", &source, "main"),
+            tiled: compute_pipeline(ctx, "normals.wgsl", &source, "normals_tiles"),
         }
     }
 
-    /// A bind group writing `map`'s normals to `out` (see [`normal_texture`]).
-    pub fn bind(&self, ctx: &Context, map: &GpuMap, out: &wgpu::Texture) -> wgpu::BindGroup {
+    /// A bind group writing `map`'s normals to `out` (see [`normal_texture`])
+    /// over every texel ([`NormalsStage::encode`]), or, given `tiles`, over
+    /// the tiles of that list ([`NormalsStage::encode_tiles`]).
+    pub fn bind(
+        &self,
+        ctx: &Context,
+        map: &GpuMap,
+        out: &wgpu::Texture,
+        tiles: Option<&wgpu::Buffer>,
+    ) -> wgpu::BindGroup {
         let view = out.create_view(&wgpu::TextureViewDescriptor::default());
-        bind_group(
-            ctx,
-            &self.pipeline.get_bind_group_layout(0),
-            &[
-                map.info.as_entire_binding(),
-                map.heights.as_entire_binding(),
-                wgpu::BindingResource::TextureView(&view),
-            ],
-        )
+        let mut entries = vec![
+            map.info.as_entire_binding(),
+            map.heights.as_entire_binding(),
+            wgpu::BindingResource::TextureView(&view),
+        ];
+        let pipeline = match tiles {
+            Some(t) => {
+                entries.push(t.as_entire_binding());
+                &self.tiled
+            }
+            None => &self.pipeline,
+        };
+        bind_group(ctx, &pipeline.get_bind_group_layout(0), &entries)
     }
 
-    /// Records the dispatch.
+    /// Records the pass over the first `tiles` tiles of the list bound in
+    /// `bind`.
+    pub fn encode_tiles(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        bind: &wgpu::BindGroup,
+        tiles: usize,
+    ) {
+        dispatch_tiles(encoder, "normals", &self.tiled, &[bind], tiles);
+    }
+
+    /// Records the dispatch over every texel.
     pub fn encode(
         &self,
         encoder: &mut wgpu::CommandEncoder,
@@ -80,7 +106,7 @@ pub fn normal_map(ctx: &Context, map: &DisplacementMap) -> Result<Vec<[f32; 3]>>
     let stage = NormalsStage::new(ctx);
     let src = GpuMap::upload(ctx, map);
     let out = normal_texture(ctx, map.width, map.height);
-    let bind = stage.bind(ctx, &src, &out);
+    let bind = stage.bind(ctx, &src, &out, None);
     let mut enc = encoder(ctx);
     stage.encode(&mut enc, &bind, map.width, map.height);
     ctx.queue.submit([enc.finish()]);

@@ -92,8 +92,14 @@ impl SurfaceBuffers {
     /// Uploads `field`'s per-vertex matrices (same layout).
     pub fn update(&self, ctx: &Context, field: &SurfaceField) {
         debug_assert!(self.fits(field));
+        self.write(ctx, &vertices(field));
+    }
+
+    /// Uploads raster vertices (one per vertex of the layout).
+    pub fn write(&self, ctx: &Context, vertices: &[RasterVertex]) {
+        assert_eq!(vertices.len(), self.vertex_count);
         ctx.queue
-            .write_buffer(&self.vertices, 0, bytemuck::cast_slice(&vertices(field)));
+            .write_buffer(&self.vertices, 0, bytemuck::cast_slice(vertices));
     }
 }
 
@@ -196,35 +202,60 @@ impl RasterStage {
         RasterStage { pipeline }
     }
 
-    /// Records the pass drawing `surface` into `targets` (cleared first).
+    /// Records the pass drawing `surface` into `targets`, cleared first when
+    /// `clear`. Without the clear the texels the triangles do not cover keep
+    /// their values: a chain redrawing the same UV layout clears once, as
+    /// every covered texel is written again each frame.
     pub fn encode(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         surface: &SurfaceBuffers,
         targets: &RasterTargets,
+        clear: bool,
     ) {
-        let views = &targets.views;
-        let attachment = |view| {
-            Some(wgpu::RenderPassColorAttachment {
-                view,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                    store: wgpu::StoreOp::Store,
-                },
-            })
-        };
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("raster"),
-            color_attachments: &[attachment(&views[0]), attachment(&views[1])],
-            ..Default::default()
-        });
+        let mut pass = begin(encoder, "raster", targets, clear);
         pass.set_pipeline(&self.pipeline);
         pass.set_vertex_buffer(0, surface.vertices.slice(..));
         pass.set_index_buffer(surface.indices.slice(..), wgpu::IndexFormat::Uint32);
         pass.draw_indexed(0..surface.index_count, 0, 0..1);
     }
+}
+
+impl RasterStage {
+    /// Records a pass clearing `targets` to zero (off the surface).
+    pub fn clear(&self, encoder: &mut wgpu::CommandEncoder, targets: &RasterTargets) {
+        begin(encoder, "raster clear", targets, true);
+    }
+}
+
+/// A render pass into both targets, cleared first when `clear`.
+fn begin<'e>(
+    encoder: &'e mut wgpu::CommandEncoder,
+    label: &str,
+    targets: &RasterTargets,
+    clear: bool,
+) -> wgpu::RenderPass<'e> {
+    let attachment = |view| {
+        Some(wgpu::RenderPassColorAttachment {
+            view,
+            depth_slice: None,
+            resolve_target: None,
+            ops: wgpu::Operations {
+                load: if clear {
+                    wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT)
+                } else {
+                    wgpu::LoadOp::Load
+                },
+                store: wgpu::StoreOp::Store,
+            },
+        })
+    };
+    let views = &targets.views;
+    encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some(label),
+        color_attachments: &[attachment(&views[0]), attachment(&views[1])],
+        ..Default::default()
+    })
 }
 
 /// Rasterises `field` at `width × height` on the GPU and reads the result
@@ -243,7 +274,7 @@ pub fn rasterize(
     let mut encoder = ctx
         .device
         .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
-    stage.encode(&mut encoder, &surface, &targets);
+    stage.encode(&mut encoder, &surface, &targets, true);
     ctx.queue.submit([encoder.finish()]);
     ctx.finish()?;
     let t = buffers::read_texture_rgba32(ctx, &targets.t, width, height)?;

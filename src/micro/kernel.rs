@@ -145,6 +145,17 @@ impl KernelModel {
         )
     }
 
+    /// The largest σ (µm) the model gives at any stretch ratio (the tables
+    /// are constant beyond their ends, so it is their largest value).
+    pub fn max_sigma_um(&self) -> f64 {
+        self.sigma_compression_um
+            .points
+            .iter()
+            .chain(&self.sigma_stretch_um.points)
+            .map(|p| p.1)
+            .fold(0.0, f64::max)
+    }
+
     /// Kernel parameters for stretch ratio `r` (a folded, negative r is
     /// taken by its magnitude).
     pub fn params(&self, r: f64) -> KernelParams {
