@@ -627,6 +627,36 @@ fn microstructure_maps_per_frame() {
     assert_eq!(normals.color(), image::ColorType::Rgb16);
 }
 
+/// `incremental_tolerance = 0` reuses only tiles whose inputs are
+/// bit-identical, so the maps equal a run without it; the run says where
+/// the passes ran.
+#[test]
+fn incremental_microstructure_frames_with_tolerance_zero_change_nothing() {
+    let section = "\n[microstructure]\nframe_stride = 3\nformats = [\"exr\"]\nnormal_maps = false\n[microstructure.procedural]\nsize_px = 200\n";
+    let dirs = [tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap()];
+    let whole = run_press_small_with(dirs[0].path(), section);
+    let incremental = run_press_small_with(
+        dirs[1].path(),
+        &section.replace("normal_maps", "incremental_tolerance = 0.0\nnormal_maps"),
+    );
+    for (_, o) in [&whole, &incremental] {
+        assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    }
+    let stdout = text(&incremental.1.stdout);
+    if !stdout.contains("microstructure stages: GPU") {
+        eprintln!("no GPU adapter: the CPU reference ran both (skipped)");
+        return;
+    }
+    assert!(stdout.contains("incremental frames, tolerance 0"), "{stdout}");
+    assert!(text(&whole.1.stdout).contains("of the map's tiles"));
+    for frame in ["0000", "0003", "0006"] {
+        let name = format!("micro/height_{frame}.exr");
+        let a = std::fs::read(whole.0.join(&name)).unwrap();
+        let b = std::fs::read(incremental.0.join(&name)).unwrap();
+        assert!(a == b, "{name} differs");
+    }
+}
+
 /// `skinpatch fit`: fits a deformed map, adds given points, prints the
 /// table and model, and writes a kernel file a scenario can use.
 #[test]

@@ -363,6 +363,86 @@ fn one_whole_frame_matches_the_cpu_path() {
     assert!(frame.normals.is_none());
 }
 
+/// The chain runs its passes only on the tiles the surface can reach, and
+/// still gives the CPU's frame on a map larger than the patch (after a UV
+/// layout that covered the whole map, so the tiles it leaves must return to
+/// the neutral map); incremental frames with tolerance 0 give a whole
+/// frame's bits while convolving fewer tiles; a tolerance above the change
+/// keeps the last output.
+#[test]
+fn tiled_and_incremental_frames_match_whole_frames() {
+    let Some(ctx) = context() else { return };
+    let mesh = patch_3k();
+    let model = KernelModel::forehead();
+    // The patch on the centre half of the map: 25 µm texels.
+    let mut neutral = skin_map(800, 736, Edge::Clamp);
+    neutral.texel_um = 25.0;
+    let mut top = mesh.top.clone();
+    for uv in &mut top.uvs {
+        *uv = uv.map(|c| 0.5 + (c - 0.5) / 2.0);
+    }
+    let field_of = |x: &[Vec3]| SurfaceField::new(&top, &mesh.positions, x);
+    let a = deformed(&mesh);
+    // B moves only the vertices with x < −3 mm (a local push along x).
+    let b: Vec<Vec3> = a
+        .iter()
+        .zip(&mesh.positions)
+        .map(|(p, rest)| p + Vec3::new(0.3 * (-3.0 - rest.x).max(0.0).powi(2), 0.0, 0.0))
+        .collect();
+    // C changes every vertex far below the tolerance.
+    let c: Vec<Vec3> = b.iter().map(|p| p * (1.0 + 1e-7)).collect();
+    let (field_a, field_b, field_c) = (field_of(&a), field_of(&b), field_of(&c));
+    let whole_map = SurfaceField::new(&mesh.top, &mesh.positions, &a);
+
+    let mut whole = gpu::micro::GpuMicro::new(ctx, &neutral, &model, DILATE_TEXELS).unwrap();
+    whole.deform(&whole_map, true).unwrap();
+    let frame_a = whole.deform(&field_a, true).unwrap();
+    let tiles = whole.last_tiles();
+    eprintln!("tiles of frame A: {tiles:?}");
+    assert!(tiles.pass_s > 0 && 2 * tiles.pass_s < tiles.total, "{tiles:?}");
+    assert_eq!(tiles.pass_s, tiles.pass_t);
+    let cpu = skinpatch::micro::convolve::deform(&neutral, &model, &field_a);
+    assert!(neutral.max_difference(&cpu) > 0.05, "the frame is deformed");
+    let d = cpu.max_difference(&frame_a.map);
+    assert!(d < 1e-4, "GPU − CPU: {d:e} of the height range");
+    let reference = normal_map(&cpu);
+    let worst = frame_a
+        .normals
+        .as_ref()
+        .unwrap()
+        .iter()
+        .zip(&reference)
+        .flat_map(|(p, q)| (0..3).map(move |k| (p[k] - q[k]).abs()))
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-3, "normals differ by {worst:e}");
+
+    let ctx = context().unwrap();
+    let mut incremental = gpu::micro::GpuMicro::new(ctx, &neutral, &model, DILATE_TEXELS).unwrap();
+    incremental.set_incremental(Some(0.0));
+    incremental.deform(&field_a, true).unwrap();
+    let step_b = incremental.deform(&field_b, true).unwrap();
+    let fewer = incremental.last_tiles();
+    eprintln!("tiles of incremental frame B: {fewer:?}");
+    assert!(fewer.pass_s > 0 && 2 * fewer.pass_s < tiles.pass_s, "{fewer:?}");
+    let full_b = whole.deform(&field_b, true).unwrap();
+    assert!(full_b.map.max_difference(&frame_a.map) > 1e-3, "B differs from A");
+    assert!(step_b.map.data == full_b.map.data, "incremental B ≠ whole B");
+    assert!(step_b.normals == full_b.normals, "incremental normals ≠ whole");
+
+    // Tolerance 1e-3: the next frame is whole, then C (a 1e-7 change)
+    // convolves nothing and keeps B's output, within 1e-4 of C's own.
+    incremental.set_incremental(Some(1e-3));
+    incremental.deform(&field_b, true).unwrap();
+    let step_c = incremental.deform(&field_c, true).unwrap();
+    let none = incremental.last_tiles();
+    assert_eq!((none.pass_s, none.pass_t, none.normals), (0, 0, 0), "{none:?}");
+    assert!(step_c.map.data == full_b.map.data);
+    assert!(step_c.normals == full_b.normals);
+    let full_c = whole.deform(&field_c, false).unwrap();
+    let d = full_c.map.max_difference(&step_c.map);
+    assert!(d < 1e-4, "kept frame vs C: {d:e} of the height range");
+}
+
 /// The GPU counts the CPU's candidate histograms (up to texels on a cell
 /// edge, where f32 square roots may round apart) and its search finds the
 /// CPU's optimum.

@@ -411,6 +411,8 @@ fn microstructure_section_is_validated() {
         ("edge = \"mirror\"\n", "microstructure.edge"),
         ("formats = [\"png16\", \"tiff\"]\n", "microstructure.formats[1]"),
         ("frame_stride = 0\n", "microstructure.frame_stride"),
+        ("incremental_tolerance = -1e-3\n", "microstructure.incremental_tolerance"),
+        ("incremental_tolerance = nan\n", "microstructure.incremental_tolerance"),
         ("height_unit_um = -1.0\n", "microstructure.height_unit_um"),
         ("map = \"nowhere.png\"\n", "nowhere.png"),
         ("map = \"x.png\"\n[microstructure.procedural]\nseed = 3\n", "microstructure.procedural.seed"),

@@ -122,6 +122,8 @@ pub struct GpuMicro {
     raster: RasterStage,
     targets: RasterTargets,
     surface: Option<SurfaceBuffers>,
+    /// The triangles and UVs `surface` and the planner were made for.
+    layout: Option<(Vec<[usize; 3]>, Vec<[f64; 2]>)>,
     strain_inputs: wgpu::BindGroup,
     convolve: ConvolveStage,
     pass_binds: [wgpu::BindGroup; 2],
@@ -131,11 +133,13 @@ pub struct GpuMicro {
     tile_lists: [wgpu::Buffer; 3],
     dilate: usize,
     sigma_max_um: f64,
-    tolerance: Option<f32>,
+    tolerance: Option<f64>,
     planner: Option<TilePlanner>,
     /// Tiles whose normals changed since they were last computed.
     normals_due: TileMask,
     tiles: FrameTiles,
+    /// Tiles the passes ran on, and tiles in the map, over all frames so far.
+    pass_tiles: (u64, u64),
 }
 
 impl GpuMicro {
@@ -188,6 +192,7 @@ impl GpuMicro {
             normals,
             targets,
             surface: None,
+            layout: None,
             strain_inputs,
             convolve,
             pass_binds,
@@ -200,7 +205,22 @@ impl GpuMicro {
             planner: None,
             normals_due: TileMask::empty(w, h),
             tiles: FrameTiles::default(),
+            pass_tiles: (0, 0),
         })
+    }
+
+    /// The chain of a scenario's microstructure: its neutral map and kernel
+    /// model, the standard raster dilation, incremental frames when the
+    /// scenario asks for them.
+    pub fn for_scenario(ctx: Context, micro: &crate::scenario::MicroSetup) -> Result<GpuMicro> {
+        let mut chain = GpuMicro::new(
+            ctx,
+            &micro.neutral,
+            &micro.model,
+            crate::strain::raster::DILATE_TEXELS,
+        )?;
+        chain.set_incremental(micro.incremental_tolerance);
+        Ok(chain)
     }
 
     /// Makes frames incremental (`Some(tolerance)`): a tile is convolved
@@ -210,7 +230,7 @@ impl GpuMicro {
     /// [`super::tiles`]). `Some(0.0)` gives every frame's bits exactly;
     /// `None` (the default) convolves every tile the surface can reach in
     /// every frame. The next frame is a full one either way.
-    pub fn set_incremental(&mut self, tolerance: Option<f32>) {
+    pub fn set_incremental(&mut self, tolerance: Option<f64>) {
         self.tolerance = tolerance;
         self.planner = None;
     }
@@ -218,6 +238,18 @@ impl GpuMicro {
     /// The tiles each stage of the last frame ran on.
     pub fn last_tiles(&self) -> FrameTiles {
         self.tiles
+    }
+
+    /// The share of the map's tiles the two passes ran on, over every frame
+    /// so far (`None` before the first).
+    pub fn pass_tile_share(&self) -> Option<f64> {
+        let (run, all) = self.pass_tiles;
+        (all > 0).then(|| run as f64 / all as f64)
+    }
+
+    /// The incremental frames' tolerance (`None`: whole frames).
+    pub fn incremental(&self) -> Option<f64> {
+        self.tolerance
     }
 
     /// The device in use.
@@ -298,25 +330,28 @@ impl GpuMicro {
     /// normals' list when `normals`, else they stay due).
     fn prepare(&mut self, field: &SurfaceField, normals: bool) {
         let verts = vertices(field);
-        match &self.surface {
-            Some(s) if s.fits(field) => s.write(&self.ctx, &verts),
+        let (tri, uvs) = field.layout();
+        let uvs: Vec<[f64; 2]> = uvs.iter().map(|uv| [uv.x, uv.y]).collect();
+        match (&self.surface, &self.layout) {
+            (Some(s), Some(layout)) if layout.0 == tri && layout.1 == uvs => {
+                s.write(&self.ctx, &verts)
+            }
             _ => {
-                // A new layout: the maps and raster start over.
+                // A new UV layout: the maps and raster start over.
                 self.surface = Some(SurfaceBuffers::new(&self.ctx, field));
+                self.layout = Some((tri.to_vec(), uvs.clone()));
                 self.planner = None;
                 self.reset();
             }
         }
         let planner = self.planner.get_or_insert_with(|| {
-            let (tri, uvs) = field.layout();
-            let uvs: Vec<[f64; 2]> = uvs.iter().map(|uv| [uv.x, uv.y]).collect();
             TilePlanner::new(
                 (self.width, self.height),
                 tri,
                 &uvs,
                 self.dilate,
                 self.sigma_max_um,
-                self.tolerance,
+                self.tolerance.map(|t| t as f32),
             )
         });
         let plan = planner.plan(&verts);
@@ -334,6 +369,8 @@ impl GpuMicro {
             normals: 0,
             total: plan.pass_s.total(),
         };
+        self.pass_tiles.0 += (self.tiles.pass_s + self.tiles.pass_t) as u64;
+        self.pass_tiles.1 += 2 * self.tiles.total as u64;
         if normals {
             self.tiles.normals = write(2, &self.normals_due);
             self.normals_due = TileMask::empty(self.width, self.height);

@@ -249,7 +249,7 @@ impl TilePlanner {
             .map(|(v, l)| {
                 let dt = v.t.iter().zip(&l.t).map(|(a, b)| (a - b).abs());
                 let df = v.frame.iter().zip(&l.frame).map(|(a, b)| (a - b).abs() / scale);
-                dt.chain(df).any(|d| !(d <= tolerance))
+                dt.chain(df).any(|d| d > tolerance || d.is_nan())
             })
             .collect();
         let mut pass_s = TileMask::empty(self.width, self.height);

@@ -57,12 +57,7 @@ impl MicroEngine {
             return Ok(MicroEngine::Cpu);
         };
         let name = ctx.describe();
-        let built = crate::gpu::micro::GpuMicro::new(
-            ctx,
-            &micro.neutral,
-            &micro.model,
-            crate::strain::raster::DILATE_TEXELS,
-        );
+        let built = crate::gpu::micro::GpuMicro::for_scenario(ctx, micro);
         Ok(match crate::gpu::or_cpu(built)? {
             Some(chain) => {
                 log::info!("microstructure stages on the GPU: {name}");
@@ -74,7 +69,19 @@ impl MicroEngine {
 
     fn describe(&self) -> String {
         match self {
-            MicroEngine::Gpu(chain) => format!("GPU: {}", chain.context().describe()),
+            MicroEngine::Gpu(chain) => {
+                let mut text = format!("GPU: {}", chain.context().describe());
+                if let Some(share) = chain.pass_tile_share() {
+                    text += &format!(
+                        "; convolution passes ran on {:.1}% of the map's tiles",
+                        100.0 * share
+                    );
+                    if let Some(t) = chain.incremental() {
+                        text += &format!(" (incremental frames, tolerance {})", crate::error::shown(t));
+                    }
+                }
+                text
+            }
             MicroEngine::Cpu => "CPU reference stages".into(),
         }
     }
@@ -209,7 +216,6 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<RunSum
     if let Some(micro) = &setup.micro {
         written.extend(write_neutral(dir, setup, micro)?);
     }
-    let micro_device = engine.as_ref().map(MicroEngine::describe);
     let mut hdf = None;
     let result = simulate(setup, |m, sim| {
         let mut m = *m;
@@ -302,7 +308,7 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<RunSum
         written,
         quality: QualityReport::of(&setup.mesh),
         frames,
-        micro_device,
+        micro_device: engine.as_ref().map(MicroEngine::describe),
     })
 }
 

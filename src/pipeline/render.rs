@@ -293,11 +293,9 @@ pub fn bench_render(
     let (lo, hi) = setup.mesh.bounds();
     let albedo = Albedo::from_source(&render.albedo, render.texture_px, hi.x - lo.x)?;
     let mut chain = match &micro {
-        Some(m) => Some(GpuMicro::new(
+        Some(m) => Some(GpuMicro::for_scenario(
             ctx.take().expect("the device is unused so far"),
-            &m.neutral,
-            &m.model,
-            crate::strain::raster::DILATE_TEXELS,
+            m,
         )?),
         None => None,
     };

@@ -40,6 +40,14 @@ pub struct MicrostructureSection {
     /// Write `micro/roughness.csv`: Beckmann roughness m(r) of the neutral map
     /// under the kernel model for r = 0.70 … 1.40 (seed 003). Default false.
     pub roughness_table: bool,
+    /// Incremental frames on the GPU: a map tile is convolved again only
+    /// when a surface vertex it depends on changed its stretch (`T − I`
+    /// entries) or its UV frame (entries relative to the largest) by more
+    /// than this since the tile was last convolved. 0 reuses only tiles
+    /// whose inputs are bit-identical (same output as full frames). Default:
+    /// none (every tile under the surface, every frame). The CPU reference
+    /// always computes whole frames.
+    pub incremental_tolerance: Option<f64>,
 }
 
 impl Default for MicrostructureSection {
@@ -56,6 +64,7 @@ impl Default for MicrostructureSection {
             normal_maps: true,
             frame_stride: 1,
             roughness_table: false,
+            incremental_tolerance: None,
         }
     }
 }
@@ -122,6 +131,8 @@ pub struct MicroSetup {
     pub frame_stride: usize,
     /// Write the roughness table.
     pub roughness_table: bool,
+    /// Incremental frames' tolerance on the GPU (none: whole frames).
+    pub incremental_tolerance: Option<f64>,
 }
 
 fn table(points: &[[f64; 2]]) -> PiecewiseLinear {
@@ -163,6 +174,14 @@ impl MicrostructureSection {
                 "microstructure.frame_stride",
                 "must be ≥ 1, got 0",
             ));
+        }
+        if let Some(t) = self.incremental_tolerance {
+            if !(t.is_finite() && t >= 0.0) {
+                return Err(Error::parameter(
+                    "microstructure.incremental_tolerance",
+                    format!("must be finite and ≥ 0, got {}", crate::error::shown(t)),
+                ));
+            }
         }
         let unit = self.height_unit_um;
         if !(unit.is_finite() && unit > 0.0) {
@@ -237,6 +256,7 @@ impl MicrostructureSection {
             normal_maps: self.normal_maps,
             frame_stride: self.frame_stride,
             roughness_table: self.roughness_table,
+            incremental_tolerance: self.incremental_tolerance,
         })
     }
 

@@ -267,12 +267,7 @@ impl App {
         surface.configure(&ctx.device, &config);
         let (chain, own) = match &self.loaded.setup.micro {
             Some(m) => {
-                let chain = GpuMicro::new(
-                    ctx,
-                    &m.neutral,
-                    &m.model,
-                    crate::strain::raster::DILATE_TEXELS,
-                )?;
+                let chain = GpuMicro::for_scenario(ctx, m)?;
                 (Some(chain), None)
             }
             None => (None, Some(ctx)),
