@@ -59,6 +59,9 @@ pub struct MicroRow {
     pub gpu_readback_ms: Option<f64>,
     /// Largest |GPU − CPU| of D′ relative to the height range.
     pub max_difference: Option<f64>,
+    /// Share of the map's tiles the GPU passes ran on (the rest lies
+    /// beyond the surface's reach and keeps the neutral map).
+    pub pass_tile_share: Option<f64>,
     /// Each stage of a GPU frame submitted alone and waited for: wall
     /// time and, where the adapter has timestamp queries, GPU time (ms).
     pub stages: Option<StageTimes>,
@@ -153,6 +156,7 @@ pub fn bench_micro(
             gpu_ms: None,
             gpu_readback_ms: None,
             max_difference: None,
+            pass_tile_share: None,
             stages: None,
         };
         if let Some(c) = ctx.take() {
@@ -170,6 +174,9 @@ pub fn bench_micro(
             let frame = chain.deform(&field, normals)?;
             row.gpu_readback_ms = Some(start.elapsed().as_secs_f64() * 1e3);
             row.max_difference = cpu.as_ref().map(|c| c.max_difference(&frame.map));
+            let tiles = chain.last_tiles();
+            row.pass_tile_share =
+                Some((tiles.pass_s + tiles.pass_t) as f64 / (2 * tiles.total) as f64);
             row.stages = Some(chain.time_stages(&field)?);
             ctx = Some(chain.into_context());
         }

@@ -506,13 +506,13 @@ fn bench_micro(
         ),
     }
     println!(
-        "{:>6} {:>9} {:>12} {:>12} {:>16} {:>10} {:>12}",
-        "size", "texel µm", "CPU ms", "GPU ms", "GPU+readback ms", "CPU/GPU", "max |Δ|"
+        "{:>6} {:>9} {:>12} {:>12} {:>16} {:>10} {:>12} {:>8}",
+        "size", "texel µm", "CPU ms", "GPU ms", "GPU+readback ms", "CPU/GPU", "max |Δ|", "tiles %"
     );
     let fmt = |x: Option<f64>, p: usize| x.map_or("-".to_string(), |v| format!("{v:.p$}"));
     let bench = skinpatch::bench::bench_micro(&setup.mesh, &model, sizes, frames, layout, |r| {
         println!(
-            "{:>6} {:>9.3} {:>12} {:>12} {:>16} {:>10} {:>12}",
+            "{:>6} {:>9.3} {:>12} {:>12} {:>16} {:>10} {:>12} {:>8}",
             r.size,
             r.texel_um,
             fmt(r.cpu_ms, 1),
@@ -521,8 +521,10 @@ fn bench_micro(
             fmt(r.cpu_ms.zip(r.gpu_ms).map(|(c, g)| c / g), 1),
             r.max_difference
                 .map_or("-".to_string(), |d| format!("{d:.1e}")),
+            fmt(r.pass_tile_share.map(|s| 100.0 * s), 1),
         );
     })?;
+    println!("tiles %: share of the map's tiles the GPU passes ran on (the others keep the neutral map)");
     match &bench.adapter {
         Some(a) => println!("GPU: {a}; GPU ms is the mean of {} frames", frames.max(1)),
         None => println!("no GPU adapter: CPU figures only"),

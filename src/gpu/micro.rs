@@ -15,7 +15,7 @@
 use super::convolve::{ConvolveStage, Params, PassInfo};
 use super::map::GpuMap;
 use super::normals::{normal_texture, read_normals, NormalsStage};
-use super::raster::{vertices, RasterStage, RasterTargets, SurfaceBuffers};
+use super::raster::{vertices, RasterStage, RasterTargets, RasterVertex, SurfaceBuffers};
 use super::svd2::Svd2Stage;
 use super::tiles::{TileMask, TilePlanner};
 use super::{buffers, encoder, Context};
@@ -110,6 +110,20 @@ pub struct FrameTiles {
     pub total: usize,
 }
 
+/// Where a chain's map lies in a larger map: it holds texels `origin ..
+/// origin + its size` of a `map_size` map (a tile and its halo, see
+/// [`super::tiled`]); texels beyond the larger map's edges follow its edge
+/// rule, so with `wrap` the surface is drawn again across each edge.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct UvWindow {
+    /// Texel of the larger map at the chain's texel (0, 0) (may be negative).
+    pub origin: [isize; 2],
+    /// Size of the larger map (texels).
+    pub map_size: [usize; 2],
+    /// Whether the larger map wraps around.
+    pub wrap: bool,
+}
+
 /// The resident per-frame chain.
 pub struct GpuMicro {
     ctx: Context,
@@ -122,8 +136,10 @@ pub struct GpuMicro {
     raster: RasterStage,
     targets: RasterTargets,
     surface: Option<SurfaceBuffers>,
-    /// The triangles and UVs `surface` and the planner were made for.
-    layout: Option<(Vec<[usize; 3]>, Vec<[f64; 2]>)>,
+    /// The triangles and raster UVs `surface` and the planner were made for.
+    layout: Option<(Vec<[usize; 3]>, Vec<[f32; 2]>)>,
+    /// Where this chain's map lies in a larger one (none: it is the map).
+    window: Option<UvWindow>,
     strain_inputs: wgpu::BindGroup,
     convolve: ConvolveStage,
     pass_binds: [wgpu::BindGroup; 2],
@@ -193,6 +209,7 @@ impl GpuMicro {
             targets,
             surface: None,
             layout: None,
+            window: None,
             strain_inputs,
             convolve,
             pass_binds,
@@ -220,6 +237,20 @@ impl GpuMicro {
             crate::strain::raster::DILATE_TEXELS,
         )?;
         chain.set_incremental(micro.incremental_tolerance);
+        Ok(chain)
+    }
+
+    /// A chain over `window_map`, the texels of a larger map that `window`
+    /// says (the surface field's UVs stay those of the larger map).
+    pub fn for_window(
+        ctx: Context,
+        window_map: &DisplacementMap,
+        model: &KernelModel,
+        dilate: usize,
+        window: UvWindow,
+    ) -> Result<GpuMicro> {
+        let mut chain = GpuMicro::new(ctx, window_map, model, dilate)?;
+        chain.window = Some(window);
         Ok(chain)
     }
 
@@ -326,28 +357,76 @@ impl GpuMicro {
         Ok(times)
     }
 
+    /// The triangles and raster vertices of `field` in this chain's map:
+    /// as they are, or moved into the window (with the copies a wrapping map
+    /// shows across its edges).
+    fn raster_layout(&self, field: &SurfaceField) -> (Vec<[usize; 3]>, Vec<RasterVertex>) {
+        let (tri, _) = field.layout();
+        let verts = vertices(field);
+        let Some(win) = self.window else {
+            return (tri.to_vec(), verts);
+        };
+        let (mw, mh) = (win.map_size[0] as f64, win.map_size[1] as f64);
+        let (w, h) = (self.width as f64, self.height as f64);
+        let shifts: &[[f64; 2]] = if win.wrap {
+            &[
+                [0.0, 0.0],
+                [-1.0, 0.0],
+                [1.0, 0.0],
+                [0.0, -1.0],
+                [0.0, 1.0],
+                [-1.0, -1.0],
+                [1.0, -1.0],
+                [-1.0, 1.0],
+                [1.0, 1.0],
+            ]
+        } else {
+            &[[0.0, 0.0]]
+        };
+        let (su, sv) = ((mw / w) as f32, (mh / h) as f32);
+        let uvs = field.layout().1;
+        let mut out_tri = Vec::with_capacity(tri.len() * shifts.len());
+        let mut out = Vec::with_capacity(verts.len() * shifts.len());
+        for shift in shifts {
+            let base = out.len();
+            out_tri.extend(tri.iter().map(|t| t.map(|k| k + base)));
+            out.extend(verts.iter().zip(uvs).map(|(v, uv)| {
+                let f = v.frame;
+                RasterVertex {
+                    uv: [
+                        (((uv.x + shift[0]) * mw - win.origin[0] as f64) / w) as f32,
+                        (((uv.y + shift[1]) * mh - win.origin[1] as f64) / h) as f32,
+                    ],
+                    t: v.t,
+                    frame: [f[0] * su, f[1] * su, f[2] * sv, f[3] * sv],
+                }
+            }));
+        }
+        (out_tri, out)
+    }
+
     /// Uploads `field`'s raster vertices and this frame's tile lists (the
     /// normals' list when `normals`, else they stay due).
     fn prepare(&mut self, field: &SurfaceField, normals: bool) {
-        let verts = vertices(field);
-        let (tri, uvs) = field.layout();
-        let uvs: Vec<[f64; 2]> = uvs.iter().map(|uv| [uv.x, uv.y]).collect();
+        let (tri, verts) = self.raster_layout(field);
+        let uvs: Vec<[f32; 2]> = verts.iter().map(|v| v.uv).collect();
         match (&self.surface, &self.layout) {
             (Some(s), Some(layout)) if layout.0 == tri && layout.1 == uvs => {
                 s.write(&self.ctx, &verts)
             }
             _ => {
                 // A new UV layout: the maps and raster start over.
-                self.surface = Some(SurfaceBuffers::new(&self.ctx, field));
-                self.layout = Some((tri.to_vec(), uvs.clone()));
+                self.surface = Some(SurfaceBuffers::from_parts(&self.ctx, &tri, &verts));
+                self.layout = Some((tri.clone(), uvs.clone()));
                 self.planner = None;
                 self.reset();
             }
         }
         let planner = self.planner.get_or_insert_with(|| {
+            let uvs: Vec<[f64; 2]> = uvs.iter().map(|uv| uv.map(f64::from)).collect();
             TilePlanner::new(
                 (self.width, self.height),
-                tri,
+                &tri,
                 &uvs,
                 self.dilate,
                 self.sigma_max_um,

@@ -67,7 +67,8 @@ pub struct AdapterReport {
     pub features: wgpu::Features,
 }
 
-/// A headless device and its queue.
+/// A headless device and its queue (clones share the device).
+#[derive(Clone)]
 pub struct Context {
     /// The device.
     pub device: wgpu::Device,

@@ -62,14 +62,17 @@ pub struct SurfaceBuffers {
 impl SurfaceBuffers {
     /// Buffers for `field`'s layout, holding its current vertices.
     pub fn new(ctx: &Context, field: &SurfaceField) -> SurfaceBuffers {
-        let (tri, _) = field.layout();
+        SurfaceBuffers::from_parts(ctx, field.layout().0, &vertices(field))
+    }
+
+    /// Buffers for triangles `tri` over raster vertices `verts`.
+    pub fn from_parts(ctx: &Context, tri: &[[usize; 3]], verts: &[RasterVertex]) -> SurfaceBuffers {
         let indices: Vec<u32> = tri.iter().flatten().map(|&k| k as u32).collect();
-        let verts = vertices(field);
         SurfaceBuffers {
             vertices: buffers::init(
                 ctx,
                 "raster vertices",
-                bytemuck::cast_slice(&verts),
+                bytemuck::cast_slice(verts),
                 wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
             ),
             indices: buffers::init(

@@ -14,7 +14,9 @@
 //!   prefiltered (LEAN) specular;
 //! * [`roughness`]: per-axis Beckmann roughness m(r) from the kernel model
 //!   (seed 003), for the renderer;
-//! * [`io`]: 16-bit PNG and f32 EXR files.
+//! * [`io`]: 16-bit PNG and f32 EXR files;
+//! * [`tiled`]: maps held as a folder of EXR tiles with an index
+//!   (face-scale maps, read and written a tile at a time).
 //!
 //! File I/O lives in [`io`] only; the rest is numeric.
 
@@ -27,6 +29,7 @@ pub mod moments;
 pub mod normals;
 pub mod procedural;
 pub mod roughness;
+pub mod tiled;
 
 pub use convolve::{convolve, KernelField, PassParams};
 pub use kernel::{KernelModel, KernelParams, PiecewiseLinear};
