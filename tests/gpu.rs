@@ -443,6 +443,75 @@ fn tiled_and_incremental_frames_match_whole_frames() {
     assert!(d < 1e-4, "kept frame vs C: {d:e} of the height range");
 }
 
+/// A tiled map convolved tile by tile equals the untiled chain within 1e-5
+/// of the height range (heights and normals, seams included), on a clamped
+/// map with the patch on its centre (tiles beyond the surface's reach keep
+/// the neutral map and get no chain) and on a wrapping map the patch covers
+/// (every tile works, across the map's edges too).
+#[test]
+fn tiled_maps_match_the_untiled_chain_across_seams() {
+    use skinpatch::gpu::tiled::{TileFrame, TiledMicro};
+    use skinpatch::micro::tiled::{crop, TiledMap};
+    let Some(ctx) = context() else { return };
+    let mesh = patch_3k();
+    let model = KernelModel::forehead();
+    let dir = tempfile::tempdir().unwrap();
+    for (edge, shrink, size) in [(Edge::Clamp, 3.0, (560, 496)), (Edge::Wrap, 1.0, (300, 260))] {
+        let mut neutral = skin_map(size.0, size.1, edge);
+        neutral.texel_um = 10_000.0 * shrink / size.0 as f64;
+        let mut top = mesh.top.clone();
+        for uv in &mut top.uvs {
+            *uv = uv.map(|c| 0.5 + (c - 0.5) / shrink);
+        }
+        let field = SurfaceField::new(&top, &mesh.positions, &deformed(&mesh));
+        let mut whole =
+            gpu::micro::GpuMicro::new(ctx.clone(), &neutral, &model, DILATE_TEXELS).unwrap();
+        let reference = whole.deform(&field, true).unwrap();
+        let normals = reference.normals.unwrap();
+        let (lo, hi) = neutral.range();
+        let tiled = TiledMap::write(&dir.path().join(format!("{edge:?}")), &neutral, 128).unwrap();
+        let mut chains = TiledMicro::new(ctx.clone(), tiled.clone(), &model, DILATE_TEXELS);
+        let (mut worst, mut worst_normal, mut kept, mut seen) = (0.0f32, 0.0f32, 0, 0);
+        chains
+            .deform(&field, true, |col, row, tile| {
+                seen += 1;
+                let rect = tiled.tile_rect(col, row);
+                let want = crop(&reference.map, rect);
+                match tile {
+                    TileFrame::Deformed { map, normals: n } => {
+                        for (a, b) in map.data.iter().zip(&want.data) {
+                            worst = worst.max((a - b).abs() / (hi - lo));
+                        }
+                        let n_want = skinpatch::micro::tiled::crop_values(&normals, size.0, rect);
+                        for (a, b) in n.unwrap().iter().zip(&n_want) {
+                            for k in 0..3 {
+                                worst_normal = worst_normal.max((a[k] - b[k]).abs());
+                            }
+                        }
+                    }
+                    TileFrame::Neutral => {
+                        kept += 1;
+                        assert!(want == crop(&neutral, rect), "tile ({col}, {row}) moved");
+                    }
+                }
+                Ok(())
+            })
+            .unwrap();
+        eprintln!(
+            "{edge:?}: tiled − untiled ≤ {worst:.1e} of the range, normals ≤ {worst_normal:.1e}; \
+             {kept} of {seen} tiles kept, halo {}",
+            chains.halo()
+        );
+        assert_eq!(seen, tiled.grid().0 * tiled.grid().1);
+        assert!(worst <= 1e-5, "{edge:?}: {worst:e}");
+        assert!(worst_normal <= 1e-5, "{edge:?}: normals {worst_normal:e}");
+        match edge {
+            Edge::Clamp => assert!(kept > 0 && kept < seen, "{kept} of {seen}"),
+            Edge::Wrap => assert_eq!(kept, 0),
+        }
+    }
+}
+
 /// The GPU counts the CPU's candidate histograms (up to texels on a cell
 /// edge, where f32 square roots may round apart) and its search finds the
 /// CPU's optimum.

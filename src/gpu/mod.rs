@@ -39,6 +39,7 @@ pub mod moments;
 pub mod normals;
 pub mod raster;
 pub mod svd2;
+pub mod tiled;
 pub mod tiles;
 pub mod timing;
 pub mod vulkan;

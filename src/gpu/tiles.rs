@@ -292,30 +292,41 @@ impl TilePlanner {
         }
     }
 
-    /// How far (in tiles) the t pass reads the s pass's output: `⌈3σ⌉`
-    /// taps of unit length plus the bilinear neighbour, σ in texels at most
-    /// the model's largest σ times the largest texels per millimetre of
-    /// any vertex frame (interpolation and dilation cannot exceed the
-    /// vertices' largest).
+    /// How far (in tiles) the t pass reads the s pass's output
+    /// ([`pass_reach`]); the whole grid when the bound is not finite.
     fn reach_tiles(&self, vertices: &[RasterVertex]) -> usize {
-        let (w, h) = (self.width as f64, self.height as f64);
-        let per_mm = vertices
-            .iter()
-            .map(|v| {
-                let f = v.frame.map(f64::from);
-                // Frobenius norm of diag(w, h)·Q Rᵀ bounds its columns' lengths.
-                ((f[0] * w).powi(2) + (f[1] * w).powi(2) + (f[2] * h).powi(2) + (f[3] * h).powi(2))
-                    .sqrt()
-            })
-            .fold(0.0f64, f64::max);
-        // A margin for the shader's f32 arithmetic.
-        let sigma = self.sigma_max_um * 1e-3 * per_mm * (1.0 + 1e-4);
-        if !sigma.is_finite() {
-            return self.surface.cols.max(self.surface.rows);
+        match pass_reach(vertices, (self.width, self.height), self.sigma_max_um) {
+            Some(reach) => reach.div_ceil(TILE),
+            None => self.surface.cols.max(self.surface.rows),
         }
-        let reach = (3.0 * sigma).ceil() + 1.0;
-        (reach / TILE as f64).ceil() as usize
     }
+}
+
+/// How far (texels) a pass at any texel of a `width × height` map reads
+/// around it: `⌈3σ⌉` taps of unit length plus the bilinear neighbour, σ in
+/// texels at most `sigma_max_um` times the largest texels per millimetre of
+/// any vertex frame (interpolation and dilation cannot exceed the
+/// vertices' largest). `None` when a frame is not finite.
+pub fn pass_reach(
+    vertices: &[RasterVertex],
+    (width, height): (usize, usize),
+    sigma_max_um: f64,
+) -> Option<usize> {
+    let (w, h) = (width as f64, height as f64);
+    let per_mm = vertices
+        .iter()
+        .map(|v| {
+            let f = v.frame.map(f64::from);
+            // Frobenius norm of diag(w, h)·Q Rᵀ bounds its columns' lengths.
+            ((f[0] * w).powi(2) + (f[1] * w).powi(2) + (f[2] * h).powi(2) + (f[3] * h).powi(2))
+                .sqrt()
+        })
+        .fold(0.0f64, |m, x| if m.is_nan() || x.is_nan() { f64::NAN } else { m.max(x) });
+    // A margin for the shader's f32 arithmetic.
+    let sigma = sigma_max_um * 1e-3 * per_mm * (1.0 + 1e-4);
+    sigma
+        .is_finite()
+        .then(|| (3.0 * sigma).ceil() as usize + 1)
 }
 
 #[cfg(test)]

@@ -286,19 +286,24 @@ impl TiledMap {
 }
 
 /// Texels `[x0, y0, width, height]` of `map` (inside it), with its metadata.
-pub fn crop(map: &DisplacementMap, [x0, y0, w, h]: [usize; 4]) -> DisplacementMap {
-    let mut data = Vec::with_capacity(w * h);
-    for j in y0..y0 + h {
-        data.extend_from_slice(&map.data[j * map.width + x0..j * map.width + x0 + w]);
-    }
+pub fn crop(map: &DisplacementMap, rect: [usize; 4]) -> DisplacementMap {
     DisplacementMap {
-        width: w,
-        height: h,
+        width: rect[2],
+        height: rect[3],
         texel_um: map.texel_um,
         height_unit_um: map.height_unit_um,
         edge: map.edge,
-        data,
+        data: crop_values(&map.data, map.width, rect),
     }
+}
+
+/// Entries `[x0, y0, width, height]` of a row-major grid `grid_width` wide.
+pub fn crop_values<T: Copy>(values: &[T], grid_width: usize, [x0, y0, w, h]: [usize; 4]) -> Vec<T> {
+    let mut out = Vec::with_capacity(w * h);
+    for j in y0..y0 + h {
+        out.extend_from_slice(&values[j * grid_width + x0..j * grid_width + x0 + w]);
+    }
+    out
 }
 
 #[cfg(test)]

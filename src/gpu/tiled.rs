@@ -1,0 +1,211 @@
+//! The per-frame chain over a tiled map ([`crate::micro::tiled`]): maps
+//! beyond one storage binding or texture side, convolved tile by tile.
+//!
+//! Each map tile the surface can change gets its own resident chain
+//! ([`GpuMicro`]) over the tile and a halo around it, built on the first
+//! frame; the halo holds every texel the tile's outputs read, so a tile's
+//! result equals the untiled chain's there up to the f32 rounding of its
+//! UVs moved into the window. What a texel reads: the t pass reads the s
+//! pass's output up to the kernel's reach `R` ([`super::tiles::pass_reach`]),
+//! the s pass reads the neutral map up to `R` and takes its parameters from
+//! the raster up to the dilation `d` away, and the normals read one texel
+//! around: a halo of `2R + d + 2` texels. A tile farther than `R + d + 2`
+//! texels from every surface texel keeps the neutral map (and its normals)
+//! and has no chain. With a wrapping map the surface is also drawn across
+//! each edge of a window that reaches past the map's edges.
+//!
+//! Every chain runs the same incremental-frame rule as an untiled one
+//! ([`GpuMicro::set_incremental`]).
+
+use super::micro::{GpuMicro, UvWindow};
+use super::raster::vertices;
+use super::tiles::pass_reach;
+use super::Context;
+use crate::error::{Error, Result};
+use crate::micro::tiled::{crop, crop_values, TiledMap};
+use crate::micro::{DisplacementMap, Edge, KernelModel};
+use crate::strain::SurfaceField;
+
+/// One tile of a frame, as [`TiledMicro::deform`] hands it out.
+pub enum TileFrame {
+    /// The tile's deformed heights (and normals when asked for).
+    Deformed {
+        /// D′ over the tile.
+        map: DisplacementMap,
+        /// Its normals.
+        normals: Option<Vec<[f32; 3]>>,
+    },
+    /// Beyond the surface's reach: the neutral tile (and its normals).
+    Neutral,
+}
+
+struct TileChain {
+    col: usize,
+    row: usize,
+    chain: GpuMicro,
+}
+
+/// The resident chains of a tiled map.
+pub struct TiledMicro {
+    ctx: Context,
+    source: TiledMap,
+    model: KernelModel,
+    dilate: usize,
+    tolerance: Option<f64>,
+    halo: usize,
+    chains: Vec<TileChain>,
+}
+
+impl TiledMicro {
+    /// The chains of `source` under `model` with the raster dilated by
+    /// `dilate` texels; nothing is read or built before the first frame.
+    pub fn new(ctx: Context, source: TiledMap, model: &KernelModel, dilate: usize) -> TiledMicro {
+        TiledMicro {
+            ctx,
+            source,
+            model: model.clone(),
+            dilate,
+            tolerance: None,
+            halo: 0,
+            chains: Vec::new(),
+        }
+    }
+
+    /// Incremental frames in every chain ([`GpuMicro::set_incremental`]).
+    pub fn set_incremental(&mut self, tolerance: Option<f64>) {
+        self.tolerance = tolerance;
+        for c in &mut self.chains {
+            c.chain.set_incremental(tolerance);
+        }
+    }
+
+    /// The tiled map the chains convolve.
+    pub fn source(&self) -> &TiledMap {
+        &self.source
+    }
+
+    /// The tiles that have a chain (the others keep the neutral map).
+    pub fn active_tiles(&self) -> Vec<(usize, usize)> {
+        self.chains.iter().map(|c| (c.col, c.row)).collect()
+    }
+
+    /// The halo around each tile (texels; 0 before the first frame).
+    pub fn halo(&self) -> usize {
+        self.halo
+    }
+
+    /// Gives the device back.
+    pub fn into_context(self) -> Context {
+        self.ctx
+    }
+
+    /// One frame: `emit(col, row, tile)` for every tile of the map, in
+    /// row-major order (normals too when `normals`).
+    pub fn deform(
+        &mut self,
+        field: &SurfaceField,
+        normals: bool,
+        mut emit: impl FnMut(usize, usize, TileFrame) -> Result<()>,
+    ) -> Result<()> {
+        let size = (self.source.width, self.source.height);
+        let reach = pass_reach(&vertices(field), size, self.model.max_sigma_um()).ok_or_else(
+            || Error::parameter("microstructure", "the surface's UV frames are not finite"),
+        )?;
+        let halo = 2 * reach + self.dilate + 2;
+        if halo > self.halo {
+            // The first frame, or one whose kernels reach farther than the
+            // halo: (re)build the chains.
+            self.build(field, reach, halo)?;
+        }
+        let (cols, rows) = self.source.grid();
+        let mut chains = self.chains.iter_mut().peekable();
+        for row in 0..rows {
+            for col in 0..cols {
+                match chains.peek_mut() {
+                    Some(c) if (c.col, c.row) == (col, row) => {
+                        let frame = c.chain.deform(field, normals)?;
+                        let [_, _, w, h] = self.source.tile_rect(col, row);
+                        let inner = [self.halo, self.halo, w, h];
+                        let mut map = crop(&frame.map, inner);
+                        map.edge = self.source.edge;
+                        let normals = frame
+                            .normals
+                            .map(|n| crop_values(&n, frame.map.width, inner));
+                        emit(col, row, TileFrame::Deformed { map, normals })?;
+                        chains.next();
+                    }
+                    _ => emit(col, row, TileFrame::Neutral)?,
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Chains for the tiles within `reach + dilate + 2` texels of the
+    /// surface's UV bounding boxes, each over its tile and `halo`.
+    fn build(&mut self, field: &SurfaceField, reach: usize, halo: usize) -> Result<()> {
+        let src = &self.source;
+        let (mw, mh) = (src.width as f64, src.height as f64);
+        let margin = (reach + self.dilate + 2) as f64 + 1.0;
+        let (tri, uvs) = field.layout();
+        let shifts: &[f64] = if src.edge == Edge::Wrap {
+            &[-1.0, 0.0, 1.0]
+        } else {
+            &[0.0]
+        };
+        let (cols, rows) = src.grid();
+        let mut active = vec![false; cols * rows];
+        for t in tri {
+            let p = t.map(|k| uvs[k]);
+            let lo = [0, 1].map(|c| p.iter().map(|q| q[c]).fold(f64::INFINITY, f64::min));
+            let hi = [0, 1].map(|c| p.iter().map(|q| q[c]).fold(f64::NEG_INFINITY, f64::max));
+            for &su in shifts {
+                for &sv in shifts {
+                    let x0 = ((lo[0] + su) * mw - 0.5 - margin).floor();
+                    let x1 = ((hi[0] + su) * mw - 0.5 + margin).ceil();
+                    let y0 = ((lo[1] + sv) * mh - 0.5 - margin).floor();
+                    let y1 = ((hi[1] + sv) * mh - 0.5 + margin).ceil();
+                    if !(x0.is_finite() && y0.is_finite() && x1.is_finite() && y1.is_finite())
+                        || x1 < 0.0
+                        || y1 < 0.0
+                        || x0 >= mw
+                        || y0 >= mh
+                    {
+                        continue;
+                    }
+                    let tile = |x: f64, n: usize| (x.max(0.0) as usize / src.tile).min(n - 1);
+                    for row in tile(y0, rows)..=tile(y1, rows) {
+                        for col in tile(x0, cols)..=tile(x1, cols) {
+                            active[row * cols + col] = true;
+                        }
+                    }
+                }
+            }
+        }
+        let window = [src.tile.min(src.width), src.tile.min(src.height)].map(|n| n + 2 * halo);
+        self.ctx.check_map(window[0], window[1], super::micro::LARGEST_BYTES_PER_TEXEL)?;
+        self.chains.clear();
+        self.halo = halo;
+        for (k, _) in active.iter().enumerate().filter(|(_, &a)| a) {
+            let (col, row) = (k % cols, k / cols);
+            let [x0, y0, w, h] = src.tile_rect(col, row);
+            let origin = [x0 as isize - halo as isize, y0 as isize - halo as isize];
+            let neutral = src.read_window(origin, [w + 2 * halo, h + 2 * halo])?;
+            let win = UvWindow {
+                origin,
+                map_size: [src.width, src.height],
+                wrap: src.edge == Edge::Wrap,
+            };
+            let mut chain =
+                GpuMicro::for_window(self.ctx.clone(), &neutral, &self.model, self.dilate, win)?;
+            chain.set_incremental(self.tolerance);
+            self.chains.push(TileChain { col, row, chain });
+        }
+        log::info!(
+            "tiled microstructure: {} of {} tiles within the surface's reach ({reach} texels), halo {halo}",
+            self.chains.len(),
+            cols * rows
+        );
+        Ok(())
+    }
+}
