@@ -41,7 +41,28 @@ pub enum MapLayout {
         texel_um: f64,
         /// Largest side the CPU reference runs at.
         cpu_up_to: usize,
+        /// Also hold the map as tiles of this side and convolve it tile by
+        /// tile ([`crate::gpu::tiled::TiledMicro`]).
+        tile: Option<usize>,
     },
+}
+
+/// Figures of the tiled chain at one size.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TiledRow {
+    /// Tile side (texels).
+    pub tile: usize,
+    /// Tiles with a chain (within the surface's reach).
+    pub active: usize,
+    /// Tiles in the map.
+    pub total: usize,
+    /// Halo around each tile (texels).
+    pub halo: usize,
+    /// Frame over every chain, no read-back, mean over the repetitions (ms).
+    pub gpu_ms: f64,
+    /// Largest |tiled − untiled| of D′ relative to the height range, where
+    /// the untiled chain ran.
+    pub max_difference: Option<f64>,
 }
 
 /// Figures at one map size.
@@ -65,6 +86,11 @@ pub struct MicroRow {
     /// Each stage of a GPU frame submitted alone and waited for: wall
     /// time and, where the adapter has timestamp queries, GPU time (ms).
     pub stages: Option<StageTimes>,
+    /// The map held as tiles, where asked for.
+    pub tiled: Option<TiledRow>,
+    /// Why the untiled GPU chain did not run (the map exceeds the
+    /// adapter's limits), where it did not.
+    pub untiled_skipped: Option<String>,
 }
 
 /// What the bench ran on.
@@ -135,7 +161,12 @@ pub fn bench_micro(
             MapLayout::FixedTexel {
                 texel_um,
                 cpu_up_to,
+                ..
             } => (size as f64 * texel_um / 1000.0, size <= cpu_up_to),
+        };
+        let tile = match layout {
+            MapLayout::FixedTexel { tile, .. } => tile,
+            MapLayout::FixedPatch => None,
         };
         let field = centred_field(mesh, &deformed, patch_mm / extent_mm)?;
         let neutral = bench_map(size, extent_mm)?;
@@ -158,8 +189,17 @@ pub fn bench_micro(
             max_difference: None,
             pass_tile_share: None,
             stages: None,
+            tiled: None,
+            untiled_skipped: None,
         };
-        if let Some(c) = ctx.take() {
+        let mut untiled = None;
+        let fits = ctx
+            .as_ref()
+            .map(|c| c.check_map(size, size, crate::gpu::micro::LARGEST_BYTES_PER_TEXEL));
+        if let (Some(Err(e)), Some(_)) = (&fits, tile) {
+            // The tiled chain is the one that can run this size.
+            row.untiled_skipped = Some(e.to_string());
+        } else if let Some(c) = ctx.take() {
             let mut chain = GpuMicro::new(c, &neutral, model, DILATE_TEXELS)?;
             chain.run(&field)?; // warm-up: first use of the pipelines
             let start = Instant::now();
@@ -178,12 +218,78 @@ pub fn bench_micro(
             row.pass_tile_share =
                 Some((tiles.pass_s + tiles.pass_t) as f64 / (2 * tiles.total) as f64);
             row.stages = Some(chain.time_stages(&field)?);
+            untiled = Some(frame.map);
             ctx = Some(chain.into_context());
+        }
+        if let (Some(tile), Some(c)) = (tile, &ctx) {
+            row.tiled = Some(bench_tiled(
+                c,
+                &neutral,
+                model,
+                &field,
+                tile,
+                repetitions,
+                untiled.as_ref(),
+            )?);
         }
         on_row(&row);
         rows.push(row);
     }
     Ok(MicroBench { adapter, rows })
+}
+
+/// The tiled chain over `neutral` held as tiles of `tile` texels (in a
+/// scratch folder, removed after), timed like the untiled one and compared
+/// with its output `untiled` where given.
+fn bench_tiled(
+    ctx: &crate::gpu::Context,
+    neutral: &DisplacementMap,
+    model: &KernelModel,
+    field: &SurfaceField,
+    tile: usize,
+    repetitions: usize,
+    untiled: Option<&DisplacementMap>,
+) -> Result<TiledRow> {
+    use crate::gpu::tiled::{TileFrame, TiledMicro};
+    use crate::micro::tiled::{crop, TiledMap};
+    let dir = std::env::temp_dir().join(format!("skinpatch-bench-tiles-{}", std::process::id()));
+    let result = (|| {
+        let tiled = TiledMap::write(&dir, neutral, tile)?;
+        let (cols, rows) = tiled.grid();
+        let mut chains = TiledMicro::new(ctx.clone(), tiled.clone(), model, DILATE_TEXELS);
+        chains.run(field)?; // builds the chains; first use of the pipelines
+        let start = Instant::now();
+        for _ in 0..repetitions.max(1) {
+            chains.run(field)?;
+        }
+        let gpu_ms = start.elapsed().as_secs_f64() * 1e3 / repetitions.max(1) as f64;
+        let mut max_difference = None;
+        if let Some(reference) = untiled {
+            let (lo, hi) = neutral.range();
+            let mut worst = 0.0f32;
+            chains.deform(field, false, |col, row, frame| {
+                if let TileFrame::Deformed { map, .. } = frame {
+                    let want = crop(reference, tiled.tile_rect(col, row));
+                    for (a, b) in map.data.iter().zip(&want.data) {
+                        worst = worst.max((a - b).abs());
+                    }
+                }
+                Ok(())
+            })?;
+            max_difference = Some(f64::from(worst) / f64::from(hi - lo));
+        }
+        Ok(TiledRow {
+            tile,
+            active: chains.active_tiles().len(),
+            total: cols * rows,
+            halo: chains.halo(),
+            gpu_ms,
+            max_difference,
+        })
+    })();
+    // Best effort: the scratch tiles are no output of the bench.
+    let _ = std::fs::remove_dir_all(&dir);
+    result
 }
 
 /// The field of `mesh` deformed to `deformed` with its UVs shrunk by

@@ -78,6 +78,31 @@ enum Command {
         /// Samples file (TOML).
         samples: PathBuf,
     },
+    /// Split a displacement map into a tiled map, or join one back.
+    ///
+    /// A tiled map is a folder of f32 EXR tiles with `index.toml` (size,
+    /// tile side, texel size, height unit, edge rule): the form of
+    /// face-scale maps beyond one GPU buffer, which the library's
+    /// `TiledMicro` and `bench micro --tile` convolve tile by tile. Split and
+    /// joined back, a map keeps its bits.
+    Tiles {
+        /// `split` (a map file into a folder) or `join` (a folder into a map
+        /// file).
+        action: String,
+        /// split: the map (.png, 16-bit, or .exr); join: the tiled map's
+        /// folder.
+        input: PathBuf,
+        /// split: the folder to write; join: the map file to write (.exr,
+        /// or .png for 16-bit).
+        #[arg(short, long)]
+        output: PathBuf,
+        /// split: tile side (texels).
+        #[arg(long, default_value_t = 4096)]
+        tile: usize,
+        /// split: texel size (µm) of a map file without skinpatch metadata.
+        #[arg(long, value_name = "UM")]
+        texel_um: Option<f64>,
+    },
     /// Benchmark a stage and print its figures.
     ///
     /// `bench fem` simulates the first frames of a scenario (default the
@@ -113,6 +138,11 @@ enum Command {
         /// With --texel-um, the largest side the CPU reference runs at.
         #[arg(long, default_value_t = 2048)]
         cpu_up_to: usize,
+        /// With --texel-um, also hold the map as tiles of this side and
+        /// convolve it tile by tile (maps beyond one GPU binding run only
+        /// this way).
+        #[arg(long, value_name = "TEXELS")]
+        tile: Option<usize>,
         /// Image width for `render` (px).
         #[arg(long, default_value_t = 1920)]
         width: usize,
@@ -328,6 +358,13 @@ fn main() -> ExitCode {
         } => run(&scenario, output, force, &set, quiet),
         Command::Mesh(args) => mesh(*args),
         Command::Fit { samples } => fit(&samples),
+        Command::Tiles {
+            action,
+            input,
+            output,
+            tile,
+            texel_um,
+        } => tiles(&action, &input, &output, tile, texel_um),
         #[cfg(feature = "viewer")]
         Command::View(args) => view(*args),
         Command::Bench {
@@ -337,10 +374,11 @@ fn main() -> ExitCode {
             sizes,
             texel_um,
             cpu_up_to,
+            tile,
             width,
             height,
         } => match stage.as_str() {
-            "micro" => bench_micro(&scenario, frames, &sizes, texel_um, cpu_up_to),
+            "micro" => bench_micro(&scenario, frames, &sizes, texel_um, cpu_up_to, tile),
             "render" => bench_render(&scenario, frames, width, height),
             _ => bench(&stage, &scenario, frames),
         },
@@ -469,23 +507,91 @@ fn bench(stage: &str, path: &Path, frames: usize) -> anyhow::Result<()> {
     print_stdout(&report)
 }
 
+fn tiles(
+    action: &str,
+    input: &Path,
+    output: &Path,
+    tile: usize,
+    texel_um: Option<f64>,
+) -> anyhow::Result<()> {
+    use skinpatch::micro::io::{read_map, write_exr, write_png16, MapDefaults, TexelSize};
+    use skinpatch::micro::tiled::TiledMap;
+    match action {
+        "split" => {
+            if tile == 0 {
+                bail!("--tile must be ≥ 1 texel");
+            }
+            if let Some(t) = texel_um.filter(|t| !(t.is_finite() && *t > 0.0)) {
+                bail!("--texel-um must be finite and > 0, got {t}");
+            }
+            // Without --texel-um a sentinel texel size shows whether the
+            // file brought its own.
+            let unset = f64::MIN_POSITIVE;
+            let defaults = MapDefaults {
+                texel: TexelSize::Um(texel_um.unwrap_or(unset)),
+                height_unit_um: 1.0,
+                edge: skinpatch::micro::Edge::Wrap,
+            };
+            let map = read_map(input, &defaults)?;
+            if texel_um.is_none() && map.texel_um == unset {
+                bail!(
+                    "{} carries no texel size (no skinpatch metadata): give --texel-um",
+                    input.display()
+                );
+            }
+            let tiled = TiledMap::write(output, &map, tile)?;
+            let (cols, rows) = tiled.grid();
+            println!(
+                "wrote {} ({} × {} texels of {} µm in {cols} × {rows} tiles of {tile})",
+                output.display(),
+                map.width,
+                map.height,
+                map.texel_um
+            );
+        }
+        "join" => {
+            let map = TiledMap::open(input)?.read_all()?;
+            match output.extension().and_then(|e| e.to_str()) {
+                Some("exr") => write_exr(output, &map)?,
+                Some("png") => write_png16(output, &map)?,
+                _ => bail!(
+                    "--output must end in .exr or .png, got {}",
+                    output.display()
+                ),
+            }
+            println!(
+                "wrote {} ({} × {} texels)",
+                output.display(),
+                map.width,
+                map.height
+            );
+        }
+        other => bail!("tiles: the action is `split` or `join`, got `{other}`"),
+    }
+    Ok(())
+}
+
 fn bench_micro(
     path: &Path,
     frames: usize,
     sizes: &[usize],
     texel_um: Option<f64>,
     cpu_up_to: usize,
+    tile: Option<usize>,
 ) -> anyhow::Result<()> {
     if sizes.is_empty() || sizes.contains(&0) {
         bail!("--sizes needs positive map sides, e.g. 1024,2048,4096");
     }
-    let layout = match texel_um {
-        None => skinpatch::bench::MapLayout::FixedPatch,
-        Some(t) if t.is_finite() && t > 0.0 => skinpatch::bench::MapLayout::FixedTexel {
+    let layout = match (texel_um, tile) {
+        (None, Some(_)) => bail!("--tile needs --texel-um (tiles hold a map of fixed texels)"),
+        (_, Some(t)) if t < 16 => bail!("--tile must be ≥ 16 texels, got {t}"),
+        (None, None) => skinpatch::bench::MapLayout::FixedPatch,
+        (Some(t), _) if t.is_finite() && t > 0.0 => skinpatch::bench::MapLayout::FixedTexel {
             texel_um: t,
             cpu_up_to,
+            tile,
         },
-        Some(t) => bail!("--texel-um must be > 0, got {t}"),
+        (Some(t), _) => bail!("--texel-um must be > 0, got {t}"),
     };
     let setup = Setup::load(path).with_context(|| format!("scenario {}", path.display()))?;
     let model = setup
@@ -523,8 +629,27 @@ fn bench_micro(
                 .map_or("-".to_string(), |d| format!("{d:.1e}")),
             fmt(r.pass_tile_share.map(|s| 100.0 * s), 1),
         );
+        if let Some(why) = &r.untiled_skipped {
+            println!("{:>6} untiled GPU chain skipped: {why}", r.size);
+        }
+        if let Some(t) = &r.tiled {
+            println!(
+                "{:>6} tiled ({} texels, halo {}): {} of {} tiles convolved, GPU {:.2} ms{}",
+                r.size,
+                t.tile,
+                t.halo,
+                t.active,
+                t.total,
+                t.gpu_ms,
+                t.max_difference.map_or(String::new(), |d| format!(
+                    ", max |tiled − untiled| {d:.1e}"
+                )),
+            );
+        }
     })?;
-    println!("tiles %: share of the map's tiles the GPU passes ran on (the others keep the neutral map)");
+    println!(
+        "tiles %: share of the map's tiles the GPU passes ran on (the others keep the neutral map)"
+    );
     match &bench.adapter {
         Some(a) => println!("GPU: {a}; GPU ms is the mean of {} frames", frames.max(1)),
         None => println!("no GPU adapter: CPU figures only"),

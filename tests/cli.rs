@@ -647,7 +647,10 @@ fn incremental_microstructure_frames_with_tolerance_zero_change_nothing() {
         eprintln!("no GPU adapter: the CPU reference ran both (skipped)");
         return;
     }
-    assert!(stdout.contains("incremental frames, tolerance 0"), "{stdout}");
+    assert!(
+        stdout.contains("incremental frames, tolerance 0"),
+        "{stdout}"
+    );
     assert!(text(&whole.1.stdout).contains("of the map's tiles"));
     for frame in ["0000", "0003", "0006"] {
         let name = format!("micro/height_{frame}.exr");
@@ -1076,4 +1079,66 @@ fn the_api_example_reads_the_fields_the_run_writes() {
     // drag's tangential pull.
     let u = rows.iter().map(|r| r[7]).fold(0.0, f64::max);
     assert!((0.9..1.5).contains(&u), "{u}");
+}
+
+/// `skinpatch tiles split` and `join` round-trip a map bit for bit; a file
+/// without a texel size and an unknown action are clear errors.
+#[test]
+fn tiles_split_and_join_round_trip() {
+    use skinpatch::micro::io::{read_exr, write_exr, MapDefaults, TexelSize};
+    use skinpatch::micro::{DisplacementMap, Edge};
+    let dir = tempfile::tempdir().unwrap();
+    let map = DisplacementMap::from_fn(150, 90, 12.5, Edge::Clamp, |i, j| {
+        ((i * 7 + j * 13) % 29) as f32 * 0.125 - 1.0
+    });
+    let file = dir.path().join("map.exr");
+    write_exr(&file, &map).unwrap();
+    let folder = dir.path().join("map.tiles");
+    let p = |p: &std::path::Path| p.to_str().unwrap().to_string();
+    let o = skinpatch(&[
+        "tiles",
+        "split",
+        &p(&file),
+        "-o",
+        &p(&folder),
+        "--tile",
+        "64",
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stdout).contains("3 × 2 tiles of 64"),
+        "{}",
+        text(&o.stdout)
+    );
+    assert!(folder.join("tile_0002_0001.exr").is_file());
+    let joined = dir.path().join("joined.exr");
+    let o = skinpatch(&["tiles", "join", &p(&folder), "-o", &p(&joined)]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let defaults = MapDefaults {
+        texel: TexelSize::Um(1.0),
+        height_unit_um: 1.0,
+        edge: Edge::Wrap,
+    };
+    assert_eq!(read_exr(&joined, &defaults).unwrap(), map);
+    // A 16-bit PNG without skinpatch metadata needs --texel-um.
+    let png = dir.path().join("plain.png");
+    image::ImageBuffer::<image::Luma<u16>, _>::from_fn(20, 20, |i, j| {
+        image::Luma([(i * j) as u16])
+    })
+    .save(&png)
+    .unwrap();
+    let o = skinpatch(&["tiles", "split", &p(&png), "-o", &p(&folder)]);
+    assert!(!o.status.success());
+    assert!(
+        text(&o.stderr).contains("--texel-um"),
+        "{}",
+        text(&o.stderr)
+    );
+    let o = skinpatch(&["tiles", "merge", &p(&folder), "-o", &p(&joined)]);
+    assert!(!o.status.success());
+    assert!(
+        text(&o.stderr).contains("`split` or `join`"),
+        "{}",
+        text(&o.stderr)
+    );
 }

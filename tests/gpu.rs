@@ -399,7 +399,10 @@ fn tiled_and_incremental_frames_match_whole_frames() {
     let frame_a = whole.deform(&field_a, true).unwrap();
     let tiles = whole.last_tiles();
     eprintln!("tiles of frame A: {tiles:?}");
-    assert!(tiles.pass_s > 0 && 2 * tiles.pass_s < tiles.total, "{tiles:?}");
+    assert!(
+        tiles.pass_s > 0 && 2 * tiles.pass_s < tiles.total,
+        "{tiles:?}"
+    );
     assert_eq!(tiles.pass_s, tiles.pass_t);
     let cpu = skinpatch::micro::convolve::deform(&neutral, &model, &field_a);
     assert!(neutral.max_difference(&cpu) > 0.05, "the frame is deformed");
@@ -423,11 +426,23 @@ fn tiled_and_incremental_frames_match_whole_frames() {
     let step_b = incremental.deform(&field_b, true).unwrap();
     let fewer = incremental.last_tiles();
     eprintln!("tiles of incremental frame B: {fewer:?}");
-    assert!(fewer.pass_s > 0 && 2 * fewer.pass_s < tiles.pass_s, "{fewer:?}");
+    assert!(
+        fewer.pass_s > 0 && 2 * fewer.pass_s < tiles.pass_s,
+        "{fewer:?}"
+    );
     let full_b = whole.deform(&field_b, true).unwrap();
-    assert!(full_b.map.max_difference(&frame_a.map) > 1e-3, "B differs from A");
-    assert!(step_b.map.data == full_b.map.data, "incremental B ≠ whole B");
-    assert!(step_b.normals == full_b.normals, "incremental normals ≠ whole");
+    assert!(
+        full_b.map.max_difference(&frame_a.map) > 1e-3,
+        "B differs from A"
+    );
+    assert!(
+        step_b.map.data == full_b.map.data,
+        "incremental B ≠ whole B"
+    );
+    assert!(
+        step_b.normals == full_b.normals,
+        "incremental normals ≠ whole"
+    );
 
     // Tolerance 1e-3: the next frame is whole, then C (a 1e-7 change)
     // convolves nothing and keeps B's output, within 1e-4 of C's own.
@@ -435,7 +450,11 @@ fn tiled_and_incremental_frames_match_whole_frames() {
     incremental.deform(&field_b, true).unwrap();
     let step_c = incremental.deform(&field_c, true).unwrap();
     let none = incremental.last_tiles();
-    assert_eq!((none.pass_s, none.pass_t, none.normals), (0, 0, 0), "{none:?}");
+    assert_eq!(
+        (none.pass_s, none.pass_t, none.normals),
+        (0, 0, 0),
+        "{none:?}"
+    );
     assert!(step_c.map.data == full_b.map.data);
     assert!(step_c.normals == full_b.normals);
     let full_c = whole.deform(&field_c, false).unwrap();
@@ -456,7 +475,10 @@ fn tiled_maps_match_the_untiled_chain_across_seams() {
     let mesh = patch_3k();
     let model = KernelModel::forehead();
     let dir = tempfile::tempdir().unwrap();
-    for (edge, shrink, size) in [(Edge::Clamp, 3.0, (560, 496)), (Edge::Wrap, 1.0, (300, 260))] {
+    for (edge, shrink, size) in [
+        (Edge::Clamp, 3.0, (560, 496)),
+        (Edge::Wrap, 1.0, (300, 260)),
+    ] {
         let mut neutral = skin_map(size.0, size.1, edge);
         neutral.texel_um = 10_000.0 * shrink / size.0 as f64;
         let mut top = mesh.top.clone();
@@ -669,6 +691,7 @@ fn bench_micro_fixed_texel_puts_the_patch_on_a_larger_map() {
     let layout = MapLayout::FixedTexel {
         texel_um,
         cpu_up_to: 256,
+        tile: Some(128),
     };
     let bench = bench_micro(&mesh, &model, &[256, 512], 1, layout, |_| {}).unwrap();
     let (small, large) = (&bench.rows[0], &bench.rows[1]);
@@ -684,6 +707,14 @@ fn bench_micro_fixed_texel_puts_the_patch_on_a_larger_map() {
     // Beyond cpu_up_to only the GPU runs.
     assert!(large.cpu_ms.is_none() && large.max_difference.is_none());
     assert!(large.gpu_ms.is_some() && large.stages.is_some());
+    // The patch covers a quarter of the large map's side: the passes ran on
+    // a part of its tiles, and its tiled form convolves a part of its tiles
+    // and agrees with the untiled chain.
+    assert!(large.pass_tile_share.unwrap() < 0.5, "{large:?}");
+    let tiled = large.tiled.as_ref().unwrap();
+    assert_eq!(tiled.total, 16, "{tiled:?}");
+    assert!(tiled.active > 0 && tiled.active < tiled.total, "{tiled:?}");
+    assert!(tiled.max_difference.unwrap() <= 1e-5, "{tiled:?}");
     // A map smaller than the patch at that texel size is refused.
     let err = bench_micro(&mesh, &model, &[64], 1, layout, |_| {}).unwrap_err();
     assert!(err.to_string().contains("--texel-um"), "{err}");

@@ -99,6 +99,30 @@ impl TiledMicro {
         self.ctx
     }
 
+    /// One frame in every chain, waited for, nothing read back (for timing).
+    pub fn run(&mut self, field: &SurfaceField) -> Result<()> {
+        self.prepare(field)?;
+        for c in &mut self.chains {
+            c.chain.submit(field, true);
+        }
+        self.ctx.finish()
+    }
+
+    /// Builds the chains on the first frame, and again when the kernels of
+    /// `field` reach farther than the halo.
+    fn prepare(&mut self, field: &SurfaceField) -> Result<()> {
+        let size = (self.source.width, self.source.height);
+        let reach =
+            pass_reach(&vertices(field), size, self.model.max_sigma_um()).ok_or_else(|| {
+                Error::parameter("microstructure", "the surface's UV frames are not finite")
+            })?;
+        let halo = 2 * reach + self.dilate + 2;
+        if halo > self.halo {
+            self.build(field, reach, halo)?;
+        }
+        Ok(())
+    }
+
     /// One frame: `emit(col, row, tile)` for every tile of the map, in
     /// row-major order (normals too when `normals`).
     pub fn deform(
@@ -107,16 +131,7 @@ impl TiledMicro {
         normals: bool,
         mut emit: impl FnMut(usize, usize, TileFrame) -> Result<()>,
     ) -> Result<()> {
-        let size = (self.source.width, self.source.height);
-        let reach = pass_reach(&vertices(field), size, self.model.max_sigma_um()).ok_or_else(
-            || Error::parameter("microstructure", "the surface's UV frames are not finite"),
-        )?;
-        let halo = 2 * reach + self.dilate + 2;
-        if halo > self.halo {
-            // The first frame, or one whose kernels reach farther than the
-            // halo: (re)build the chains.
-            self.build(field, reach, halo)?;
-        }
+        self.prepare(field)?;
         let (cols, rows) = self.source.grid();
         let mut chains = self.chains.iter_mut().peekable();
         for row in 0..rows {
@@ -183,7 +198,8 @@ impl TiledMicro {
             }
         }
         let window = [src.tile.min(src.width), src.tile.min(src.height)].map(|n| n + 2 * halo);
-        self.ctx.check_map(window[0], window[1], super::micro::LARGEST_BYTES_PER_TEXEL)?;
+        self.ctx
+            .check_map(window[0], window[1], super::micro::LARGEST_BYTES_PER_TEXEL)?;
         self.chains.clear();
         self.halo = halo;
         for (k, _) in active.iter().enumerate().filter(|(_, &a)| a) {

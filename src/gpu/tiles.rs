@@ -207,7 +207,12 @@ impl TilePlanner {
                     return None;
                 }
                 let tile = |t: f64, n: usize| (t.max(0.0) as usize / TILE).min(n - 1);
-                Some((tile(x0, cols), tile(y0, rows), tile(x1, cols), tile(y1, rows)))
+                Some((
+                    tile(x0, cols),
+                    tile(y0, rows),
+                    tile(x1, cols),
+                    tile(y1, rows),
+                ))
             })
             .collect();
         let mut surface = TileMask::empty(width, height);
@@ -248,7 +253,11 @@ impl TilePlanner {
             .zip(last.iter())
             .map(|(v, l)| {
                 let dt = v.t.iter().zip(&l.t).map(|(a, b)| (a - b).abs());
-                let df = v.frame.iter().zip(&l.frame).map(|(a, b)| (a - b).abs() / scale);
+                let df = v
+                    .frame
+                    .iter()
+                    .zip(&l.frame)
+                    .map(|(a, b)| (a - b).abs() / scale);
                 dt.chain(df).any(|d| d > tolerance || d.is_nan())
             })
             .collect();
@@ -321,12 +330,16 @@ pub fn pass_reach(
             ((f[0] * w).powi(2) + (f[1] * w).powi(2) + (f[2] * h).powi(2) + (f[3] * h).powi(2))
                 .sqrt()
         })
-        .fold(0.0f64, |m, x| if m.is_nan() || x.is_nan() { f64::NAN } else { m.max(x) });
+        .fold(0.0f64, |m, x| {
+            if m.is_nan() || x.is_nan() {
+                f64::NAN
+            } else {
+                m.max(x)
+            }
+        });
     // A margin for the shader's f32 arithmetic.
     let sigma = sigma_max_um * 1e-3 * per_mm * (1.0 + 1e-4);
-    sigma
-        .is_finite()
-        .then(|| (3.0 * sigma).ceil() as usize + 1)
+    sigma.is_finite().then(|| (3.0 * sigma).ceil() as usize + 1)
 }
 
 #[cfg(test)]
@@ -393,7 +406,11 @@ mod tests {
         // Nothing moved: nothing to do.
         let still = p.plan(&rest);
         assert_eq!(
-            (still.pass_s.count(), still.pass_t.count(), still.normals.count()),
+            (
+                still.pass_s.count(),
+                still.pass_t.count(),
+                still.normals.count()
+            ),
             (0, 0, 0)
         );
         // Below the tolerance, and drift does not accumulate unseen: the

@@ -113,7 +113,11 @@ impl TiledMap {
         let edge = match index.edge.as_str() {
             "wrap" => Edge::Wrap,
             "clamp" => Edge::Clamp,
-            other => return Err(bad(format!("edge must be \"wrap\" or \"clamp\", got \"{other}\""))),
+            other => {
+                return Err(bad(format!(
+                    "edge must be \"wrap\" or \"clamp\", got \"{other}\""
+                )))
+            }
         };
         Ok(TiledMap {
             dir,
@@ -154,7 +158,10 @@ impl TiledMap {
 
     /// Tiles along u and v.
     pub fn grid(&self) -> (usize, usize) {
-        (self.width.div_ceil(self.tile), self.height.div_ceil(self.tile))
+        (
+            self.width.div_ceil(self.tile),
+            self.height.div_ceil(self.tile),
+        )
     }
 
     /// Texel rectangle `[x0, y0, width, height]` of tile `(col, row)`.
@@ -363,13 +370,19 @@ mod tests {
         ] {
             std::fs::write(&index, text.replace(from, to)).unwrap();
             let err = TiledMap::open(&path).unwrap_err().to_string();
-            assert!(err.contains(expected) && err.contains("index.toml"), "{err}");
+            assert!(
+                err.contains(expected) && err.contains("index.toml"),
+                "{err}"
+            );
         }
         std::fs::write(&index, &text).unwrap();
         // A tile of the wrong size, and a missing one.
         crate::micro::io::write_exr(&tiled.tile_path(1, 1), &crop(&map, [0, 0, 10, 16])).unwrap();
         let err = tiled.read_tile(1, 1).unwrap_err().to_string();
-        assert!(err.contains("tile_0001_0001.exr") && err.contains("16 × 16"), "{err}");
+        assert!(
+            err.contains("tile_0001_0001.exr") && err.contains("16 × 16"),
+            "{err}"
+        );
         std::fs::remove_file(tiled.tile_path(2, 0)).unwrap();
         let err = tiled.read_all().unwrap_err().to_string();
         assert!(err.contains("tile_0002_0000.exr"), "{err}");

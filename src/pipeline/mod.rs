@@ -77,7 +77,10 @@ impl MicroEngine {
                         100.0 * share
                     );
                     if let Some(t) = chain.incremental() {
-                        text += &format!(" (incremental frames, tolerance {})", crate::error::shown(t));
+                        text += &format!(
+                            " (incremental frames, tolerance {})",
+                            crate::error::shown(t)
+                        );
                     }
                 }
                 text
