@@ -110,6 +110,9 @@ pub struct FrameTiles {
     pub total: usize,
 }
 
+/// Triangles and raster UVs of a surface as the raster draws them.
+type RasterLayout = (Vec<[usize; 3]>, Vec<[f32; 2]>);
+
 /// Where a chain's map lies in a larger map: it holds texels `origin ..
 /// origin + its size` of a `map_size` map (a tile and its halo, see
 /// [`super::tiled`]); texels beyond the larger map's edges follow its edge
@@ -137,7 +140,7 @@ pub struct GpuMicro {
     targets: RasterTargets,
     surface: Option<SurfaceBuffers>,
     /// The triangles and raster UVs `surface` and the planner were made for.
-    layout: Option<(Vec<[usize; 3]>, Vec<[f32; 2]>)>,
+    layout: Option<RasterLayout>,
     /// Where this chain's map lies in a larger one (none: it is the map).
     window: Option<UvWindow>,
     strain_inputs: wgpu::BindGroup,

@@ -25,7 +25,7 @@
 //! edge = "clamp"      # or "wrap": the whole map's edge rule
 //! ```
 
-use std::collections::HashMap;
+use std::collections::hash_map::{Entry, HashMap};
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
@@ -259,10 +259,10 @@ impl TiledMap {
         for &y in &ys {
             for &x in &xs {
                 let key = (x / self.tile, y / self.tile);
-                if !tiles.contains_key(&key) {
-                    tiles.insert(key, self.read_tile(key.0, key.1)?);
-                }
-                let t = &tiles[&key];
+                let t = match tiles.entry(key) {
+                    Entry::Occupied(e) => e.into_mut(),
+                    Entry::Vacant(e) => e.insert(self.read_tile(key.0, key.1)?),
+                };
                 data.push(t.data[(y % self.tile) * t.width + x % self.tile]);
             }
         }
