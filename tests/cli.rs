@@ -1142,3 +1142,100 @@ fn tiles_split_and_join_round_trip() {
         text(&o.stderr)
     );
 }
+
+/// A tiled neutral map (`map` naming a tiled map's folder) runs on the GPU
+/// chains tile by tile and writes every frame as a tiled map, equal to the
+/// run of the same map held whole within 1e-5 of the height range; the
+/// keys that need the map whole are refused by name.
+#[test]
+fn a_tiled_neutral_map_runs_tile_by_tile() {
+    use skinpatch::micro::io::{read_exr, write_exr, MapDefaults, TexelSize};
+    use skinpatch::micro::procedural::{generate, SkinParams};
+    use skinpatch::micro::tiled::TiledMap;
+    let dir = tempfile::tempdir().unwrap();
+    let map = generate(&SkinParams {
+        size_px: 320,
+        extent_mm: 10.0,
+        seed: 4,
+        ..SkinParams::default()
+    })
+    .unwrap();
+    let whole_file = dir.path().join("neutral.exr");
+    write_exr(&whole_file, &map).unwrap();
+    let tiles = dir.path().join("neutral.tiles");
+    TiledMap::write(&tiles, &map, 128).unwrap();
+    let section = |file: &std::path::Path| {
+        format!(
+            "\n[microstructure]\nmap = \"{}\"\nframe_stride = 3\nformats = [\"exr\"]\n",
+            file.display()
+        )
+    };
+    let runs = [tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap()];
+    let (tiled_out, o) = run_press_small_with(runs[0].path(), &section(&tiles));
+    if !o.status.success() && text(&o.stderr).contains("no usable GPU adapter") {
+        eprintln!("no GPU adapter: skipped");
+        return;
+    }
+    assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    assert!(
+        text(&o.stdout).contains("tiled map of 3 × 3 tiles"),
+        "{}",
+        text(&o.stdout)
+    );
+    let (whole_out, o) = run_press_small_with(runs[1].path(), &section(&whole_file));
+    assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    let defaults = MapDefaults {
+        texel: TexelSize::Um(1.0),
+        height_unit_um: 1.0,
+        edge: skinpatch::micro::Edge::Wrap,
+    };
+    let (lo, hi) = map.range();
+    for frame in ["0000", "0006"] {
+        let tiled = TiledMap::open(&tiled_out.join(format!("micro/height_{frame}.tiles")))
+            .unwrap()
+            .read_all()
+            .unwrap();
+        let whole = read_exr(
+            &whole_out.join(format!("micro/height_{frame}.exr")),
+            &defaults,
+        )
+        .unwrap();
+        let worst = tiled
+            .data
+            .iter()
+            .zip(&whole.data)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max)
+            / (hi - lo);
+        assert!(worst <= 1e-5, "frame {frame}: tiled − whole {worst:e}");
+        assert!(tiled_out
+            .join(format!("micro/height_{frame}.tiles/normal_0002_0002.exr"))
+            .is_file());
+    }
+    assert!(tiled_out
+        .join("micro/height_neutral.tiles/normal_0001_0001.exr")
+        .is_file());
+    // Keys that need the map whole.
+    for (extra, key) in [
+        ("roughness_table = true\n", "microstructure.roughness_table"),
+        ("texel_um = 5.0\n", "microstructure.texel_um"),
+    ] {
+        let (_, o) = run_press_small_with(dir.path(), &(section(&tiles) + extra));
+        assert!(!o.status.success());
+        assert!(text(&o.stderr).contains(key), "{}", text(&o.stderr));
+    }
+    let png = section(&tiles).replace("formats = [\"exr\"]", "formats = [\"png16\"]");
+    let (_, o) = run_press_small_with(dir.path(), &png);
+    assert!(
+        text(&o.stderr).contains("microstructure.formats"),
+        "{}",
+        text(&o.stderr)
+    );
+    let render = section(&tiles) + "[render]\nwidth_px = 64\nheight_px = 48\n";
+    let (_, o) = run_press_small_with(dir.path(), &render);
+    assert!(
+        text(&o.stderr).contains("needs the map whole"),
+        "{}",
+        text(&o.stderr)
+    );
+}

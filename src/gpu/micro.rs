@@ -235,7 +235,7 @@ impl GpuMicro {
     pub fn for_scenario(ctx: Context, micro: &crate::scenario::MicroSetup) -> Result<GpuMicro> {
         let mut chain = GpuMicro::new(
             ctx,
-            &micro.neutral,
+            micro.neutral.whole("the untiled GPU chain")?,
             &micro.model,
             crate::strain::raster::DILATE_TEXELS,
         )?;

@@ -24,8 +24,10 @@ use crate::error::{Error, Result};
 use crate::export::{self, FrameMetrics, MetricsWriter};
 use crate::fem::contact::{solve_with_contact, ContactState};
 use crate::fem::integrate::{Dynamics, Simulation};
+use crate::gpu::tiled::TileFrame;
 use crate::mesh::{io, QualityReport, Vec3};
-use crate::scenario::{MicroSetup, Setup};
+use crate::micro::tiled::TiledMap;
+use crate::scenario::{MicroSetup, NeutralMap, Setup};
 use crate::strain::{ElementStrains, StrainRaster, SurfaceField};
 
 /// What a run produced.
@@ -45,14 +47,33 @@ pub struct RunSummary {
 enum MicroEngine {
     /// The GPU chain with the neutral map resident.
     Gpu(Box<crate::gpu::micro::GpuMicro>),
+    /// The GPU chains of a tiled map, one per tile within the surface's reach.
+    Tiled(Box<crate::gpu::tiled::TiledMicro>),
     /// The CPU references.
     Cpu,
 }
 
 impl MicroEngine {
     /// The GPU chain when an adapter is usable, else the CPU (an error
-    /// instead when `SKINPATCH_REQUIRE_GPU=1`).
+    /// instead when `SKINPATCH_REQUIRE_GPU=1`). A tiled map needs the GPU.
     fn new(micro: &MicroSetup) -> Result<MicroEngine> {
+        if let NeutralMap::Tiled(map) = &micro.neutral {
+            let ctx = crate::gpu::acquire()?.ok_or_else(|| {
+                Error::Gpu(format!(
+                    "microstructure.map {} is a tiled map, which only the GPU chain \
+                     convolves, and there is no usable GPU adapter",
+                    map.dir.display()
+                ))
+            })?;
+            let mut chains = crate::gpu::tiled::TiledMicro::new(
+                ctx,
+                map.clone(),
+                &micro.model,
+                crate::strain::raster::DILATE_TEXELS,
+            );
+            chains.set_incremental(micro.incremental_tolerance);
+            return Ok(MicroEngine::Tiled(Box::new(chains)));
+        }
         let Some(ctx) = crate::gpu::acquire()? else {
             return Ok(MicroEngine::Cpu);
         };
@@ -85,6 +106,13 @@ impl MicroEngine {
                 }
                 text
             }
+            MicroEngine::Tiled(chains) => {
+                let (cols, rows) = chains.source().grid();
+                format!(
+                    "GPU, tiled map of {cols} × {rows} tiles, {} within the surface's reach",
+                    chains.active_tiles().len()
+                )
+            }
             MicroEngine::Cpu => "CPU reference stages".into(),
         }
     }
@@ -101,11 +129,66 @@ impl MicroEngine {
                 Ok((frame.map, frame.normals))
             }
             MicroEngine::Cpu => Ok((
-                crate::micro::convolve::deform(&micro.neutral, &micro.model, field),
+                crate::micro::convolve::deform(
+                    micro.neutral.whole("the CPU microstructure stages")?,
+                    &micro.model,
+                    field,
+                ),
                 None,
             )),
+            MicroEngine::Tiled(_) => unreachable!("tiled frames are written by write_tiled_frame"),
         }
     }
+
+    /// A frame of a tiled map written as the tiled map `micro/height_TAG.tiles`:
+    /// the tiles within the surface's reach deformed (with their normals),
+    /// the others linked to the neutral tiles.
+    fn write_tiled_frame(
+        &mut self,
+        micro: &MicroSetup,
+        field: &SurfaceField,
+        folder: &std::path::Path,
+        frame: usize,
+    ) -> Result<PathBuf> {
+        let MicroEngine::Tiled(chains) = self else {
+            unreachable!("only a tiled map has tiled frames");
+        };
+        let neutral = TiledMap::open(&folder.join("height_neutral.tiles"))?;
+        let out_dir = folder.join(format!("height_{frame:04}.tiles"));
+        let out = TiledMap::create(
+            &out_dir,
+            &neutral.metadata(neutral.width, neutral.height),
+            neutral.tile,
+        )?;
+        let stage = "the microstructure (GPU, tiled map)";
+        chains.deform(field, micro.normal_maps, |col, row, tile| match tile {
+            TileFrame::Deformed { map, normals } => {
+                crate::error::check_finite(stage, frame, map.width, 1, &map.data)?;
+                if let Some(n) = &normals {
+                    crate::error::check_finite(stage, frame, map.width, 3, n.iter().flatten())?;
+                }
+                out.write_tile(col, row, &map, normals.as_deref())
+            }
+            TileFrame::Neutral => {
+                link_or_copy(&neutral.tile_path(col, row), &out.tile_path(col, row))?;
+                if micro.normal_maps {
+                    link_or_copy(&neutral.normal_path(col, row), &out.normal_path(col, row))?;
+                }
+                Ok(())
+            }
+        })?;
+        Ok(out_dir)
+    }
+}
+
+/// `dst` as a hard link to `src` (no space taken), or a copy where the
+/// file system has no links.
+fn link_or_copy(src: &std::path::Path, dst: &std::path::Path) -> Result<()> {
+    if std::fs::hard_link(src, dst).is_ok() {
+        return Ok(());
+    }
+    std::fs::copy(src, dst).map_err(|e| Error::io(dst, e))?;
+    Ok(())
 }
 
 /// One finished frame as [`run`]'s callback sees it: the metrics row and the
@@ -251,7 +334,9 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<RunSum
         }
         let mut fresh_normals = false;
         if let (Some(micro), Some(engine)) = (&setup.micro, engine.as_mut()) {
-            if m.frame % micro.frame_stride == 0 {
+            if m.frame % micro.frame_stride == 0 && matches!(engine, MicroEngine::Tiled(_)) {
+                engine.write_tiled_frame(micro, &field, &dir.join("micro"), m.frame)?;
+            } else if m.frame % micro.frame_stride == 0 {
                 let (deformed, normals) = engine.deform(micro, &field)?;
                 let stage = format!("the microstructure ({})", engine.describe());
                 crate::error::check_finite(&stage, m.frame, deformed.width, 1, &deformed.data)?;
@@ -320,7 +405,10 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<RunSum
 fn write_neutral(dir: &std::path::Path, setup: &Setup, micro: &MicroSetup) -> Result<Vec<PathBuf>> {
     let folder = dir.join("micro");
     std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
-    let map = &micro.neutral;
+    let map = match &micro.neutral {
+        NeutralMap::Whole(map) => map,
+        NeutralMap::Tiled(tiled) => return write_neutral_tiles(&folder, micro, tiled),
+    };
     let (lo, hi) = setup.mesh.bounds();
     let patch_texel_um = (hi.x - lo.x) * 1000.0 / map.width as f64;
     if (map.texel_um / patch_texel_um - 1.0).abs() > 0.01 {
@@ -345,6 +433,34 @@ fn write_neutral(dir: &std::path::Path, setup: &Setup, micro: &MicroSetup) -> Re
         written.push(path);
     }
     Ok(written)
+}
+
+/// The neutral tiled map as `micro/height_neutral.tiles`: its tiles linked
+/// (or copied) from the input and, when asked, each tile's normals (from the
+/// tile and the one-texel ring of its neighbours around it, so they equal
+/// the whole map's).
+fn write_neutral_tiles(
+    folder: &std::path::Path,
+    micro: &MicroSetup,
+    tiled: &TiledMap,
+) -> Result<Vec<PathBuf>> {
+    let dir = folder.join("height_neutral.tiles");
+    let out = TiledMap::create(&dir, &tiled.metadata(tiled.width, tiled.height), tiled.tile)?;
+    let (cols, rows) = tiled.grid();
+    for row in 0..rows {
+        for col in 0..cols {
+            link_or_copy(&tiled.tile_path(col, row), &out.tile_path(col, row))?;
+            if micro.normal_maps {
+                let [x0, y0, w, h] = tiled.tile_rect(col, row);
+                let ring = tiled.read_window([x0 as isize - 1, y0 as isize - 1], [w + 2, h + 2])?;
+                let normals = crate::micro::normals::normal_map(&ring);
+                let tile = out.read_tile(col, row)?;
+                let inner = crate::micro::tiled::crop_values(&normals, w + 2, [1, 1, w, h]);
+                crate::micro::io::write_normal_exr(&out.normal_path(col, row), &inner, &tile)?;
+            }
+        }
+    }
+    Ok(vec![dir])
 }
 
 /// Writes a map as `height_TAG.{png,exr}` and, when asked, its normals as

@@ -46,7 +46,8 @@ pub fn planned_bytes(setup: &Setup) -> u64 {
     }
     let every = |stride: usize| frames.div_ceil(stride.max(1) as u64);
     if let Some(m) = &setup.micro {
-        let texels = (m.neutral.width * m.neutral.height) as u64;
+        let (width, height) = m.neutral.size();
+        let texels = (width * height) as u64;
         let per_map = u64::from(m.png16) * 2 + u64::from(m.exr) * 4;
         let per_normals = u64::from(m.normal_maps) * (6 + u64::from(m.exr) * 12);
         // The neutral map and every stride-th frame.

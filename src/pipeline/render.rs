@@ -43,7 +43,11 @@ pub fn roughness_curve(setup: &RenderSetup, micro: Option<&MicroSetup>) -> [f32;
     let ratios = crate::render::lighting::curve_ratios();
     match micro {
         Some(m) if setup.roughness == Roughness::Anisotropic => {
-            let table = crate::micro::roughness::tabulate(&m.neutral, &m.model, &ratios);
+            // A tiled map is refused with [render] when the scenario loads.
+            let crate::scenario::NeutralMap::Whole(map) = &m.neutral else {
+                return [1.0; 16];
+            };
+            let table = crate::micro::roughness::tabulate(map, &m.model, &ratios);
             let at_one = table
                 .points
                 .iter()
@@ -90,12 +94,13 @@ impl RenderEngine {
         let (lo, hi) = mesh.bounds();
         let albedo = Albedo::from_source(&setup.albedo, setup.texture_px, hi.x - lo.x)?;
         let texel_mm = texel_mm((lo, hi), setup.texture_px);
-        let neutral_normals = micro.map(|m| crate::micro::normals::normal_map(&m.neutral));
-        let neutral = match (micro, &neutral_normals) {
+        let neutral_map = micro.map(|m| m.neutral.whole("[render]")).transpose()?;
+        let neutral_normals = neutral_map.map(crate::micro::normals::normal_map);
+        let neutral = match (neutral_map, &neutral_normals) {
             (Some(m), Some(n)) => Some(NormalMap {
                 normals: n,
-                width: m.neutral.width,
-                height: m.neutral.height,
+                width: m.width,
+                height: m.height,
             }),
             _ => None,
         };
@@ -114,6 +119,7 @@ impl RenderEngine {
                 None,
             ),
             Some(MicroEngine::Cpu) => return Err(no_gpu()),
+            Some(MicroEngine::Tiled(_)) => unreachable!("a tiled map is refused above"),
             None => {
                 let ctx = crate::gpu::acquire()?.ok_or_else(no_gpu)?;
                 let renderer = Renderer::new(&ctx, setup, &albedo, neutral, None, curve, texel_mm)?;

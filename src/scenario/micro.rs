@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Error, Result};
 use crate::micro::io::{read_map, MapDefaults, TexelSize};
 use crate::micro::procedural::{generate, SkinParams};
+use crate::micro::tiled::TiledMap;
 use crate::micro::{DisplacementMap, Edge, KernelModel, PiecewiseLinear};
 
 /// `[microstructure]`.
@@ -114,11 +115,56 @@ pub struct KernelSection {
     pub sigma_stretch_um: Vec<[f64; 2]>,
 }
 
+/// A scenario's neutral map: held whole, or as a tiled map (a folder of
+/// EXR tiles with an index, [`crate::micro::tiled`]) for maps beyond one
+/// GPU buffer, which only the GPU chain of `skinpatch run` convolves.
+#[derive(Clone, Debug)]
+pub enum NeutralMap {
+    /// The map in memory.
+    Whole(DisplacementMap),
+    /// The map on disk as tiles.
+    Tiled(TiledMap),
+}
+
+impl NeutralMap {
+    /// Texels along u and v.
+    pub fn size(&self) -> (usize, usize) {
+        match self {
+            NeutralMap::Whole(m) => (m.width, m.height),
+            NeutralMap::Tiled(t) => (t.width, t.height),
+        }
+    }
+
+    /// Texel side (µm).
+    pub fn texel_um(&self) -> f64 {
+        match self {
+            NeutralMap::Whole(m) => m.texel_um,
+            NeutralMap::Tiled(t) => t.texel_um,
+        }
+    }
+
+    /// The whole map; for a tiled one an error saying `needed_by` needs
+    /// the map whole.
+    pub fn whole(&self, needed_by: &str) -> Result<&DisplacementMap> {
+        match self {
+            NeutralMap::Whole(m) => Ok(m),
+            NeutralMap::Tiled(t) => Err(Error::parameter(
+                "microstructure.map",
+                format!(
+                    "is a tiled map ({}); {needed_by} needs the map whole (join it with \
+                     `skinpatch tiles join`, or leave {needed_by} out)",
+                    t.dir.display()
+                ),
+            )),
+        }
+    }
+}
+
 /// Validated microstructure settings.
 #[derive(Clone, Debug)]
 pub struct MicroSetup {
     /// The neutral map.
-    pub neutral: DisplacementMap,
+    pub neutral: NeutralMap,
     /// Stretch ratio → kernel parameters.
     pub model: KernelModel,
     /// Write 16-bit PNG maps.
@@ -207,6 +253,10 @@ impl MicrostructureSection {
         };
         model.validate(&key)?;
         let neutral = match &self.map {
+            Some(file) if crate::micro::tiled::is_tiled(&base.join(file)) => {
+                self.tiled_checks()?;
+                NeutralMap::Tiled(TiledMap::open(&base.join(file))?)
+            }
             Some(file) => {
                 if let Some(k) = self.procedural_keys_set().first() {
                     return Err(Error::parameter(
@@ -229,7 +279,7 @@ impl MicrostructureSection {
                     height_unit_um: unit,
                     edge,
                 };
-                read_map(&base.join(file), &defaults)?
+                NeutralMap::Whole(read_map(&base.join(file), &defaults)?)
             }
             None => {
                 if let Some(t) = self.texel_um {
@@ -245,7 +295,7 @@ impl MicrostructureSection {
                 let params = self.procedural.params(patch_width_mm);
                 params.validate("microstructure.procedural")?;
                 crate::gpu::precheck_map(params.size_px, params.size_px)?;
-                generate(&params)?
+                NeutralMap::Whole(generate(&params)?)
             }
         };
         Ok(MicroSetup {
@@ -258,6 +308,41 @@ impl MicrostructureSection {
             roughness_table: self.roughness_table,
             incremental_tolerance: self.incremental_tolerance,
         })
+    }
+
+    /// What a tiled `map` allows: its index gives the metadata, its frames
+    /// are tiled maps of EXR tiles, and the roughness table needs the map
+    /// whole.
+    fn tiled_checks(&self) -> Result<()> {
+        if let Some(k) = self.procedural_keys_set().first() {
+            return Err(Error::parameter(
+                format!("microstructure.procedural.{k}"),
+                "has no effect when microstructure.map is set; remove one of them",
+            ));
+        }
+        if self.texel_um.is_some() {
+            return Err(Error::parameter(
+                "microstructure.texel_um",
+                "has no effect with a tiled map: its index.toml gives the texel size",
+            ));
+        }
+        if self.formats != ["exr"] {
+            return Err(Error::parameter(
+                "microstructure.formats",
+                format!(
+                    "must be [\"exr\"] with a tiled map (its frames are tiled maps of f32 EXR \
+                     tiles), got {:?}",
+                    self.formats
+                ),
+            ));
+        }
+        if self.roughness_table {
+            return Err(Error::parameter(
+                "microstructure.roughness_table",
+                "needs the map whole; a tiled map has none (join it with `skinpatch tiles join`)",
+            ));
+        }
+        Ok(())
     }
 
     fn procedural_keys_set(&self) -> Vec<&'static str> {

@@ -29,7 +29,7 @@ mod simulation;
 
 pub use mesh::{MeshSection, RefineSection, ZoneKind};
 pub use micro::{
-    FitPoint, FitSample, FitSamples, KernelSection, MicroSetup, MicrostructureSection,
+    FitPoint, FitSample, FitSamples, KernelSection, MicroSetup, MicrostructureSection, NeutralMap,
     ProceduralSection,
 };
 pub use render::{CameraSection, EnvironmentSection, LightSection, RenderSection};
@@ -540,6 +540,10 @@ impl Setup {
             .as_ref()
             .map(|r| r.setup(base, micro.is_some()))
             .transpose()?;
+        if let (Some(m), Some(_)) = (&micro, &render) {
+            // The renderer samples the deformed map's normals as one texture.
+            m.neutral.whole("[render]")?;
+        }
         Ok(Setup {
             name,
             render,

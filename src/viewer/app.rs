@@ -169,14 +169,18 @@ impl App {
         let render = loaded.render.clone();
         let (lo, hi) = setup.mesh.bounds();
         let albedo = Albedo::from_source(&render.albedo, render.texture_px, hi.x - lo.x)?;
-        let neutral = setup.micro.as_ref().map(|m| {
-            let map = &m.neutral;
-            (
-                crate::micro::normals::normal_map(map),
-                map.width,
-                map.height,
-            )
-        });
+        let neutral = setup
+            .micro
+            .as_ref()
+            .map(|m| m.neutral.whole("skinpatch view"))
+            .transpose()?
+            .map(|map| {
+                (
+                    crate::micro::normals::normal_map(map),
+                    map.width,
+                    map.height,
+                )
+            });
         let mut anisotropic = render.clone();
         anisotropic.roughness = crate::render::Roughness::Anisotropic;
         let curve = crate::pipeline::roughness_curve(&anisotropic, setup.micro.as_ref());
