@@ -403,7 +403,7 @@ fn microstructure_section_is_validated() {
     let ok = setup_with("\n[microstructure]\n[microstructure.procedural]\nsize_px = 32\n").unwrap();
     let micro = ok.micro.unwrap();
     assert_eq!(
-        (micro.neutral.width, micro.neutral.texel_um),
+        (micro.neutral.size().0, micro.neutral.texel_um()),
         (32, 10_000.0 / 32.0)
     );
     assert!(micro.png16 && !micro.exr && micro.normal_maps);
@@ -447,13 +447,14 @@ fn a_loaded_map_takes_the_patch_texel_size_unless_told() {
     );
     let micro = setup_with(&text).unwrap().micro.unwrap();
     // 10 mm patch over 50 texels; heights 0 … 1 per full range × 65535 µm.
-    assert_eq!(micro.neutral.texel_um, 200.0);
-    assert_eq!(micro.neutral.height_unit_um, 65535.0);
+    let neutral = micro.neutral.whole("this test").unwrap();
+    assert_eq!(neutral.texel_um, 200.0);
+    assert_eq!(neutral.height_unit_um, 65535.0);
     let told = setup_with(&format!("{text}texel_um = 7.5\n"))
         .unwrap()
         .micro
         .unwrap();
-    assert_eq!(told.neutral.texel_um, 7.5);
+    assert_eq!(told.neutral.texel_um(), 7.5);
 }
 
 /// The fit's row-wise blur is the convolution pass with α = 1 along u or v,
