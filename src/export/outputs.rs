@@ -57,6 +57,32 @@ pub fn is_run_output(folder: &str, name: &str) -> bool {
     }
 }
 
+/// Whether `name` in `micro/` is a frame folder a run writes for a tiled
+/// map (`height_NNNN.tiles`, `height_neutral.tiles`).
+fn is_tiled_frame(name: &str) -> bool {
+    name.strip_prefix("height_")
+        .and_then(|r| r.strip_suffix(".tiles"))
+        .is_some_and(|n| n == "neutral" || all_digits(n))
+}
+
+/// Whether `name` inside a tiled frame folder is a file a run writes: the
+/// index, `tile_C_R.exr`, `normal_C_R.exr`, temporaries.
+fn is_tile_file(name: &str) -> bool {
+    if name == crate::micro::tiled::INDEX_FILE || is_temporary(name) {
+        return true;
+    }
+    ["tile_", "normal_"].iter().any(|p| {
+        name.strip_prefix(p)
+            .and_then(|r| r.strip_suffix(".exr"))
+            .and_then(|r| r.split_once('_'))
+            .is_some_and(|(c, r)| all_digits(c) && all_digits(r))
+    })
+}
+
+fn all_digits(s: &str) -> bool {
+    !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit())
+}
+
 /// A temporary of an atomic write (`<name>.tmp<pid>`), complete or not:
 /// finished files are only ever renamed into place, so one that is still
 /// there belongs to a run that was killed.
@@ -85,13 +111,33 @@ pub fn clear_previous_run(dir: &Path) -> Result<usize> {
         };
         for entry in entries.flatten() {
             let name = entry.file_name().to_string_lossy().into_owned();
-            if entry.file_type().is_ok_and(|t| t.is_file()) && is_run_output(&label, &name) {
+            let kind = entry.file_type();
+            if kind.as_ref().is_ok_and(|t| t.is_file()) && is_run_output(&label, &name) {
                 let path = entry.path();
                 std::fs::remove_file(&path).map_err(|e| Error::io(&path, e))?;
                 removed += 1;
+            } else if label == "micro" && kind.is_ok_and(|t| t.is_dir()) && is_tiled_frame(&name) {
+                removed += clear_tiled_frame(&entry.path())?;
             }
         }
     }
+    Ok(removed)
+}
+
+/// Removes a tiled frame folder's run files, and the folder once empty.
+fn clear_tiled_frame(folder: &Path) -> Result<usize> {
+    let mut removed = 0;
+    let entries = std::fs::read_dir(folder).map_err(|e| Error::io(folder, e))?;
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if entry.file_type().is_ok_and(|t| t.is_file()) && is_tile_file(&name) {
+            let path = entry.path();
+            std::fs::remove_file(&path).map_err(|e| Error::io(&path, e))?;
+            removed += 1;
+        }
+    }
+    // Kept when the user put files of their own there.
+    let _ = std::fs::remove_dir(folder);
     Ok(removed)
 }
 
@@ -160,6 +206,23 @@ mod tests {
         for f in mine {
             assert!(d.join(f).exists(), "{f}");
         }
+        // Tiled frames: the run's tiles go, a folder left empty too.
+        for f in ["micro/height_0006.tiles", "micro/height_neutral.tiles"] {
+            std::fs::create_dir_all(d.join(f)).unwrap();
+            for tile in ["index.toml", "tile_0000_0001.exr", "normal_0002_0000.exr"] {
+                std::fs::write(d.join(f).join(tile), "x").unwrap();
+            }
+        }
+        std::fs::write(d.join("micro/height_0006.tiles/notes.txt"), "x").unwrap();
+        std::fs::create_dir_all(d.join("micro/height_mine.tiles")).unwrap();
+        std::fs::write(d.join("micro/height_mine.tiles/index.toml"), "x").unwrap();
+        assert_eq!(clear_previous_run(d).unwrap(), 6);
+        assert!(!d.join("micro/height_neutral.tiles").exists());
+        assert!(d.join("micro/height_0006.tiles/notes.txt").exists());
+        assert!(!d
+            .join("micro/height_0006.tiles/tile_0000_0001.exr")
+            .exists());
+        assert!(d.join("micro/height_mine.tiles/index.toml").exists());
         // A folder that does not exist yet is nothing to clear.
         assert_eq!(clear_previous_run(&d.join("new")).unwrap(), 0);
     }

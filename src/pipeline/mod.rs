@@ -182,8 +182,13 @@ impl MicroEngine {
 }
 
 /// `dst` as a hard link to `src` (no space taken), or a copy where the
-/// file system has no links.
+/// file system has no links. An existing `dst` is removed first: copying
+/// onto a link to `src` would truncate `src` itself.
 fn link_or_copy(src: &std::path::Path, dst: &std::path::Path) -> Result<()> {
+    match std::fs::remove_file(dst) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(Error::io(dst, e)),
+        _ => {}
+    }
     if std::fs::hard_link(src, dst).is_ok() {
         return Ok(());
     }
