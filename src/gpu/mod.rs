@@ -469,16 +469,8 @@ pub(crate) fn dispatch(
     width: usize,
     height: usize,
 ) {
-    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-        label: Some(label),
-        timestamp_writes: None,
-    });
-    pass.set_pipeline(pipeline);
-    for (k, bind) in binds.iter().enumerate() {
-        pass.set_bind_group(k as u32, *bind, &[]);
-    }
     let (gx, gy) = Context::groups(width, height);
-    pass.dispatch_workgroups(gx, gy, 1);
+    compute_pass(encoder, label, pipeline, binds, (gx, gy));
 }
 
 /// Records one compute pass of `pipeline` over `tiles` tiles of a list
@@ -495,6 +487,19 @@ pub(crate) fn dispatch_tiles(
     if tiles == 0 {
         return;
     }
+    let gx = tiles.min(65_535);
+    let groups = (gx as u32, tiles.div_ceil(gx) as u32);
+    compute_pass(encoder, label, pipeline, binds, groups);
+}
+
+/// One compute pass of `groups` workgroups with `binds` as groups 0, 1, ….
+fn compute_pass(
+    encoder: &mut wgpu::CommandEncoder,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    binds: &[&wgpu::BindGroup],
+    (gx, gy): (u32, u32),
+) {
     let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
         label: Some(label),
         timestamp_writes: None,
@@ -503,8 +508,7 @@ pub(crate) fn dispatch_tiles(
     for (k, bind) in binds.iter().enumerate() {
         pass.set_bind_group(k as u32, *bind, &[]);
     }
-    let gx = tiles.min(65_535);
-    pass.dispatch_workgroups(gx as u32, tiles.div_ceil(gx) as u32, 1);
+    pass.dispatch_workgroups(gx, gy, 1);
 }
 
 /// A new command encoder.
