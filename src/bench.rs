@@ -268,11 +268,13 @@ fn bench_tiled(
             let (lo, hi) = neutral.range();
             let mut worst = 0.0f32;
             chains.deform(field, false, |col, row, frame| {
-                if let TileFrame::Deformed { map, .. } = frame {
-                    let want = crop(reference, tiled.tile_rect(col, row));
-                    for (a, b) in map.data.iter().zip(&want.data) {
-                        worst = worst.max((a - b).abs());
-                    }
+                let rect = tiled.tile_rect(col, row);
+                let got = match frame {
+                    TileFrame::Deformed { map, .. } => map,
+                    TileFrame::Neutral => crop(neutral, rect),
+                };
+                for (a, b) in got.data.iter().zip(&crop(reference, rect).data) {
+                    worst = worst.max((a - b).abs());
                 }
                 Ok(())
             })?;

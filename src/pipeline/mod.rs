@@ -160,12 +160,12 @@ impl MicroEngine {
             &neutral.metadata(neutral.width, neutral.height),
             neutral.tile,
         )?;
-        let stage = "the microstructure (GPU, tiled map)";
         chains.deform(field, micro.normal_maps, |col, row, tile| match tile {
             TileFrame::Deformed { map, normals } => {
-                crate::error::check_finite(stage, frame, map.width, 1, &map.data)?;
+                let stage = format!("the microstructure (GPU, tiled map, tile ({col}, {row}))");
+                crate::error::check_finite(&stage, frame, map.width, 1, &map.data)?;
                 if let Some(n) = &normals {
-                    crate::error::check_finite(stage, frame, map.width, 3, n.iter().flatten())?;
+                    crate::error::check_finite(&stage, frame, map.width, 3, n.iter().flatten())?;
                 }
                 out.write_tile(col, row, &map, normals.as_deref())
             }
