@@ -19,7 +19,7 @@
 
 use super::micro::{GpuMicro, UvWindow};
 use super::raster::vertices;
-use super::tiles::pass_reach;
+use super::tiles::{pass_reach, triangle_tiles};
 use super::Context;
 use crate::error::{Error, Result};
 use crate::micro::tiled::{crop, crop_values, TiledMap};
@@ -160,7 +160,6 @@ impl TiledMicro {
     /// surface's UV bounding boxes, each over its tile and `halo`.
     fn build(&mut self, field: &SurfaceField, reach: usize, halo: usize) -> Result<()> {
         let src = &self.source;
-        let (mw, mh) = (src.width as f64, src.height as f64);
         let margin = (reach + self.dilate + 2) as f64 + 1.0;
         let (tri, uvs) = field.layout();
         let shifts: &[f64] = if src.edge == Edge::Wrap {
@@ -171,27 +170,15 @@ impl TiledMicro {
         let (cols, rows) = src.grid();
         let mut active = vec![false; cols * rows];
         for t in tri {
-            let p = t.map(|k| uvs[k]);
-            let lo = [0, 1].map(|c| p.iter().map(|q| q[c]).fold(f64::INFINITY, f64::min));
-            let hi = [0, 1].map(|c| p.iter().map(|q| q[c]).fold(f64::NEG_INFINITY, f64::max));
+            let p = t.map(|k| [uvs[k].x, uvs[k].y]);
             for &su in shifts {
                 for &sv in shifts {
-                    let x0 = ((lo[0] + su) * mw - 0.5 - margin).floor();
-                    let x1 = ((hi[0] + su) * mw - 0.5 + margin).ceil();
-                    let y0 = ((lo[1] + sv) * mh - 0.5 - margin).floor();
-                    let y1 = ((hi[1] + sv) * mh - 0.5 + margin).ceil();
-                    if !(x0.is_finite() && y0.is_finite() && x1.is_finite() && y1.is_finite())
-                        || x1 < 0.0
-                        || y1 < 0.0
-                        || x0 >= mw
-                        || y0 >= mh
+                    let size = (src.width, src.height);
+                    if let Some((x0, y0, x1, y1)) =
+                        triangle_tiles(p, [su, sv], size, margin, src.tile)
                     {
-                        continue;
-                    }
-                    let tile = |x: f64, n: usize| (x.max(0.0) as usize / src.tile).min(n - 1);
-                    for row in tile(y0, rows)..=tile(y1, rows) {
-                        for col in tile(x0, cols)..=tile(x1, cols) {
-                            active[row * cols + col] = true;
+                        for row in y0..=y1 {
+                            active[row * cols + x0..=row * cols + x1].fill(true);
                         }
                     }
                 }

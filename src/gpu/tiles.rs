@@ -180,39 +180,11 @@ impl TilePlanner {
         tolerance: Option<f32>,
     ) -> TilePlanner {
         let margin = dilate as f64 + 1.0;
-        let (w, h) = (width as f64, height as f64);
-        let (cols, rows) = (width.div_ceil(TILE), height.div_ceil(TILE));
         let triangle_tiles: Vec<Option<TileRange>> = triangles
             .iter()
             .map(|tri| {
                 let p = tri.map(|k| uvs[k]);
-                let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-                for q in p {
-                    for c in 0..2 {
-                        lo[c] = lo[c].min(q[c]);
-                        hi[c] = hi[c].max(q[c]);
-                    }
-                }
-                // Texel i has its centre at u = (i + 0.5) / width.
-                let x0 = (lo[0] * w - 0.5 - margin).floor();
-                let x1 = (hi[0] * w - 0.5 + margin).ceil();
-                let y0 = (lo[1] * h - 0.5 - margin).floor();
-                let y1 = (hi[1] * h - 0.5 + margin).ceil();
-                if !(x0.is_finite() && x1.is_finite() && y0.is_finite() && y1.is_finite())
-                    || x1 < 0.0
-                    || y1 < 0.0
-                    || x0 >= w
-                    || y0 >= h
-                {
-                    return None;
-                }
-                let tile = |t: f64, n: usize| (t.max(0.0) as usize / TILE).min(n - 1);
-                Some((
-                    tile(x0, cols),
-                    tile(y0, rows),
-                    tile(x1, cols),
-                    tile(y1, rows),
-                ))
+                triangle_tiles(p, [0.0, 0.0], (width, height), margin, TILE)
             })
             .collect();
         let mut surface = TileMask::empty(width, height);
@@ -309,6 +281,38 @@ impl TilePlanner {
             None => self.surface.cols.max(self.surface.rows),
         }
     }
+}
+
+/// The inclusive range of `tile`-texel tiles of a `width × height` map that
+/// the texels within `margin` texels of triangle `uvs` (moved by `shift`
+/// UV) can fall in; `None` when it misses the map or is not finite. Texel
+/// `i` has its centre at `u = (i + ½)/width`.
+pub fn triangle_tiles(
+    uvs: [[f64; 2]; 3],
+    shift: [f64; 2],
+    (width, height): (usize, usize),
+    margin: f64,
+    tile: usize,
+) -> Option<TileRange> {
+    let size = [width as f64, height as f64];
+    let mut range = [[0.0; 2]; 2];
+    for c in 0..2 {
+        let lo = uvs.iter().map(|q| q[c]).fold(f64::INFINITY, f64::min) + shift[c];
+        let hi = uvs.iter().map(|q| q[c]).fold(f64::NEG_INFINITY, f64::max) + shift[c];
+        let first = (lo * size[c] - 0.5 - margin).floor();
+        let last = (hi * size[c] - 0.5 + margin).ceil();
+        if !(first.is_finite() && last.is_finite()) || last < 0.0 || first >= size[c] {
+            return None;
+        }
+        range[c] = [first, last];
+    }
+    let at = |t: f64, n: usize| (t.max(0.0) as usize / tile).min(n.div_ceil(tile) - 1);
+    Some((
+        at(range[0][0], width),
+        at(range[1][0], height),
+        at(range[0][1], width),
+        at(range[1][1], height),
+    ))
 }
 
 /// How far (texels) a pass at any texel of a `width × height` map reads

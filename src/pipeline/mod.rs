@@ -459,9 +459,9 @@ fn write_neutral_tiles(
                 let [x0, y0, w, h] = tiled.tile_rect(col, row);
                 let ring = tiled.read_window([x0 as isize - 1, y0 as isize - 1], [w + 2, h + 2])?;
                 let normals = crate::micro::normals::normal_map(&ring);
-                let tile = out.read_tile(col, row)?;
                 let inner = crate::micro::tiled::crop_values(&normals, w + 2, [1, 1, w, h]);
-                crate::micro::io::write_normal_exr(&out.normal_path(col, row), &inner, &tile)?;
+                let meta = tiled.metadata(w, h);
+                crate::micro::io::write_normal_exr(&out.normal_path(col, row), &inner, &meta)?;
             }
         }
     }
