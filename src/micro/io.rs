@@ -32,13 +32,21 @@ pub enum TexelSize {
     Um(f64),
     /// The map spans this many millimetres along u.
     Extent(f64),
+    /// None: a file without a texel size in its metadata is an error (an
+    /// 8-bit PNG from an image editor says nothing of its scale); the text
+    /// names where to give one.
+    Required(&'static str),
 }
 
 impl TexelSize {
-    fn of(self, width: usize) -> f64 {
+    fn of(self, path: &Path, width: usize) -> Result<f64> {
         match self {
-            TexelSize::Um(t) => t,
-            TexelSize::Extent(mm) => mm * 1000.0 / width.max(1) as f64,
+            TexelSize::Um(t) => Ok(t),
+            TexelSize::Extent(mm) => Ok(mm * 1000.0 / width.max(1) as f64),
+            TexelSize::Required(hint) => Err(Error::malformed(
+                path,
+                format!("carries no texel size ({TEXEL} metadata); give it with {hint}"),
+            )),
         }
     }
 }
@@ -179,7 +187,10 @@ pub fn read_png16(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap
     };
     let offset = number(OFFSET)?.unwrap_or(0.0);
     let scale = number(SCALE)?.unwrap_or(1.0 / full);
-    let texel_um = number(TEXEL)?.unwrap_or_else(|| defaults.texel.of(width));
+    let texel_um = match number(TEXEL)? {
+        Some(t) => t,
+        None => defaults.texel.of(path, width)?,
+    };
     let height_unit_um = number(UNIT)?.unwrap_or(defaults.height_unit_um);
     if [texel_um, height_unit_um, scale]
         .iter()
@@ -326,7 +337,10 @@ pub fn read_exr(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap> 
             _ => None,
         })
     };
-    let texel_um = number(TEXEL)?.unwrap_or_else(|| defaults.texel.of(width));
+    let texel_um = match number(TEXEL)? {
+        Some(t) => t,
+        None => defaults.texel.of(path, width)?,
+    };
     let height_unit_um = number(UNIT)?.unwrap_or(defaults.height_unit_um);
     if [texel_um, height_unit_um]
         .iter()

@@ -170,6 +170,24 @@ impl DisplacementMap {
             })
     }
 
+    /// The map resampled bilinearly onto a `width × height` grid over the
+    /// same area (texel centres mapped onto each other, reads past the edge
+    /// by the edge rule); the texel size scales with it.
+    pub fn resampled(&self, width: usize, height: usize) -> DisplacementMap {
+        let (sx, sy) = (
+            self.width as f64 / width.max(1) as f64,
+            self.height as f64 / height.max(1) as f64,
+        );
+        let mut out =
+            DisplacementMap::from_fn(width, height, self.texel_um * sx, self.edge, |i, j| {
+                let x = (i as f64 + 0.5) * sx - 0.5;
+                let y = (j as f64 + 0.5) * sy - 0.5;
+                self.bilinear(x as f32, y as f32)
+            });
+        out.height_unit_um = self.height_unit_um;
+        out
+    }
+
     /// The map turned by 90° counter-clockwise: texel `(i, j)` of the result
     /// is texel `(j, height − 1 − i)` of this one, so a feature along +u ends
     /// up along +v.
@@ -220,5 +238,23 @@ mod tests {
         assert_eq!(r.data[r.index(2, 1)], m.data[m.index(1, 0)]);
         let back = r.rotated_90().rotated_90().rotated_90();
         assert_eq!(back, m);
+    }
+
+    #[test]
+    fn resampling_keeps_linear_ramps_and_scales_the_texel() {
+        // A ramp in x with clamped edges: doubling the resolution keeps the
+        // ramp inside, halving it averages neighbours.
+        let m = DisplacementMap::from_fn(8, 4, 10.0, Edge::Clamp, |i, _| i as f32);
+        let up = m.resampled(16, 8);
+        assert_eq!(up.texel_um, 5.0);
+        // Texel i of the finer grid has its centre at (i + ½)/2 − ½ coarse texels.
+        for i in 1..15 {
+            let x = (i as f32 + 0.5) / 2.0 - 0.5;
+            assert!((up.data[up.index(i, 3)] - x).abs() < 1e-6, "{i}");
+        }
+        let down = m.resampled(4, 2);
+        assert_eq!(down.texel_um, 20.0);
+        assert_eq!(down.data[down.index(1, 0)], 2.5);
+        assert_eq!(m.resampled(8, 4), m);
     }
 }

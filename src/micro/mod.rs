@@ -14,6 +14,9 @@
 //!   prefiltered (LEAN) specular;
 //! * [`roughness`]: per-axis Beckmann roughness m(r) from the kernel model
 //!   (seed 003), for the renderer;
+//! * [`synth`]: microstructure synthesis from an exemplar (seed 002 §4,
+//!   Image Analogies): a neutral map from a measured patch and a scan;
+//! * [`spectrum`]: radially averaged height power spectra per octave;
 //! * [`io`]: 16-bit PNG and f32 EXR files;
 //! * [`tiled`]: maps held as a folder of EXR tiles with an index
 //!   (face-scale maps, read and written a tile at a time).
@@ -29,6 +32,8 @@ pub mod moments;
 pub mod normals;
 pub mod procedural;
 pub mod roughness;
+pub mod spectrum;
+pub mod synth;
 pub mod tiled;
 
 pub use convolve::{convolve, KernelField, PassParams};

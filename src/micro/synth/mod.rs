@@ -1,0 +1,986 @@
+//! Microstructure synthesis from a measured exemplar (seed 002 §4):
+//! constrained texture synthesis in the Image Analogies framework.
+//!
+//! Given an exemplar micro map A′ (≈ 1 cm² at ≈ 10 µm) and a mesostructure
+//! map B (a scan at a coarser resolution), it makes B′: B's shape with the
+//! exemplar's microstructure, pores and creases of B drawing on exemplar
+//! places whose mesostructure looks alike.
+//!
+//! 1. Everything is brought to the output texel: A′ resampled if its texel
+//!    differs, B upsampled bilinearly over the output grid. Heights in µm.
+//! 2. The analogy's other half: A = A′ blurred by a Gaussian of σ_m
+//!    ("matched to B's resolution"; default one B texel), the mesostructure
+//!    of the exemplar.
+//! 3. Frequencies split with a wider Gaussian σ_L (default 4 σ_m): each of
+//!    A, A′, B loses its low pass, `X_h = X − G_L * X`, so B_h's medium
+//!    frequencies guide the match and B's low pass is never replaced.
+//! 4. Coarse to fine over `levels` Gaussian pyramid levels, with the
+//!    neighbourhood window growing from `window_coarse` to `window_fine`
+//!    (5 × 5 to 13 × 13 in the seed). The output is a map S from output
+//!    texels to exemplar texels (B′_h(q) = A′_h(S(q))). The coarsest
+//!    level starts from random exemplar texels (seeded); each finer level
+//!    starts from the coarser S upsampled (a texel's four children take
+//!    the four children of its source); then `passes` correction passes
+//!    visit every texel.
+//! 5. Per texel q, the feature is the Gaussian-weighted window of B_h
+//!    around q, weighted √(1 − α), next to the window of the current B′_h,
+//!    weighted √α; an exemplar texel p has [A_h window, A′_h window] the
+//!    same way. So the squared distance is α |N_A′(p) − N_B′(q)|² +
+//!    (1 − α) |N_A(p) − N_B(q)|², α the seed's weight. Features are reduced
+//!    by PCA to `pca_dims` (default the window side n for an n × n window,
+//!    as in the seed).
+//! 6. Best approximate match: the nearest exemplar feature from a k-d tree
+//!    ([`ann`]), visiting at most `ann_leaves` leaves. Best coherence match
+//!    (Ashikhmin): the candidates S(r) + (q − r) of q's eight neighbours r
+//!    and S(q) itself. The coherent one wins when
+//!    `d_coh ≤ d_app (1 + 2^(l − L) κ)²` (l the level, L the finest), κ
+//!    the coherence parameter (1 in the seed; see [`SynthParams::kappa`]).
+//! 7. B′ = G_L * B + A′_h(S): the frequencies recombined, where each
+//!    texel's A′_h value is the Gaussian-weighted mean of what its
+//!    neighbours' sources say it should be (`blend_radius`; a seam between
+//!    two patches would otherwise be a step that adds power at the highest
+//!    frequencies).
+//! 8. The mesostructure restored (`restore_passes`): B′ += G_m * (B − B′),
+//!    so that B′ seen at B's resolution matches B seen at it to within a
+//!    few per cent of B's range (the match alone leaves ≈ 10 %).
+//!
+//! Parallel and deterministic: a correction pass runs as four sub-passes
+//! over the texels of one parity class (i mod 2, j mod 2) each, every texel
+//! of a sub-pass reading S as it was before the sub-pass, so the result
+//! does not depend on the thread count. Random starts come from a hash of
+//! (seed, texel). Exemplars with `Edge::Wrap` offer every texel (windows
+//! wrap); with `Edge::Clamp` only those whose window lies inside. An
+//! output with `Edge::Wrap` is a torus: windows wrap, and the map tiles
+//! without a seam.
+
+pub mod ann;
+
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use super::convolve::blur_along_axis;
+use super::map::{DisplacementMap, Edge};
+use crate::error::{shown, Error, Result};
+use ann::{squared_distance, KdTree};
+
+/// Parameters of the synthesis.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SynthParams {
+    /// σ (µm) of the Gaussian that takes the exemplar to the mesostructure
+    /// map's level of detail (A = G * A′). Default: one mesostructure texel,
+    /// or four output texels without a mesostructure map.
+    pub mesostructure_sigma_um: Option<f64>,
+    /// σ (µm) of the low pass kept from the mesostructure map. Default
+    /// 4 × `mesostructure_sigma_um`.
+    pub lowpass_sigma_um: Option<f64>,
+    /// Pyramid levels (1: the output resolution only).
+    pub levels: usize,
+    /// Window side at the coarsest level (odd).
+    pub window_coarse: usize,
+    /// Window side at the finest level (odd).
+    pub window_fine: usize,
+    /// Weight of the A′/B′ neighbourhoods against the A/B ones, [0, 1].
+    pub alpha: f64,
+    /// Coherence parameter κ ≥ 0 (0: the approximate match whenever it is
+    /// closer). The seed uses 1 with scan-line synthesis, where a coherent
+    /// candidate's window holds only texels already made to agree with it;
+    /// the parallel correction passes here compare whole windows, seams
+    /// included, and need a larger κ for patches of the same size
+    /// (docs/SYNTHESIS.md has the measurements behind the default, 100).
+    pub kappa: f64,
+    /// Correction passes per level.
+    pub passes: usize,
+    /// Dimensions kept by PCA; `None`: the window side, `Some(0)`: no PCA.
+    pub pca_dims: Option<usize>,
+    /// Leaves of the k-d tree visited per query (0: exact search).
+    pub ann_leaves: usize,
+    /// Random seed of the coarsest level's start.
+    pub seed: u64,
+    /// Seam blending: each output texel averages what the sources of its
+    /// neighbours within this many texels say it should be (0: copies).
+    pub blend_radius: usize,
+    /// Mesostructure restoring passes: B′ += G_m * B − G_m * B′ each, so
+    /// that B′ seen at B's resolution converges to B seen at it.
+    pub restore_passes: usize,
+}
+
+impl Default for SynthParams {
+    fn default() -> Self {
+        SynthParams {
+            mesostructure_sigma_um: None,
+            lowpass_sigma_um: None,
+            levels: 3,
+            window_coarse: 5,
+            window_fine: 13,
+            alpha: 0.5,
+            kappa: 100.0,
+            passes: 3,
+            pca_dims: None,
+            ann_leaves: 8,
+            seed: 1,
+            blend_radius: 1,
+            restore_passes: 2,
+        }
+    }
+}
+
+/// Most pyramid levels.
+pub const MAX_LEVELS: usize = 8;
+/// Widest window.
+pub const MAX_WINDOW: usize = 31;
+
+impl SynthParams {
+    /// Checks every parameter; `key` prefixes the names in errors.
+    pub fn validate(&self, key: &str) -> Result<()> {
+        let bad =
+            |name: &str, reason: String| Err(Error::parameter(format!("{key}.{name}"), reason));
+        for (name, v) in [
+            ("mesostructure_sigma_um", self.mesostructure_sigma_um),
+            ("lowpass_sigma_um", self.lowpass_sigma_um),
+        ] {
+            if let Some(v) = v {
+                if !(v.is_finite() && v > 0.0) {
+                    return bad(name, format!("must be finite and > 0, got {}", shown(v)));
+                }
+            }
+        }
+        if !(1..=MAX_LEVELS).contains(&self.levels) {
+            return bad(
+                "levels",
+                format!("must be in 1 … {MAX_LEVELS}, got {}", self.levels),
+            );
+        }
+        for (name, w) in [
+            ("window_coarse", self.window_coarse),
+            ("window_fine", self.window_fine),
+        ] {
+            if w < 3 || w > MAX_WINDOW || w % 2 == 0 {
+                return bad(name, format!("must be odd, in 3 … {MAX_WINDOW}, got {w}"));
+            }
+        }
+        if self.window_coarse > self.window_fine {
+            return bad(
+                "window_coarse",
+                format!(
+                    "must not exceed window_fine ({}), got {}",
+                    self.window_fine, self.window_coarse
+                ),
+            );
+        }
+        if !(0.0..=1.0).contains(&self.alpha) {
+            return bad(
+                "alpha",
+                format!("must be in [0, 1], got {}", shown(self.alpha)),
+            );
+        }
+        if !(self.kappa.is_finite() && self.kappa >= 0.0) {
+            return bad(
+                "kappa",
+                format!("must be finite and ≥ 0, got {}", shown(self.kappa)),
+            );
+        }
+        if !(1..=16).contains(&self.passes) {
+            return bad("passes", format!("must be in 1 … 16, got {}", self.passes));
+        }
+        if let Some(d) = self.pca_dims {
+            let most = 2 * self.window_coarse * self.window_coarse;
+            if d > most {
+                return bad(
+                    "pca_dims",
+                    format!("must be at most 2 × window_coarse² = {most} (0: no PCA), got {d}"),
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// Window side at `level` of `levels` (0 coarsest): from
+    /// `window_coarse` to `window_fine` in equal steps, rounded to odd.
+    pub fn window(&self, level: usize) -> usize {
+        if self.levels <= 1 {
+            return self.window_fine;
+        }
+        let t = level as f64 / (self.levels - 1) as f64;
+        let w = self.window_coarse as f64 + t * (self.window_fine - self.window_coarse) as f64;
+        // Nearest odd number.
+        (((w - 1.0) / 2.0).round() as usize) * 2 + 1
+    }
+}
+
+/// What to synthesize from.
+#[derive(Clone, Copy, Debug)]
+pub struct SynthInputs<'a> {
+    /// The exemplar micro map A′.
+    pub exemplar: &'a DisplacementMap,
+    /// The mesostructure map B to detail (any texel size; covers the output).
+    /// None: plain texture synthesis of `size` texels.
+    pub mesostructure: Option<&'a DisplacementMap>,
+    /// Output texel (µm). None: the exemplar's.
+    pub texel_um: Option<f64>,
+    /// Output size without a mesostructure map (with one, the output covers it).
+    pub size: Option<(usize, usize)>,
+    /// Output edge rule. None: the mesostructure map's, else wrap.
+    pub edge: Option<Edge>,
+}
+
+/// One level's figures.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LevelReport {
+    /// Level (0 coarsest).
+    pub level: usize,
+    /// Output texels (width, height).
+    pub size: (usize, usize),
+    /// Exemplar texels at this level.
+    pub exemplar: (usize, usize),
+    /// Window side.
+    pub window: usize,
+    /// Feature dimensions searched (after PCA).
+    pub dims: usize,
+    /// Exemplar texels that can be matched.
+    pub candidates: usize,
+    /// Share of the last pass's texels that took the coherence match.
+    pub coherent_share: f64,
+    /// Seconds spent on the level (features, PCA, tree, passes).
+    pub seconds: f64,
+}
+
+/// What a synthesis made.
+#[derive(Clone, Debug)]
+pub struct Synthesis {
+    /// B′: heights in µm, the output texel and edge rule.
+    pub map: DisplacementMap,
+    /// B at the output texel (µm; zeros without a mesostructure map).
+    pub guide: DisplacementMap,
+    /// Per output texel (row-major), the index `y · width + x` of the
+    /// exemplar texel (of the exemplar as given) it copies.
+    pub source: Vec<u32>,
+    /// σ_m and σ_L used (µm).
+    pub sigmas_um: (f64, f64),
+    /// Per level, coarse to fine.
+    pub levels: Vec<LevelReport>,
+    /// Whole synthesis (s).
+    pub seconds: f64,
+}
+
+/// Largest output or exemplar side.
+pub const MAX_SIDE: usize = 32768;
+
+/// Synthesizes B′. `on_level` hears of each level as it finishes.
+pub fn synthesize(
+    inputs: &SynthInputs<'_>,
+    params: &SynthParams,
+    on_level: &mut dyn FnMut(&LevelReport),
+) -> Result<Synthesis> {
+    let start = Instant::now();
+    params.validate("synthesis")?;
+    let exemplar = inputs.exemplar;
+    check_map("synthesis.exemplar", exemplar)?;
+    if let Some(b) = inputs.mesostructure {
+        check_map("synthesis.mesostructure", b)?;
+    }
+    let texel = inputs.texel_um.unwrap_or(exemplar.texel_um);
+    if !(texel.is_finite() && texel > 0.0) {
+        return Err(Error::parameter(
+            "synthesis.texel_um",
+            format!("must be finite and > 0, got {}", shown(texel)),
+        ));
+    }
+    // The output grid.
+    let (width, height) = match (inputs.mesostructure, inputs.size) {
+        (Some(_), Some(_)) => {
+            return Err(Error::parameter(
+                "synthesis.size_px",
+                "has no effect with a mesostructure map: the output covers the map",
+            ))
+        }
+        (Some(b), None) => (
+            (b.width as f64 * b.texel_um / texel).round() as usize,
+            (b.height as f64 * b.texel_um / texel).round() as usize,
+        ),
+        (None, Some(s)) => s,
+        (None, None) => {
+            return Err(Error::parameter(
+                "synthesis.size_px",
+                "is needed without a mesostructure map",
+            ))
+        }
+    };
+    if !(1..=MAX_SIDE).contains(&width) || !(1..=MAX_SIDE).contains(&height) {
+        return Err(Error::parameter(
+            "synthesis",
+            format!("output of {width} × {height} texels at {texel} µm: each side must be in 1 … {MAX_SIDE}"),
+        ));
+    }
+    let edge = inputs
+        .edge
+        .or(inputs.mesostructure.map(|b| b.edge))
+        .unwrap_or(Edge::Wrap);
+
+    // 1. Heights in µm at the output texel.
+    let a1 = {
+        let f = exemplar.texel_um / texel;
+        let (w, h) = (
+            (exemplar.width as f64 * f).round() as usize,
+            (exemplar.height as f64 * f).round() as usize,
+        );
+        let resized = if (w, h) == (exemplar.width, exemplar.height) {
+            exemplar.clone()
+        } else {
+            if w.max(h) > MAX_SIDE {
+                return Err(Error::parameter(
+                    "synthesis.exemplar",
+                    format!("at the output texel ({texel} µm) it would be {w} × {h} texels, more than {MAX_SIDE} a side"),
+                ));
+            }
+            exemplar.resampled(w, h)
+        };
+        in_um(&resized, texel)
+    };
+    let guide = match inputs.mesostructure {
+        Some(b) => in_um(&b.resampled(width, height), texel),
+        None => DisplacementMap::zeros(width, height, texel, edge),
+    };
+    let guide = DisplacementMap { edge, ..guide };
+
+    // 2–3. The analogy and the frequency split.
+    let sigma_m = params
+        .mesostructure_sigma_um
+        .unwrap_or(match inputs.mesostructure {
+            Some(b) => b.texel_um,
+            None => 4.0 * texel,
+        });
+    let sigma_l = params.lowpass_sigma_um.unwrap_or(4.0 * sigma_m);
+    let a = gauss(&a1, sigma_m / texel);
+    let high = |m: &DisplacementMap| -> (DisplacementMap, DisplacementMap) {
+        let low = gauss(m, sigma_l / texel);
+        let h = m.with_data(m.data.iter().zip(&low.data).map(|(x, l)| x - l).collect());
+        (low, h)
+    };
+    let (_, a_h) = high(&a);
+    let (_, a1_h) = high(&a1);
+    let (b_low, b_h) = high(&guide);
+
+    // 4. Pyramids, finest first.
+    let pyramid = |m: DisplacementMap| -> Vec<DisplacementMap> {
+        let mut levels = vec![m];
+        for _ in 1..params.levels {
+            let next = reduce(levels.last().expect("one level at least"));
+            levels.push(next);
+        }
+        levels
+    };
+    let (pa, pa1, pb) = (pyramid(a_h), pyramid(a1_h), pyramid(b_h));
+    let top = params.levels - 1;
+    for level in 0..params.levels {
+        let ex = &pa1[top - level];
+        let n = params.window(level);
+        if exemplar.edge == Edge::Clamp && (ex.width <= n || ex.height <= n)
+            || ex.width < 2
+            || ex.height < 2
+        {
+            return Err(Error::parameter(
+                "synthesis.exemplar",
+                format!(
+                    "is too small: at pyramid level {level} it has {} × {} texels, the window \
+                     is {n} × {n}{}; use fewer levels, smaller windows or a larger exemplar",
+                    ex.width,
+                    ex.height,
+                    if exemplar.edge == Edge::Clamp {
+                        " and must fit inside it (the exemplar does not wrap)"
+                    } else {
+                        ""
+                    }
+                ),
+            ));
+        }
+    }
+
+    let mut s: Vec<u32> = Vec::new();
+    let mut reports = Vec::new();
+    for level in 0..params.levels {
+        let t0 = Instant::now();
+        let k = top - level;
+        let lv = LevelData::new(&pa[k], &pa1[k], &pb[k], exemplar.edge, params, level)?;
+        s = if level == 0 {
+            lv.random_start(params.seed)
+        } else {
+            lv.upsample(&s, pb[k + 1].width, pa1[k + 1].width)
+        };
+        let mut coherent = 0usize;
+        for _ in 0..params.passes {
+            coherent = lv.correct(&mut s);
+        }
+        let report = LevelReport {
+            level,
+            size: (lv.guide.width, lv.guide.height),
+            exemplar: (lv.ex_a1.width, lv.ex_a1.height),
+            window: lv.window,
+            dims: lv.projection.dims(),
+            candidates: lv.candidates.len(),
+            coherent_share: coherent as f64 / s.len().max(1) as f64,
+            seconds: t0.elapsed().as_secs_f64(),
+        };
+        on_level(&report);
+        reports.push(report);
+    }
+
+    // 7. Recombined.
+    let a1_h = &pa1[0];
+    let detail = resolve(&s, &b_low, a1_h, params.blend_radius);
+    let data: Vec<f32> = detail
+        .iter()
+        .zip(&b_low.data)
+        .map(|(&d, &low)| low + d)
+        .collect();
+    let mut map = DisplacementMap {
+        texel_um: texel,
+        height_unit_um: 1.0,
+        edge,
+        ..guide.with_data(data)
+    };
+    // 8. The mesostructure restored: B′ += G_m * (B − B′), repeated.
+    let guide_low = gauss(&guide, sigma_m / texel);
+    for _ in 0..params.restore_passes {
+        let low = gauss(&map, sigma_m / texel);
+        map.data
+            .par_iter_mut()
+            .zip(&guide_low.data)
+            .zip(&low.data)
+            .for_each(|((x, b), l)| *x += b - l);
+    }
+    // Sources in the exemplar as given.
+    let (ew, eh) = (a1_h.width, a1_h.height);
+    let source = if (ew, eh) == (exemplar.width, exemplar.height) {
+        s
+    } else {
+        let (fx, fy) = (
+            exemplar.width as f64 / ew as f64,
+            exemplar.height as f64 / eh as f64,
+        );
+        s.iter()
+            .map(|&p| {
+                let (x, y) = ((p as usize % ew) as f64, (p as usize / ew) as f64);
+                let xo = (((x + 0.5) * fx) as usize).min(exemplar.width - 1);
+                let yo = (((y + 0.5) * fy) as usize).min(exemplar.height - 1);
+                (yo * exemplar.width + xo) as u32
+            })
+            .collect()
+    };
+    Ok(Synthesis {
+        map,
+        guide,
+        source,
+        sigmas_um: (sigma_m, sigma_l),
+        levels: reports,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// The synthesized detail B′_h: per output texel q, the exemplar detail at
+/// S(q) when `radius` is 0, else the mean over the neighbours r within
+/// `radius` (a square) of what r's source says q should be, A′_h(S(r) +
+/// q − r), with Gaussian weights. Inside a coherent patch every neighbour
+/// says the same; across a seam between patches the two sides are
+/// averaged over a few texels instead of meeting in a step, which would
+/// add power at the highest frequencies that the exemplar does not have.
+fn resolve(s: &[u32], like: &DisplacementMap, detail: &DisplacementMap, radius: usize) -> Vec<f32> {
+    let (w, h) = (like.width, like.height);
+    if radius == 0 {
+        return s.iter().map(|&p| detail.data[p as usize]).collect();
+    }
+    let r = radius as isize;
+    let (ew, eh) = (detail.width as isize, detail.height as isize);
+    let sigma = (radius as f32).max(0.5);
+    let mut out = vec![0.0f32; w * h];
+    out.par_chunks_mut(w).enumerate().for_each(|(j, row)| {
+        for (i, o) in row.iter_mut().enumerate() {
+            let (mut sum, mut norm) = (0.0f32, 0.0f32);
+            for dy in -r..=r {
+                for dx in -r..=r {
+                    let (x, y) = (i as isize + dx, j as isize + dy);
+                    let (x, y) = match like.edge {
+                        Edge::Wrap => (x.rem_euclid(w as isize), y.rem_euclid(h as isize)),
+                        Edge::Clamp => {
+                            if x < 0 || y < 0 || x >= w as isize || y >= h as isize {
+                                continue;
+                            }
+                            (x, y)
+                        }
+                    };
+                    let p = s[y as usize * w + x as usize] as isize;
+                    let g = (-((dx * dx + dy * dy) as f32) / (2.0 * sigma * sigma)).exp();
+                    sum += g * detail.texel(p % ew - dx, p / ew - dy);
+                    norm += g;
+                }
+            }
+            let _ = eh;
+            *o = sum / norm;
+        }
+    });
+    out
+}
+
+/// Size and finiteness of an input map.
+fn check_map(key: &str, m: &DisplacementMap) -> Result<()> {
+    if m.width == 0 || m.height == 0 || m.width.max(m.height) > MAX_SIDE {
+        return Err(Error::parameter(
+            key,
+            format!(
+                "is {} × {} texels; each side must be in 1 … {MAX_SIDE}",
+                m.width, m.height
+            ),
+        ));
+    }
+    if !(m.texel_um.is_finite() && m.texel_um > 0.0) {
+        return Err(Error::parameter(
+            key,
+            format!(
+                "has texel size {} µm; it must be finite and > 0",
+                shown(m.texel_um)
+            ),
+        ));
+    }
+    if let Some(k) = m.data.iter().position(|h| !h.is_finite()) {
+        return Err(Error::parameter(
+            key,
+            format!(
+                "height at texel ({}, {}) is not finite",
+                k % m.width,
+                k / m.width
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The map in µm with texel `texel` (its grid as it is).
+fn in_um(m: &DisplacementMap, texel: f64) -> DisplacementMap {
+    let unit = m.height_unit_um as f32;
+    DisplacementMap {
+        texel_um: texel,
+        height_unit_um: 1.0,
+        ..m.with_data(m.data.iter().map(|h| h * unit).collect())
+    }
+}
+
+/// A separable Gaussian blur of σ texels (the map's edge rule).
+pub fn gauss(m: &DisplacementMap, sigma: f64) -> DisplacementMap {
+    let s = sigma as f32;
+    blur_along_axis(&blur_along_axis(m, true, s), false, s)
+}
+
+/// One pyramid step: blurred by σ = 1 texel, every second texel kept.
+fn reduce(m: &DisplacementMap) -> DisplacementMap {
+    let b = gauss(m, 1.0);
+    let (w, h) = (m.width.div_ceil(2), m.height.div_ceil(2));
+    let mut out = DisplacementMap::from_fn(w, h, m.texel_um * 2.0, m.edge, |i, j| {
+        b.data[(2 * j) * b.width + 2 * i]
+    });
+    out.height_unit_um = m.height_unit_um;
+    out
+}
+
+/// A 64-bit mix (splitmix64's finaliser).
+fn mix(mut z: u64) -> u64 {
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// The feature projection: PCA (mean, then rows of the basis) or none.
+struct Projection {
+    input: usize,
+    mean: Vec<f32>,
+    /// `dims × input`, row-major; empty: the identity.
+    basis: Vec<f32>,
+}
+
+impl Projection {
+    fn dims(&self) -> usize {
+        if self.basis.is_empty() {
+            self.input
+        } else {
+            self.basis.len() / self.input
+        }
+    }
+
+    fn apply(&self, x: &[f32], out: &mut [f32]) {
+        if self.basis.is_empty() {
+            out.copy_from_slice(x);
+            return;
+        }
+        for (o, row) in out.iter_mut().zip(self.basis.chunks(self.input)) {
+            let mut sum = 0.0f32;
+            for ((r, xi), m) in row.iter().zip(x).zip(&self.mean) {
+                sum += r * (xi - m);
+            }
+            *o = sum;
+        }
+    }
+
+    /// The `dims` leading principal axes of `features` (rows of `input`
+    /// values), from at most `MAX_SAMPLES` rows taken at a fixed stride.
+    fn pca(
+        input: usize,
+        dims: usize,
+        rows: usize,
+        feature: impl Fn(usize, &mut [f32]) + Sync,
+    ) -> Projection {
+        const MAX_SAMPLES: usize = 8192;
+        const CHUNK: usize = 256;
+        let stride = rows.div_ceil(MAX_SAMPLES).max(1);
+        let samples: Vec<usize> = (0..rows).step_by(stride).collect();
+        // Mean and second moments per chunk of samples (f64), added in
+        // chunk order: the same sums on any thread count.
+        let partial: Vec<(Vec<f64>, Vec<f64>)> = samples
+            .par_chunks(CHUNK)
+            .map(|chunk| {
+                let mut x = vec![0.0f32; input];
+                let mut sum = vec![0.0f64; input];
+                let mut outer = vec![0.0f64; input * input];
+                for &r in chunk {
+                    feature(r, &mut x);
+                    for a in 0..input {
+                        let xa = x[a] as f64;
+                        sum[a] += xa;
+                        let row = &mut outer[a * input..(a + 1) * input];
+                        for (o, &xb) in row[a..].iter_mut().zip(&x[a..]) {
+                            *o += xa * xb as f64;
+                        }
+                    }
+                }
+                (sum, outer)
+            })
+            .collect();
+        let n = samples.len() as f64;
+        let mut sum = vec![0.0f64; input];
+        let mut outer = vec![0.0f64; input * input];
+        for (s, o) in partial {
+            sum.iter_mut().zip(s).for_each(|(a, b)| *a += b);
+            outer.iter_mut().zip(o).for_each(|(a, b)| *a += b);
+        }
+        let mean: Vec<f64> = sum.iter().map(|s| s / n).collect();
+        let cov = nalgebra::DMatrix::from_fn(input, input, |a, b| {
+            let (a, b) = (a.min(b), a.max(b));
+            outer[a * input + b] / n - mean[a] * mean[b]
+        });
+        let eig = nalgebra::SymmetricEigen::new(cov);
+        let mut order: Vec<usize> = (0..input).collect();
+        order.sort_by(|&a, &b| {
+            eig.eigenvalues[b]
+                .total_cmp(&eig.eigenvalues[a])
+                .then(a.cmp(&b))
+        });
+        let mut basis = Vec::with_capacity(dims * input);
+        for &c in order.iter().take(dims) {
+            basis.extend(eig.eigenvectors.column(c).iter().map(|&v| v as f32));
+        }
+        Projection {
+            input,
+            mean: mean.iter().map(|&m| m as f32).collect(),
+            basis,
+        }
+    }
+}
+
+/// One pyramid level's images, exemplar features and search tree.
+struct LevelData<'a> {
+    ex_a1: &'a DisplacementMap,
+    guide: &'a DisplacementMap,
+    window: usize,
+    /// Window offsets and the square roots of their Gaussian weights.
+    taps: Vec<(isize, isize, f32)>,
+    /// √(1 − α), √α.
+    weights: (f32, f32),
+    projection: Projection,
+    /// Exemplar texels that can be matched.
+    candidates: Vec<u32>,
+    /// Exemplar texel → index into `candidates` (`u32::MAX`: none).
+    candidate_of: Vec<u32>,
+    /// Projected features of the candidates, `dims` each.
+    features: Vec<f32>,
+    tree: KdTree,
+    ann_leaves: usize,
+    /// `(1 + 2^(l − L) κ)²`.
+    coherence_factor: f32,
+}
+
+impl<'a> LevelData<'a> {
+    fn new(
+        ex_a: &'a DisplacementMap,
+        ex_a1: &'a DisplacementMap,
+        guide: &'a DisplacementMap,
+        exemplar_edge: Edge,
+        params: &SynthParams,
+        level: usize,
+    ) -> Result<LevelData<'a>> {
+        let n = params.window(level);
+        let r = (n / 2) as isize;
+        let sigma = r.max(1) as f32;
+        let mut taps = Vec::with_capacity(n * n);
+        for dy in -r..=r {
+            for dx in -r..=r {
+                let g = (-((dx * dx + dy * dy) as f32) / (2.0 * sigma * sigma)).exp();
+                taps.push((dx, dy, g.sqrt()));
+            }
+        }
+        let weights = (
+            (1.0 - params.alpha).sqrt() as f32,
+            params.alpha.sqrt() as f32,
+        );
+        let (ew, eh) = (ex_a1.width, ex_a1.height);
+        let inside = |x: usize, y: usize| match exemplar_edge {
+            Edge::Wrap => true,
+            Edge::Clamp => {
+                let r = r as usize;
+                x >= r && y >= r && x + r < ew && y + r < eh
+            }
+        };
+        let candidates: Vec<u32> = (0..ew * eh)
+            .filter(|&p| inside(p % ew, p / ew))
+            .map(|p| p as u32)
+            .collect();
+        let mut candidate_of = vec![u32::MAX; ew * eh];
+        for (k, &p) in candidates.iter().enumerate() {
+            candidate_of[p as usize] = k as u32;
+        }
+        let input = 2 * taps.len();
+        let exemplar_feature = |k: usize, out: &mut [f32]| {
+            let p = candidates[k] as usize;
+            let (x, y) = ((p % ew) as isize, (p / ew) as isize);
+            let (a_half, a1_half) = out.split_at_mut(taps.len());
+            for (t, &(dx, dy, g)) in taps.iter().enumerate() {
+                a_half[t] = weights.0 * g * ex_a.texel(x + dx, y + dy);
+                a1_half[t] = weights.1 * g * ex_a1.texel(x + dx, y + dy);
+            }
+        };
+        let dims = params.pca_dims.unwrap_or(n).min(input);
+        let projection = if dims == 0 {
+            Projection {
+                input,
+                mean: vec![0.0; input],
+                basis: Vec::new(),
+            }
+        } else {
+            Projection::pca(input, dims, candidates.len(), &exemplar_feature)
+        };
+        let d = projection.dims();
+        let mut features = vec![0.0f32; candidates.len() * d];
+        features
+            .par_chunks_mut(d * 1024)
+            .enumerate()
+            .for_each(|(c, chunk)| {
+                let mut x = vec![0.0f32; input];
+                for (o, out) in chunk.chunks_mut(d).enumerate() {
+                    exemplar_feature(c * 1024 + o, &mut x);
+                    projection.apply(&x, out);
+                }
+            });
+        let ids: Vec<u32> = (0..candidates.len() as u32).collect();
+        let tree = KdTree::new(d, &features, &ids);
+        let finest = (params.levels - 1) as i32;
+        let f = 1.0 + 2f64.powi(level as i32 - finest) * params.kappa;
+        Ok(LevelData {
+            ex_a1,
+            guide,
+            window: n,
+            taps,
+            weights,
+            projection,
+            candidates,
+            candidate_of,
+            features,
+            tree,
+            ann_leaves: params.ann_leaves,
+            coherence_factor: (f * f) as f32,
+        })
+    }
+
+    /// The coarsest level's start: blocks of `window × window` output
+    /// texels, each a piece of the exemplar at an offset drawn from (seed,
+    /// block). Coherent pieces from the start: a start of independent
+    /// random texels leaves the coarse levels, where the coherence rule
+    /// favours the approximate match, as a patchwork of single texels.
+    fn random_start(&self, seed: u64) -> Vec<u32> {
+        let (w, h) = (self.guide.width, self.guide.height);
+        let (ew, eh) = (self.ex_a1.width, self.ex_a1.height);
+        let b = self.window;
+        (0..w * h)
+            .map(|q| {
+                let (i, j) = (q % w, q / w);
+                let block = ((j / b) * w.div_ceil(b) + i / b) as u64;
+                let offset = mix(seed ^ mix(block + 0x5157_4e54));
+                let (ox, oy) = (
+                    (offset % ew as u64) as usize,
+                    ((offset >> 32) % eh as u64) as usize,
+                );
+                self.nearest_candidate((ox + i % b) as isize, (oy + j % b) as isize, ew, eh)
+            })
+            .collect()
+    }
+
+    /// The coarser level's sources carried to this level: texel (i, j)
+    /// takes child (i mod 2, j mod 2) of its parent's source.
+    fn upsample(
+        &self,
+        coarse: &[u32],
+        coarse_width: usize,
+        coarse_exemplar_width: usize,
+    ) -> Vec<u32> {
+        let (w, h) = (self.guide.width, self.guide.height);
+        let (ew, eh) = (self.ex_a1.width, self.ex_a1.height);
+        (0..w * h)
+            .map(|q| {
+                let (i, j) = (q % w, q / w);
+                let p = coarse[(j / 2) * coarse_width + i / 2] as usize;
+                let (px, py) = (p % coarse_exemplar_width, p / coarse_exemplar_width);
+                let (x, y) = (2 * px + i % 2, 2 * py + j % 2);
+                self.nearest_candidate(x as isize, y as isize, ew, eh)
+            })
+            .collect()
+    }
+
+    /// The exemplar texel (x, y), wrapped, or moved to the nearest candidate.
+    fn nearest_candidate(&self, x: isize, y: isize, ew: usize, eh: usize) -> u32 {
+        let (x, y) = (
+            x.rem_euclid(ew as isize) as usize,
+            y.rem_euclid(eh as isize) as usize,
+        );
+        let p = y * ew + x;
+        if self.candidate_of[p] != u32::MAX {
+            return p as u32;
+        }
+        // Clamped exemplar: into the interior.
+        let r = self.window / 2;
+        let cx = x.clamp(r, ew - 1 - r);
+        let cy = y.clamp(r, eh - 1 - r);
+        (cy * ew + cx) as u32
+    }
+
+    /// One correction pass (four parity sub-passes); returns how many
+    /// texels took the coherence match.
+    fn correct(&self, s: &mut [u32]) -> usize {
+        let (w, h) = (self.guide.width, self.guide.height);
+        let mut coherent = 0;
+        for parity in 0..4 {
+            let (px, py) = (parity % 2, parity / 2);
+            let rows: Vec<usize> = (py..h).step_by(2).collect();
+            let current: &[u32] = s;
+            let updates: Vec<(Vec<u32>, usize)> = rows
+                .par_iter()
+                .map_init(
+                    || Scratch::new(2 * self.taps.len(), self.projection.dims()),
+                    |scratch, &j| {
+                        let mut row = Vec::with_capacity(w / 2 + 1);
+                        let mut count = 0;
+                        for i in (px..w).step_by(2) {
+                            let (p, c) = self.best_match(current, i, j, scratch);
+                            row.push(p);
+                            count += c as usize;
+                        }
+                        (row, count)
+                    },
+                )
+                .collect();
+            for (&j, (row, count)) in rows.iter().zip(updates) {
+                coherent += count;
+                for (k, p) in row.into_iter().enumerate() {
+                    s[j * w + px + 2 * k] = p;
+                }
+            }
+        }
+        coherent
+    }
+
+    /// Output texel `q + (dx, dy)` by the output's edge rule.
+    #[inline]
+    fn output_index(&self, i: usize, j: usize, dx: isize, dy: isize) -> usize {
+        let (w, h) = (self.guide.width as isize, self.guide.height as isize);
+        let (x, y) = (i as isize + dx, j as isize + dy);
+        let (x, y) = match self.guide.edge {
+            Edge::Wrap => (x.rem_euclid(w), y.rem_euclid(h)),
+            Edge::Clamp => (x.clamp(0, w - 1), y.clamp(0, h - 1)),
+        };
+        (y * w + x) as usize
+    }
+
+    /// The exemplar texel for output texel (i, j) and whether it is the
+    /// coherence match.
+    fn best_match(&self, s: &[u32], i: usize, j: usize, scratch: &mut Scratch) -> (u32, bool) {
+        let n = self.taps.len();
+        {
+            let (b_half, b1_half) = scratch.x.split_at_mut(n);
+            for (t, &(dx, dy, g)) in self.taps.iter().enumerate() {
+                let q = self.output_index(i, j, dx, dy);
+                b_half[t] = self.weights.0 * g * self.guide.data[q];
+                b1_half[t] = self.weights.1 * g * self.ex_a1.data[s[q] as usize];
+            }
+        }
+        self.projection.apply(&scratch.x, &mut scratch.y);
+        let y = &scratch.y;
+        let d = y.len();
+        let (k_app, d_app) = self
+            .tree
+            .nearest(y, self.ann_leaves)
+            .expect("a level has candidates");
+        // Coherence candidates: S(q) and S(r) + (q − r) for the 8 neighbours.
+        let (ew, eh) = (self.ex_a1.width as isize, self.ex_a1.height as isize);
+        let wraps = self.candidates.len() == (ew * eh) as usize;
+        let mut best_coh = (u32::MAX, f32::INFINITY);
+        for (dx, dy) in NEIGHBOURS {
+            let r = self.output_index(i, j, dx, dy);
+            let p = s[r] as isize;
+            let (mut x, mut y0) = (p % ew - dx, p / ew - dy);
+            if wraps {
+                x = x.rem_euclid(ew);
+                y0 = y0.rem_euclid(eh);
+            } else if x < 0 || y0 < 0 || x >= ew || y0 >= eh {
+                continue;
+            }
+            let c = self.candidate_of[(y0 * ew + x) as usize];
+            if c == u32::MAX {
+                continue;
+            }
+            let f = &self.features[c as usize * d..(c as usize + 1) * d];
+            let dist = squared_distance(y, f, best_coh.1);
+            if dist < best_coh.1 {
+                best_coh = (c, dist);
+            }
+        }
+        if best_coh.0 != u32::MAX && best_coh.1 <= d_app * self.coherence_factor {
+            (self.candidates[best_coh.0 as usize], true)
+        } else {
+            (self.candidates[k_app as usize], false)
+        }
+    }
+}
+
+/// The coherence candidates' offsets: the texel itself, then its eight
+/// neighbours.
+const NEIGHBOURS: [(isize, isize); 9] = [
+    (0, 0),
+    (-1, -1),
+    (0, -1),
+    (1, -1),
+    (-1, 0),
+    (1, 0),
+    (-1, 1),
+    (0, 1),
+    (1, 1),
+];
+
+/// Per-thread buffers of a pass.
+struct Scratch {
+    x: Vec<f32>,
+    y: Vec<f32>,
+}
+
+impl Scratch {
+    fn new(input: usize, dims: usize) -> Scratch {
+        Scratch {
+            x: vec![0.0; input],
+            y: vec![0.0; dims],
+        }
+    }
+}
