@@ -78,6 +78,26 @@ enum Command {
         /// Samples file (TOML).
         samples: PathBuf,
     },
+    /// Synthesize a neutral microstructure map from an exemplar (seed 002 §4).
+    ///
+    /// Image-analogies texture synthesis: a measured micro map (the
+    /// exemplar) details a coarser mesostructure map (a scan), keeping the
+    /// scan's low frequencies. The file's [synthesis] table names the
+    /// inputs and parameters (README, "Synthesizing a neutral map"); the
+    /// outputs go to [output] dir (default out/<name>) or --output:
+    /// synthesized.exr/.png (+ normal maps), albedo.png with an exemplar
+    /// albedo, preview.png (exemplar, mesostructure, result, render) and
+    /// synthesis.json (parameters, timings, statistics).
+    Synth {
+        /// Synthesis file (TOML).
+        file: PathBuf,
+        /// Output folder, overriding the file's [output] dir.
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+        /// Override a key: `--set synthesis.alpha=1` (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+    },
     /// Split a displacement map into a tiled map, or join one back.
     ///
     /// A tiled map is a folder of f32 EXR tiles with `index.toml` (size,
@@ -251,6 +271,60 @@ struct MeshArgs {
     edges_within: Option<Vec<f64>>,
 }
 
+fn synth(file: &Path, output: Option<&Path>, set: &[String]) -> anyhow::Result<()> {
+    let started = std::time::Instant::now();
+    let run = skinpatch::pipeline::synth::run(file, set, output, &mut |l| {
+        eprintln!(
+            "level {}: {} × {} texels from {} × {} exemplar texels, window {}, {} dims, \
+             {:.0}% coherent, {:.1} s",
+            l.level,
+            l.size.0,
+            l.size.1,
+            l.exemplar.0,
+            l.exemplar.1,
+            l.window,
+            l.dims,
+            100.0 * l.coherent_share,
+            l.seconds
+        );
+    })?;
+    let m = &run.synthesis.map;
+    let st = &run.statistics;
+    println!(
+        "synthesized {} × {} texels at {} µm in {:.1} s (σ_m {} µm, σ_L {} µm)",
+        m.width,
+        m.height,
+        m.texel_um,
+        run.synthesis.seconds,
+        run.synthesis.sigmas_um.0,
+        run.synthesis.sigmas_um.1
+    );
+    if let Some(e) = st.low_frequency_rms {
+        println!(
+            "mesostructure kept: RMS of the difference at its resolution {:.2}% of its range",
+            100.0 * e
+        );
+    }
+    println!(
+        "normal histogram total variation to the exemplar: {:.3}",
+        st.histogram_tv
+    );
+    if let Some(w) = st.spectrum_worst {
+        println!(
+            "power spectrum, microstructure band: worst octave {:+.1}% from the exemplar",
+            100.0 * w
+        );
+    }
+    if !run.rendered_on_gpu && run.written.iter().any(|p| p.ends_with("preview.png")) {
+        println!("preview: no GPU adapter, the render panel is CPU shading");
+    }
+    for p in &run.written {
+        println!("wrote {}", p.display());
+    }
+    log::info!("synth took {:.1} s", started.elapsed().as_secs_f64());
+    Ok(())
+}
+
 fn fit(samples: &Path) -> anyhow::Result<()> {
     use std::io::IsTerminal;
     let bar = std::io::stderr().is_terminal().then(|| {
@@ -358,6 +432,7 @@ fn main() -> ExitCode {
         } => run(&scenario, output, force, &set, quiet),
         Command::Mesh(args) => mesh(*args),
         Command::Fit { samples } => fit(&samples),
+        Command::Synth { file, output, set } => synth(&file, output.as_deref(), &set),
         Command::Tiles {
             action,
             input,

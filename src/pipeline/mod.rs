@@ -16,6 +16,7 @@ use std::time::Instant;
 
 pub mod plan;
 mod render;
+pub mod synth;
 mod vtkhdf;
 
 pub use render::{bench_render, roughness_curve, texel_mm, RenderBench};

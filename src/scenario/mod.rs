@@ -26,6 +26,7 @@ mod mesh;
 mod micro;
 mod render;
 mod simulation;
+mod synth;
 
 pub use mesh::{MeshSection, RefineSection, ZoneKind};
 pub use micro::{
@@ -37,6 +38,7 @@ pub use simulation::{
     BoundarySection, CaliperSection, MaterialSection, PrescribedSection, ProbeSection,
     SimulationSetup, SolverSection, TimeSection,
 };
+pub use synth::{GeneratedSection, SynthFile, SynthOutputSection, SynthSources, SynthesisSection};
 
 /// Region id of the top layer (epidermis + dermis) in generated meshes.
 pub const TOP_REGION_ID: i32 = 1;
@@ -260,16 +262,7 @@ impl Scenario {
 
     /// Parses scenario text; `path` names the file in errors.
     pub fn parse(text: &str, path: &Path) -> Result<Scenario> {
-        let fail = |message: String| Error::Scenario {
-            path: path.to_path_buf(),
-            message,
-        };
-        let de =
-            toml::Deserializer::parse(text).map_err(|e| fail(describe_toml_error(&e, text)))?;
-        serde_path_to_error::deserialize(de).map_err(|e| {
-            let key = e.path().to_string();
-            fail(describe_schema_error(&key, e.inner(), text))
-        })
+        parse_toml(text, path)
     }
 
     /// Reads and parses a scenario file.
@@ -283,34 +276,56 @@ impl Scenario {
     /// The file is validated on its own first (errors name its lines), then
     /// with the overrides (errors name the key as `--set key`).
     pub fn load_with(path: &Path, overrides: &[String]) -> Result<Scenario> {
-        let text = crate::mesh::io::read_input_text(path)?;
-        let scenario = Scenario::parse(&text, path)?;
-        if overrides.is_empty() {
-            return Ok(scenario);
-        }
-        let fail = |message: String| Error::Scenario {
-            path: path.to_path_buf(),
-            message,
-        };
-        let mut table: toml::Table =
-            toml::from_str(&text).map_err(|e| fail(describe_toml_error(&e, &text)))?;
-        for o in overrides {
-            let (key, value) = o
-                .split_once('=')
-                .ok_or_else(|| fail(format!("--set {o}: expected key=value")))?;
-            set_key(&mut table, key.trim(), override_value(value.trim()))
-                .map_err(|reason| fail(format!("--set {}: {reason}", key.trim())))?;
-        }
-        // A value tree has no spans, so the message names the key without a
-        // line.
-        serde_path_to_error::deserialize(toml::Value::Table(table)).map_err(|e| {
-            let key = e.path().to_string();
-            fail(format!(
-                "with --set: {}",
-                describe_schema_error(&key, e.inner(), "")
-            ))
-        })
+        load_with(path, overrides)
     }
+}
+
+/// Reads a TOML file of type `T` (any of the project's files: scenarios,
+/// synthesis files) and applies `overrides` (`key=value` with a dotted key
+/// and a TOML value; a value that is not TOML is taken as a string). The
+/// file is validated on its own first (errors name its lines), then with
+/// the overrides (errors name the key as `--set key`).
+pub fn load_with<T: serde::de::DeserializeOwned>(path: &Path, overrides: &[String]) -> Result<T> {
+    let text = crate::mesh::io::read_input_text(path)?;
+    let parsed: T = parse_toml(&text, path)?;
+    if overrides.is_empty() {
+        return Ok(parsed);
+    }
+    let fail = |message: String| Error::Scenario {
+        path: path.to_path_buf(),
+        message,
+    };
+    let mut table: toml::Table =
+        toml::from_str(&text).map_err(|e| fail(describe_toml_error(&e, &text)))?;
+    for o in overrides {
+        let (key, value) = o
+            .split_once('=')
+            .ok_or_else(|| fail(format!("--set {o}: expected key=value")))?;
+        set_key(&mut table, key.trim(), override_value(value.trim()))
+            .map_err(|reason| fail(format!("--set {}: {reason}", key.trim())))?;
+    }
+    // A value tree has no spans, so the message names the key without a
+    // line.
+    serde_path_to_error::deserialize(toml::Value::Table(table)).map_err(|e| {
+        let key = e.path().to_string();
+        fail(format!(
+            "with --set: {}",
+            describe_schema_error(&key, e.inner(), "")
+        ))
+    })
+}
+
+/// Parses TOML text of type `T`; errors name `path`, the key and line.
+fn parse_toml<T: serde::de::DeserializeOwned>(text: &str, path: &Path) -> Result<T> {
+    let fail = |message: String| Error::Scenario {
+        path: path.to_path_buf(),
+        message,
+    };
+    let de = toml::Deserializer::parse(text).map_err(|e| fail(describe_toml_error(&e, text)))?;
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let key = e.path().to_string();
+        fail(describe_schema_error(&key, e.inner(), text))
+    })
 }
 
 /// The TOML value of an override's right-hand side, or the text itself as

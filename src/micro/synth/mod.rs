@@ -252,6 +252,10 @@ pub struct Synthesis {
     pub map: DisplacementMap,
     /// B at the output texel (µm; zeros without a mesostructure map).
     pub guide: DisplacementMap,
+    /// A′ at the output texel (µm).
+    pub exemplar: DisplacementMap,
+    /// Whether a mesostructure map guided the synthesis.
+    pub guided: bool,
     /// Per output texel (row-major), the index `y · width + x` of the
     /// exemplar texel (of the exemplar as given) it copies.
     pub source: Vec<u32>,
@@ -470,6 +474,8 @@ pub fn synthesize(
     Ok(Synthesis {
         map,
         guide,
+        exemplar: a1,
+        guided: inputs.mesostructure.is_some(),
         source,
         sigmas_um: (sigma_m, sigma_l),
         levels: reports,
@@ -519,6 +525,63 @@ fn resolve(s: &[u32], like: &DisplacementMap, detail: &DisplacementMap, radius: 
         }
     });
     out
+}
+
+/// How a synthesis compares with its inputs (the figures of the tests and
+/// of `synthesis.json`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct SynthStatistics {
+    /// RMS of `G_m * B′ − G_m * B` over B's height range: the mesostructure
+    /// kept (None without B).
+    pub low_frequency_rms: Option<f64>,
+    /// Total variation between the 64 × 64 normal histograms of B′ and A′
+    /// (half range from the data, as the kernel fit does).
+    pub histogram_tv: f64,
+    /// Largest `|P_B′/P_A′ − 1|` over the octaves of the microstructure band,
+    /// from `1/(π σ_m)` to Nyquist (None when the band holds no octave).
+    pub spectrum_worst: Option<f64>,
+    /// Per octave of that band: (low, high) cycles/µm, B′'s and A′'s power.
+    pub spectrum: Vec<(f64, f64, f64, f64)>,
+}
+
+/// The statistics of a synthesis against its exemplar and mesostructure.
+pub fn statistics(s: &Synthesis) -> SynthStatistics {
+    use super::normals::NormalHistogram;
+    use super::spectrum::{band_difference, octaves};
+    let texel = s.map.texel_um;
+    let sm = s.sigmas_um.0 / texel;
+    let low_frequency_rms = s.guided.then(|| {
+        let (lo, hi) = s.guide.range();
+        let (a, b) = (gauss(&s.map, sm), gauss(&s.guide, sm));
+        let sum: f64 = a
+            .data
+            .iter()
+            .zip(&b.data)
+            .map(|(x, y)| ((x - y) as f64).powi(2))
+            .sum();
+        (sum / a.data.len().max(1) as f64).sqrt() / ((hi - lo) as f64).max(f64::MIN_POSITIVE)
+    });
+    let range = super::fit::auto_range(&[&s.exemplar, &s.map]);
+    let histogram_tv = NormalHistogram::of(&s.map, 64, range, [1.0, 1.0])
+        .distance(&NormalHistogram::of(&s.exemplar, 64, range, [1.0, 1.0]));
+    let from = 1.0 / (std::f64::consts::PI * s.sigmas_um.0);
+    let band = band_difference(&octaves(&s.map), &octaves(&s.exemplar), from, 1.0);
+    let (spectrum_worst, spectrum) = match band {
+        Some((worst, pairs)) => (
+            Some(worst),
+            pairs
+                .iter()
+                .map(|(a, b)| (a.low_per_um, a.high_per_um, a.power, b.power))
+                .collect(),
+        ),
+        None => (None, Vec::new()),
+    };
+    SynthStatistics {
+        low_frequency_rms,
+        histogram_tv,
+        spectrum_worst,
+        spectrum,
+    }
 }
 
 /// Size and finiteness of an input map.
