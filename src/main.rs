@@ -475,12 +475,13 @@ fn run(
     overrides: &[String],
     quiet: bool,
 ) -> anyhow::Result<()> {
-    let scenario = Scenario::load_with(path, overrides)?;
+    let mut scenario = Scenario::load_with(path, overrides)?;
+    // Before the setup: it places the synthesized map's cache there.
+    if let Some(dir) = output {
+        scenario.output.dir = Some(dir);
+    }
     let mut setup = Setup::from_scenario(&scenario, path)
         .with_context(|| format!("scenario {}", path.display()))?;
-    if let Some(dir) = output {
-        setup.output_dir = dir;
-    }
     setup.force_large_output = force;
     let progress = (!quiet).then(Progress::new);
     let result = skinpatch::pipeline::run(&setup, |frame| {

@@ -1239,3 +1239,74 @@ fn a_tiled_neutral_map_runs_tile_by_tile() {
         text(&o.stderr)
     );
 }
+
+/// `[microstructure.synthesis]` synthesizes the neutral map once: the run
+/// writes it to `cache/` and a rerun reads it back instead of
+/// synthesizing again; the neutral map the run writes is that map.
+#[test]
+fn a_synthesized_neutral_map_is_cached_between_runs() {
+    use skinpatch::micro::io::{read_exr, MapDefaults, TexelSize};
+    let dir = tempfile::tempdir().unwrap();
+    let section =
+        "\n[microstructure]\nframe_stride = 6\nformats = [\"exr\"]\nnormal_maps = false\n\
+        [microstructure.synthesis]\nsize_px = 128\nlevels = 2\n\
+        [microstructure.synthesis.exemplar_generated]\nextent_mm = 0.64\n\
+        [microstructure.synthesis.exemplar_generated.skin]\nsize_px = 128\n";
+    let (out, o) = run_press_small_with(dir.path(), section);
+    assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    let cached: Vec<_> = std::fs::read_dir(out.join("cache"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(cached.len(), 1, "{cached:?}");
+    let name = cached[0]
+        .file_name()
+        .unwrap()
+        .to_string_lossy()
+        .into_owned();
+    assert!(
+        name.starts_with("synthesis-") && name.ends_with(".exr"),
+        "{name}"
+    );
+    let modified = std::fs::metadata(&cached[0]).unwrap().modified().unwrap();
+    let defaults = MapDefaults {
+        texel: TexelSize::Um(1.0),
+        height_unit_um: 1.0,
+        edge: skinpatch::micro::Edge::Wrap,
+    };
+    let neutral = read_exr(&out.join("micro/height_neutral.exr"), &defaults).unwrap();
+    let synthesized = read_exr(&cached[0], &defaults).unwrap();
+    assert_eq!(neutral.data, synthesized.data);
+    assert_eq!((neutral.width, neutral.texel_um), (128, 5.0));
+    // The rerun reads the cache (the file is not written again) and gives
+    // the same neutral map.
+    let (_, o) = run_press_small_configured(dir.path(), section, |cmd| {
+        cmd.arg("-v");
+    });
+    assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    assert!(
+        text(&o.stderr).contains("synthesized earlier"),
+        "{}",
+        text(&o.stderr)
+    );
+    assert_eq!(
+        std::fs::metadata(&cached[0]).unwrap().modified().unwrap(),
+        modified
+    );
+    let again = read_exr(&out.join("micro/height_neutral.exr"), &defaults).unwrap();
+    assert_eq!(again.data, neutral.data);
+    // A map file beside the synthesis is refused by name.
+    let (_, o) = run_press_small_with(
+        dir.path(),
+        &section.replace(
+            "normal_maps = false\n",
+            "normal_maps = false\nmap = \"x.png\"\n",
+        ),
+    );
+    assert!(!o.status.success());
+    assert!(
+        text(&o.stderr).contains("microstructure.synthesis"),
+        "{}",
+        text(&o.stderr)
+    );
+}

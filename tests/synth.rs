@@ -448,3 +448,194 @@ fn bad_inputs_are_named() {
         assert!(e.contains(key), "{key}: {e}");
     }
 }
+
+/// A small synthesis file over generated inputs, with `extra` keys in
+/// `[synthesis]`.
+fn small_file(dir: &std::path::Path, synthesis_extra: &str, rest: &str) -> std::path::PathBuf {
+    let text = format!(
+        "[synthesis]\nmesostructure_sigma_um = 40.0\nlevels = 2\n{synthesis_extra}\n{rest}\n\
+         [output]\npreview_px = 64\n"
+    );
+    let path = dir.join("synth.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+const GENERATED: &str = "[synthesis.exemplar_generated]\nextent_mm = 0.64\n\
+    [synthesis.exemplar_generated.skin]\nsize_px = 128\ngroove_spacing_um = 140.0\n\
+    [synthesis.mesostructure_generated]\nextent_mm = 0.8\nblur_um = 40.0\ntexel_um = 20.0\n\
+    [synthesis.mesostructure_generated.skin]\nsize_px = 160\nseed = 2\ngroove_spacing_um = 500.0\n";
+
+#[test]
+fn a_synthesis_file_writes_maps_preview_and_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = small_file(dir.path(), "", GENERATED);
+    let out = dir.path().join("out");
+    let mut levels = 0;
+    let run =
+        skinpatch::pipeline::synth::run(&path, &[], Some(&out), &mut |_| levels += 1).unwrap();
+    assert_eq!(levels, 2);
+    let names: Vec<String> = run
+        .written
+        .iter()
+        .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "synthesized.exr",
+            "synthesized.png",
+            "synthesized_normals.exr",
+            "synthesized_normals.png",
+            "preview.png",
+            "synthesis.json"
+        ]
+    );
+    // The map reads back with its metadata: 160 texels of 5 µm, µm heights.
+    let defaults = skinpatch::micro::io::MapDefaults {
+        texel: skinpatch::micro::io::TexelSize::Required("test"),
+        height_unit_um: 1.0,
+        edge: Edge::Clamp,
+    };
+    let map = skinpatch::micro::io::read_map(&out.join("synthesized.exr"), &defaults).unwrap();
+    assert_eq!(
+        (map.width, map.height, map.texel_um, map.edge),
+        (160, 160, 5.0, Edge::Wrap)
+    );
+    assert_eq!(map.data, run.synthesis.map.data);
+    let preview = image::open(out.join("preview.png")).unwrap();
+    assert_eq!((preview.width(), preview.height()), (4 * 64 + 12, 64));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("synthesis.json")).unwrap())
+            .unwrap();
+    assert_eq!(report["levels"].as_array().unwrap().len(), 2);
+    assert_eq!(report["levels"][1]["window"], 13);
+    let tv = report["statistics"]["histogram_tv"].as_f64().unwrap();
+    assert!(tv > 0.0 && tv < 2.0, "{tv}");
+    let low = report["statistics"]["low_frequency_rms"].as_f64().unwrap();
+    assert!(low < 0.1, "{low}");
+    // --set overrides, and the same file gives the same bytes.
+    let again = dir.path().join("again");
+    skinpatch::pipeline::synth::run(&path, &[], Some(&again), &mut |_| {}).unwrap();
+    assert_eq!(
+        std::fs::read(out.join("synthesized.exr")).unwrap(),
+        std::fs::read(again.join("synthesized.exr")).unwrap()
+    );
+    let other = dir.path().join("other");
+    let r = skinpatch::pipeline::synth::run(
+        &path,
+        &["synthesis.seed=5".into()],
+        Some(&other),
+        &mut |_| {},
+    )
+    .unwrap();
+    assert_ne!(r.synthesis.map.data, run.synthesis.map.data);
+}
+
+/// The albedo output borrows, per texel, the exemplar albedo pixel whose
+/// height the texel took: an albedo that spells out each pixel's
+/// coordinates gives them back, and the heights there agree.
+#[test]
+fn the_albedo_borrows_the_pixels_the_heights_came_from() {
+    let dir = tempfile::tempdir().unwrap();
+    let exemplar = skin(1, 96);
+    let exemplar = exemplar.resampled(96, 80);
+    skinpatch::micro::io::write_exr(&dir.path().join("ex.exr"), &exemplar).unwrap();
+    // 16-bit RGB: R = x, G = y of the map texel (rows flipped: images run
+    // top down, maps v up).
+    let (w, h) = (exemplar.width as u32, exemplar.height as u32);
+    let albedo = image::ImageBuffer::from_fn(w, h, |x, y| {
+        image::Rgb([x as u16, (h - 1 - y) as u16, 7u16])
+    });
+    image::DynamicImage::ImageRgb16(albedo)
+        .save(dir.path().join("albedo.png"))
+        .unwrap();
+    let path = small_file(
+        dir.path(),
+        "exemplar = \"ex.exr\"\nexemplar_albedo = \"albedo.png\"\nsize_px = 120\n\
+         blend_radius = 0\nrestore_passes = 0\nlowpass_sigma_um = 80.0",
+        "",
+    );
+    let out = dir.path().join("out");
+    let run = skinpatch::pipeline::synth::run(&path, &[], Some(&out), &mut |_| {}).unwrap();
+    let result = image::open(out.join("albedo.png")).unwrap().to_rgba16();
+    assert_eq!(result.dimensions(), (120, 120));
+    // Without B and without blending, B′ = A′_h(S): A′ less its 80 µm low pass.
+    let low = gauss(&exemplar, 80.0 / TEXEL_UM);
+    let map = &run.synthesis.map;
+    for j in 0..map.height {
+        for i in 0..map.width {
+            let px = result.get_pixel(i as u32, (map.height - 1 - j) as u32);
+            let (x, y) = (px[0] as usize, px[1] as usize);
+            assert_eq!(px[2], 7);
+            let k = y * exemplar.width + x;
+            assert_eq!(
+                map.data[j * map.width + i],
+                exemplar.data[k] - low.data[k],
+                "texel ({i}, {j})"
+            );
+        }
+    }
+    // An albedo of another size is refused by name.
+    image::DynamicImage::ImageRgb8(image::RgbImage::new(10, 10))
+        .save(dir.path().join("albedo.png"))
+        .unwrap();
+    let e = skinpatch::pipeline::synth::run(&path, &[], Some(&out), &mut |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("synthesis.exemplar_albedo") && e.contains("same size"),
+        "{e}"
+    );
+}
+
+/// An 8-bit PNG says nothing of its texel size: without
+/// `exemplar_texel_um` it is refused, naming the file and the key; with
+/// it, it reads.
+#[test]
+fn maps_without_a_texel_size_need_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let img =
+        image::GrayImage::from_fn(64, 64, |x, y| image::Luma([((x * 7 + y * 3) % 256) as u8]));
+    image::DynamicImage::ImageLuma8(img)
+        .save(dir.path().join("ex8.png"))
+        .unwrap();
+    let path = small_file(dir.path(), "exemplar = \"ex8.png\"\nsize_px = 64\n", "");
+    let out = dir.path().join("out");
+    let e = skinpatch::pipeline::synth::run(&path, &[], Some(&out), &mut |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("ex8.png") && e.contains("exemplar_texel_um"),
+        "{e}"
+    );
+    let run = skinpatch::pipeline::synth::run(
+        &path,
+        &["synthesis.exemplar_texel_um=10".into()],
+        Some(&out),
+        &mut |_| {},
+    );
+    assert_eq!(run.unwrap().synthesis.map.texel_um, 10.0);
+    // Unknown keys and conflicting sources are named.
+    let e = skinpatch::pipeline::synth::run(
+        &path,
+        &["synthesis.alhpa=1".into()],
+        Some(&out),
+        &mut |_| {},
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("alhpa") && e.contains("alpha"), "{e}");
+    let both = small_file(
+        dir.path(),
+        "exemplar = \"ex8.png\"\nexemplar_texel_um = 5.0",
+        GENERATED,
+    );
+    let e = skinpatch::pipeline::synth::run(&both, &[], Some(&out), &mut |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("synthesis.exemplar") && e.contains("keep one"),
+        "{e}"
+    );
+}

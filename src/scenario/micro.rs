@@ -27,6 +27,11 @@ pub struct MicrostructureSection {
     pub edge: String,
     /// The procedural generator's parameters (used when `map` is not set).
     pub procedural: ProceduralSection,
+    /// A neutral map synthesized from an exemplar (seed 002 §4) instead of
+    /// `map` or `procedural`; the same keys as a `skinpatch synth` file's
+    /// `[synthesis]`. Cached in the output folder's `cache/` by a hash of
+    /// the settings and input files, so reruns do not synthesize again.
+    pub synthesis: Option<super::synth::SynthesisSection>,
     /// Custom kernel model tables. Default: the forehead model (seed 000 eq. 8–9).
     pub kernel: Option<KernelSection>,
     /// A kernel model file written by `skinpatch fit` (its tables, as in
@@ -59,6 +64,7 @@ impl Default for MicrostructureSection {
             height_unit_um: 1.0,
             edge: "wrap".into(),
             procedural: ProceduralSection::default(),
+            synthesis: None,
             kernel: None,
             kernel_file: None,
             formats: vec!["png16".into()],
@@ -190,8 +196,9 @@ fn table(points: &[[f64; 2]]) -> PiecewiseLinear {
 impl MicrostructureSection {
     /// Builds the neutral map and kernel model. `base` resolves `map`;
     /// `patch_width_mm` is the default extent of a generated map and the
-    /// default texel size of a loaded one.
-    pub fn setup(&self, base: &Path, patch_width_mm: f64) -> Result<MicroSetup> {
+    /// default texel size of a loaded one; `cache` is the folder for a
+    /// synthesized map.
+    pub fn setup(&self, base: &Path, patch_width_mm: f64, cache: &Path) -> Result<MicroSetup> {
         let edge = match self.edge.as_str() {
             "wrap" => Edge::Wrap,
             "clamp" => Edge::Clamp,
@@ -253,6 +260,28 @@ impl MicrostructureSection {
         };
         model.validate(&key)?;
         let neutral = match &self.map {
+            _ if self.synthesis.is_some() => {
+                if self.map.is_some() {
+                    return Err(Error::parameter(
+                        "microstructure.synthesis",
+                        "and microstructure.map both give the neutral map; keep one",
+                    ));
+                }
+                if let Some(k) = self.procedural_keys_set().first() {
+                    return Err(Error::parameter(
+                        format!("microstructure.procedural.{k}"),
+                        "has no effect with [microstructure.synthesis]; remove one of them",
+                    ));
+                }
+                if self.texel_um.is_some() {
+                    return Err(Error::parameter(
+                        "microstructure.texel_um",
+                        "has no effect with [microstructure.synthesis] (its texel_um sets the texel)",
+                    ));
+                }
+                let section = self.synthesis.as_ref().expect("checked above");
+                NeutralMap::Whole(section.cached_map(base, cache, "microstructure.synthesis")?)
+            }
             Some(file) if crate::micro::tiled::is_tiled(&base.join(file)) => {
                 self.tiled_checks()?;
                 NeutralMap::Tiled(TiledMap::open(&base.join(file))?)

@@ -546,7 +546,7 @@ impl Setup {
         let micro = match &scenario.microstructure {
             Some(m) => {
                 let (lo, hi) = mesh.bounds();
-                Some(m.setup(base, hi.x - lo.x)?)
+                Some(m.setup(base, hi.x - lo.x, &output_dir.join("cache"))?)
             }
             None => None,
         };

@@ -468,6 +468,94 @@ impl SynthesisSection {
     }
 }
 
+impl SynthesisSection {
+    /// The synthesized map for a scenario: read from `cache` when a
+    /// previous run synthesized it from the same settings and input files
+    /// (a 128-bit hash of both names the file), else synthesized and
+    /// written there. `key` names the table in errors.
+    pub fn cached_map(&self, base: &Path, cache: &Path, key: &str) -> Result<DisplacementMap> {
+        let params = self.params(key)?;
+        let mut hash = Fnv128::default();
+        hash.write(b"skinpatch synthesis 1 ");
+        hash.write(env!("CARGO_PKG_VERSION").as_bytes());
+        let settings = serde_json::to_string(self)
+            .map_err(|e| Error::parameter(key, format!("cannot be hashed: {e}")))?;
+        hash.write(settings.as_bytes());
+        for file in self.files(base) {
+            let bytes = std::fs::read(&file).map_err(|e| Error::io(&file, e))?;
+            hash.write(&(bytes.len() as u64).to_le_bytes());
+            hash.write(&bytes);
+        }
+        let path = cache.join(format!("synthesis-{}.exr", hash.hex()));
+        if path.is_file() {
+            let defaults = MapDefaults {
+                texel: TexelSize::Required("the synthesis settings"),
+                height_unit_um: 1.0,
+                edge: Edge::Wrap,
+            };
+            match read_map(&path, &defaults) {
+                Ok(map) => {
+                    log::info!(
+                        "neutral map: synthesized earlier, read from {}",
+                        path.display()
+                    );
+                    return Ok(map);
+                }
+                Err(e) => log::warn!("{e}; synthesizing the neutral map again"),
+            }
+        }
+        let sources = self.load(base, key)?;
+        if let Some(b) = &sources.mesostructure {
+            let t = sources.texel_um.unwrap_or(sources.exemplar.texel_um);
+            let side = (b.width.max(b.height) as f64 * b.texel_um / t).round() as usize;
+            crate::gpu::precheck_map(side, side)?;
+        } else if let Some((w, h)) = sources.size {
+            crate::gpu::precheck_map(w, h)?;
+        }
+        log::info!("neutral map: synthesizing from the exemplar (seed 002 §4)");
+        let result = crate::micro::synth::synthesize(&sources.inputs(), &params, &mut |l| {
+            log::info!(
+                "synthesis level {}: {} × {} texels, window {}, {:.1} s",
+                l.level,
+                l.size.0,
+                l.size.1,
+                l.window,
+                l.seconds
+            )
+        })?;
+        std::fs::create_dir_all(cache).map_err(|e| Error::io(cache, e))?;
+        crate::micro::io::write_exr(&path, &result.map)?;
+        Ok(result.map)
+    }
+}
+
+/// FNV-1a over two 64-bit lanes with different offset bases: a stable
+/// 128-bit hash (the standard library's hasher may change between Rust
+/// releases, which would make every cached file look stale).
+struct Fnv128([u64; 2]);
+
+impl Default for Fnv128 {
+    fn default() -> Self {
+        Fnv128([0xcbf2_9ce4_8422_2325, 0x6c62_272e_07bb_0142])
+    }
+}
+
+impl Fnv128 {
+    fn write(&mut self, bytes: &[u8]) {
+        const PRIME: u64 = 0x0000_0100_0000_01b3;
+        for &b in bytes {
+            for (k, h) in self.0.iter_mut().enumerate() {
+                *h ^= (b ^ (k as u8 * 0x5a)) as u64;
+                *h = h.wrapping_mul(PRIME);
+            }
+        }
+    }
+
+    fn hex(&self) -> String {
+        format!("{:016x}{:016x}", self.0[0], self.0[1])
+    }
+}
+
 impl GeneratedSection {
     /// The generated, blurred and resampled map; `key` names the table.
     pub fn generate(&self, key: &str) -> Result<DisplacementMap> {
