@@ -748,19 +748,33 @@ fn an_interrupted_run_leaves_only_complete_frames() {
 }
 
 /// Every shipped example validates (meshes loaded or generated, render
-/// settings checked).
+/// settings checked; a synthesis file's parameters, inputs and outputs).
 #[test]
 fn every_example_validates() {
-    let mut count = 0;
+    let (mut count, mut synth) = (0, 0);
     for entry in std::fs::read_dir(root().join("examples")).unwrap() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "toml") {
+            let text = std::fs::read_to_string(&path).unwrap();
+            if text.lines().any(|l| l.trim() == "[synthesis]") {
+                let file: skinpatch::scenario::SynthFile =
+                    skinpatch::scenario::load_with(&path, &[])
+                        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+                file.synthesis.params("synthesis").unwrap();
+                file.output.formats().unwrap();
+                file.synthesis
+                    .load(path.parent().unwrap(), "synthesis")
+                    .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+                synth += 1;
+                continue;
+            }
             skinpatch::scenario::Setup::load(&path)
                 .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
             count += 1;
         }
     }
     assert!(count >= 6, "{count} examples");
+    assert!(synth >= 1, "{synth} synthesis examples");
 }
 
 /// `render.mp4 = true` without ffmpeg stops before any work with a message
