@@ -580,9 +580,8 @@ impl GeneratedSection {
         }
         if let Some(t) = self.texel_um {
             let side = extent * 1000.0 / t;
-            if !(t.is_finite() && t > 0.0)
-                || !(1.0..=crate::micro::synth::MAX_SIDE as f64).contains(&side.round())
-            {
+            let fits = (1.0..=crate::micro::synth::MAX_SIDE as f64).contains(&side.round());
+            if !(t.is_finite() && t > 0.0 && fits) {
                 return Err(Error::parameter(
                     format!("{key}.texel_um"),
                     format!(

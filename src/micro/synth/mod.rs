@@ -155,7 +155,7 @@ impl SynthParams {
             ("window_coarse", self.window_coarse),
             ("window_fine", self.window_fine),
         ] {
-            if w < 3 || w > MAX_WINDOW || w % 2 == 0 {
+            if !(3..=MAX_WINDOW).contains(&w) || w % 2 == 0 {
                 return bad(name, format!("must be odd, in 3 … {MAX_WINDOW}, got {w}"));
             }
         }
@@ -826,7 +826,7 @@ impl<'a> LevelData<'a> {
                 basis: Vec::new(),
             }
         } else {
-            Projection::pca(input, dims, candidates.len(), &exemplar_feature)
+            Projection::pca(input, dims, candidates.len(), exemplar_feature)
         };
         let d = projection.dims();
         let mut features = vec![0.0f32; candidates.len() * d];
