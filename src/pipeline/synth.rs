@@ -20,7 +20,7 @@ use crate::micro::synth::{statistics, synthesize, LevelReport, SynthStatistics, 
 use crate::micro::DisplacementMap;
 use crate::render::albedo::srgb_to_linear;
 use crate::render::{FrameFormat, Image};
-use crate::scenario::{SynthFile, SynthSources};
+use crate::scenario::SynthFile;
 
 /// What a synthesis run produced.
 #[derive(Debug)]
@@ -104,7 +104,7 @@ pub fn run(
     let mut rendered_on_gpu = false;
     if file.output.preview {
         let p = dir.join("preview.png");
-        let (image, gpu) = preview(&sources, &synthesis, &normals, file.output.preview_px)?;
+        let (image, gpu) = preview(&synthesis, &normals, file.output.preview_px)?;
         crate::export::frames::write_image(&p, &image, FrameFormat::Png8)?;
         rendered_on_gpu = gpu;
         written.push(p);
@@ -178,18 +178,12 @@ fn write_albedo(path: &Path, albedo: &image::DynamicImage, synthesis: &Synthesis
 /// Four panels of `px`: exemplar, mesostructure, result (heights, each
 /// over its own 1st–99th percentile) and the result rendered; and whether
 /// the render came from the GPU.
-fn preview(
-    sources: &SynthSources,
-    synthesis: &Synthesis,
-    normals: &[[f32; 3]],
-    px: usize,
-) -> Result<(Image, bool)> {
+fn preview(synthesis: &Synthesis, normals: &[[f32; 3]], px: usize) -> Result<(Image, bool)> {
     let heights = [&synthesis.exemplar, &synthesis.guide, &synthesis.map];
     let (render, gpu) = match render_flat(&synthesis.map, normals, px)? {
         Some(image) => (image, true),
         None => (shade_on_cpu(&synthesis.map, normals, px), false),
     };
-    let _ = sources;
     let gap = 4;
     let width = 4 * px + 3 * gap;
     let mut image = Image {
@@ -213,7 +207,30 @@ fn preview(
     Ok((image, gpu))
 }
 
-/// A map as a greyscale panel (row 0 at the top, v up), aspect kept.
+/// A `px × px` panel showing a `width × height` grid (row 0 at the top, v
+/// up, aspect kept, white beyond the grid); `colour` gives the colour of a
+/// grid texel by its row-major index.
+fn panel(
+    width: usize,
+    height: usize,
+    px: usize,
+    colour: impl Fn(usize) -> [f32; 4],
+) -> Vec<[f32; 4]> {
+    let scale = width.max(height) as f64 / px as f64;
+    let mut out = vec![[1.0, 1.0, 1.0, 1.0]; px * px];
+    for row in 0..px {
+        for i in 0..px {
+            let (x, y) = ((i as f64 + 0.5) * scale, (row as f64 + 0.5) * scale);
+            if x < width as f64 && y < height as f64 {
+                let j = height - 1 - y as usize;
+                out[row * px + i] = colour(j * width + x as usize);
+            }
+        }
+    }
+    out
+}
+
+/// A map's heights in grey over its own 1st–99th percentile.
 fn grey_panel(m: &DisplacementMap, px: usize) -> Vec<[f32; 4]> {
     let mut sorted: Vec<f32> = m.data.iter().copied().filter(|v| v.is_finite()).collect();
     sorted.sort_by(f32::total_cmp);
@@ -225,21 +242,10 @@ fn grey_panel(m: &DisplacementMap, px: usize) -> Vec<[f32; 4]> {
     };
     let (lo, hi) = (at(0.01), at(0.99));
     let span = (hi - lo).max(f32::MIN_POSITIVE);
-    let scale = m.width.max(m.height) as f64 / px as f64;
-    let mut out = vec![[1.0, 1.0, 1.0, 1.0]; px * px];
-    for row in 0..px {
-        for i in 0..px {
-            let (x, y) = ((i as f64 + 0.5) * scale, (row as f64 + 0.5) * scale);
-            if x >= m.width as f64 || y >= m.height as f64 {
-                continue;
-            }
-            let j = m.height - 1 - y as usize;
-            let v = ((m.data[j * m.width + x as usize] - lo) / span).clamp(0.0, 1.0);
-            let l = srgb_to_linear(v);
-            out[row * px + i] = [l, l, l, 1.0];
-        }
-    }
-    out
+    panel(m.width, m.height, px, |k| {
+        let l = srgb_to_linear(((m.data[k] - lo) / span).clamp(0.0, 1.0));
+        [l, l, l, 1.0]
+    })
 }
 
 /// One light grazing from the upper left.
@@ -251,7 +257,7 @@ fn light_direction() -> Vec3 {
 /// mode: the map's normals, the procedural albedo, one grazing light);
 /// None without a GPU adapter.
 fn render_flat(map: &DisplacementMap, normals: &[[f32; 3]], px: usize) -> Result<Option<Image>> {
-    use crate::render::scene::{FrameGeometry, MeshVertex, SurfaceVertex};
+    use crate::render::scene::{FrameGeometry, SurfaceVertex};
     use crate::render::{light, Mode, NormalMap, Renderer};
     let Some(ctx) = crate::gpu::acquire()? else {
         return Ok(None);
@@ -319,22 +325,7 @@ fn render_flat(map: &DisplacementMap, normals: &[[f32; 3]], px: usize) -> Result
             surface.extend_from_slice(&[a, b, c, a, c, d]);
         }
     }
-    let top = surface
-        .iter()
-        .map(|v| MeshVertex {
-            position: v.position,
-            normal: v.normal,
-        })
-        .collect();
-    renderer.set_geometry(
-        &ctx,
-        &FrameGeometry {
-            surface,
-            top,
-            sides: Vec::new(),
-            probe: Vec::new(),
-        },
-    );
+    renderer.set_geometry(&ctx, &FrameGeometry::of_surface(surface));
     Ok(Some(renderer.render(&ctx, Mode::Static)?))
 }
 
@@ -342,21 +333,11 @@ fn render_flat(map: &DisplacementMap, normals: &[[f32; 3]], px: usize) -> Result
 /// seen from straight above.
 fn shade_on_cpu(map: &DisplacementMap, normals: &[[f32; 3]], px: usize) -> Image {
     let l = -light_direction();
-    let scale = map.width.max(map.height) as f64 / px as f64;
-    let mut pixels = vec![[1.0, 1.0, 1.0, 1.0]; px * px];
-    for row in 0..px {
-        for i in 0..px {
-            let (x, y) = ((i as f64 + 0.5) * scale, (row as f64 + 0.5) * scale);
-            if x >= map.width as f64 || y >= map.height as f64 {
-                continue;
-            }
-            let j = map.height - 1 - y as usize;
-            let n = normals[j * map.width + x as usize];
-            let d = (n[0] * l.x + n[1] * l.y + n[2] * l.z).max(0.0);
-            let c = 0.05 + 0.9 * d;
-            pixels[row * px + i] = [c * 0.86, c * 0.62, c * 0.52, 1.0];
-        }
-    }
+    let pixels = panel(map.width, map.height, px, |k| {
+        let n = normals[k];
+        let c = 0.05 + 0.9 * (n[0] * l.x + n[1] * l.y + n[2] * l.z).max(0.0);
+        [c * 0.86, c * 0.62, c * 0.52, 1.0]
+    });
     Image {
         width: px,
         height: px,

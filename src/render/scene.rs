@@ -74,19 +74,29 @@ pub fn build(
     probe: Option<&ProbePose>,
     tessellate: usize,
 ) -> FrameGeometry {
-    let surface = surface(mesh, x, field, tessellate);
-    let top = surface
-        .iter()
-        .map(|v| MeshVertex {
-            position: v.position,
-            normal: v.normal,
-        })
-        .collect();
     FrameGeometry {
-        surface,
-        top,
         sides: sides(mesh, x),
         probe: probe.map(probe_mesh).unwrap_or_default(),
+        ..FrameGeometry::of_surface(surface(mesh, x, field, tessellate))
+    }
+}
+
+impl FrameGeometry {
+    /// A surface alone (also its own shadow caster), without sides or probe.
+    pub fn of_surface(surface: Vec<SurfaceVertex>) -> FrameGeometry {
+        let top = surface
+            .iter()
+            .map(|v| MeshVertex {
+                position: v.position,
+                normal: v.normal,
+            })
+            .collect();
+        FrameGeometry {
+            surface,
+            top,
+            sides: Vec::new(),
+            probe: Vec::new(),
+        }
     }
 }
 

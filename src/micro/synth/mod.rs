@@ -496,7 +496,7 @@ fn resolve(s: &[u32], like: &DisplacementMap, detail: &DisplacementMap, radius: 
         return s.iter().map(|&p| detail.data[p as usize]).collect();
     }
     let r = radius as isize;
-    let (ew, eh) = (detail.width as isize, detail.height as isize);
+    let ew = detail.width as isize;
     let sigma = (radius as f32).max(0.5);
     let mut out = vec![0.0f32; w * h];
     out.par_chunks_mut(w).enumerate().for_each(|(j, row)| {
@@ -520,7 +520,6 @@ fn resolve(s: &[u32], like: &DisplacementMap, detail: &DisplacementMap, radius: 
                     norm += g;
                 }
             }
-            let _ = eh;
             *o = sum / norm;
         }
     });
