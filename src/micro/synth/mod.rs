@@ -18,7 +18,8 @@
 //!    neighbourhood window growing from `window_coarse` to `window_fine`
 //!    (5 × 5 to 13 × 13 in the seed). The output is a map S from output
 //!    texels to exemplar texels (B′_h(q) = A′_h(S(q))). The coarsest
-//!    level starts from random exemplar texels (seeded); each finer level
+//!    level starts from blocks of window × window texels, each a piece of
+//!    the exemplar at an offset drawn from the seed; each finer level
 //!    starts from the coarser S upsampled (a texel's four children take
 //!    the four children of its source); then `passes` correction passes
 //!    visit every texel.
@@ -42,13 +43,13 @@
 //!    frequencies).
 //! 8. The mesostructure restored (`restore_passes`): B′ += G_m * (B − B′),
 //!    so that B′ seen at B's resolution matches B seen at it to within a
-//!    few per cent of B's range (the match alone leaves ≈ 10 %).
+//!    few per cent of B's range (the match alone leaves ≈ 12 %).
 //!
 //! Parallel and deterministic: a correction pass runs as four sub-passes
 //! over the texels of one parity class (i mod 2, j mod 2) each, every texel
 //! of a sub-pass reading S as it was before the sub-pass, so the result
 //! does not depend on the thread count. Random starts come from a hash of
-//! (seed, texel). Exemplars with `Edge::Wrap` offer every texel (windows
+//! (seed, block). Exemplars with `Edge::Wrap` offer every texel (windows
 //! wrap); with `Edge::Clamp` only those whose window lies inside. An
 //! output with `Edge::Wrap` is a torus: windows wrap, and the map tiles
 //! without a seam.
