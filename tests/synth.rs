@@ -399,6 +399,22 @@ fn bad_inputs_are_named() {
         e.contains("synthesis.exemplar") && e.contains("(5, 3)"),
         "{e}"
     );
+    // Memory: the estimate matches the measured peaks within 15 %, and an
+    // output beyond what is available is refused before any work.
+    use skinpatch::micro::synth::{check_memory, estimated_bytes};
+    let at_4096 = estimated_bytes(4096 * 4096, 1024 * 1024, &params()) as f64;
+    assert!((at_4096 / 0.879e9 - 1.0).abs() < 0.15, "{at_4096}");
+    let no_pca = SynthParams {
+        pca_dims: Some(0),
+        ..params()
+    };
+    let at_1024 = estimated_bytes(1024 * 1024, 1024 * 1024, &no_pca) as f64;
+    assert!((at_1024 / 2.91e9 - 1.0).abs() < 0.15, "{at_1024}");
+    let e = check_memory(60_000_000_000, Some(16_000_000_000))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("60.0 GB") && e.contains("16.0 GB"), "{e}");
+    assert!(check_memory(1, Some(2)).is_ok() && check_memory(3, None).is_ok());
     // Parameters.
     for (p, key) in [
         (

@@ -321,6 +321,12 @@ pub fn synthesize(
         .edge
         .or(inputs.mesostructure.map(|b| b.edge))
         .unwrap_or(Edge::Wrap);
+    let exemplar_texels = (exemplar.width as f64 * exemplar.texel_um / texel).round()
+        * (exemplar.height as f64 * exemplar.texel_um / texel).round();
+    check_memory(
+        estimated_bytes(width * height, exemplar_texels as usize, params),
+        available_memory(),
+    )?;
 
     // 1. Heights in µm at the output texel.
     let a1 = {
@@ -581,6 +587,49 @@ pub fn statistics(s: &Synthesis) -> SynthStatistics {
         histogram_tv,
         spectrum_worst,
         spectrum,
+    }
+}
+
+/// About how many bytes a synthesis holds at its peak: per output texel
+/// the guide, its low and high passes, their pyramids, the result and S
+/// (≈ 48 B); per exemplar texel its maps and pyramids (≈ 48 B) and, at the
+/// finest level, the candidates' features twice (the features and the
+/// k-d tree's copy), 8 B per dimension. Measured peaks: 0.88 GB for 4096²
+/// from a 1024² exemplar (estimate 0.96 GB), 2.91 GB without PCA at 1024²
+/// (estimate 2.94 GB).
+pub fn estimated_bytes(output_texels: usize, exemplar_texels: usize, params: &SynthParams) -> u64 {
+    let n = params.window_fine;
+    let dims = match params.pca_dims {
+        Some(0) => 2 * n * n,
+        Some(d) => d.min(2 * n * n),
+        None => n,
+    };
+    output_texels as u64 * 48 + exemplar_texels as u64 * (48 + 8 * dims as u64)
+}
+
+/// The memory the system has available (Linux: `MemAvailable` of
+/// /proc/meminfo), if known.
+pub fn available_memory() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+/// An error when `needed` bytes exceed what is `available`.
+pub fn check_memory(needed: u64, available: Option<u64>) -> Result<()> {
+    match available {
+        Some(have) if needed > have => Err(Error::parameter(
+            "synthesis",
+            format!(
+                "needs about {:.1} GB of memory, {:.1} GB are available: synthesize a smaller \
+                 output (per facial region), use a coarser texel_um, or PCA (pca_dims) with \
+                 fewer dimensions",
+                needed as f64 / 1e9,
+                have as f64 / 1e9
+            ),
+        )),
+        _ => Ok(()),
     }
 }
 
