@@ -187,8 +187,8 @@ impl SkinParams {
     }
 }
 
-/// A 64-bit mix (splitmix64 finaliser).
-fn mix(mut z: u64) -> u64 {
+/// A 64-bit mix (splitmix64 finaliser); also the synthesis's random starts.
+pub(crate) fn mix(mut z: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
     z ^ (z >> 31)

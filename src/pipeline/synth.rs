@@ -82,7 +82,12 @@ pub fn run(
         write_png16(&p, map)?;
         written.push(p);
     }
-    let normals = normal_map(map);
+    // Normals only for the files and the preview that use them.
+    let normals = if file.output.normal_maps || file.output.preview {
+        normal_map(map)
+    } else {
+        Vec::new()
+    };
     if file.output.normal_maps {
         if exr {
             let p = dir.join("synthesized_normals.exr");

@@ -187,6 +187,18 @@ pub struct MicroSetup {
     pub incremental_tolerance: Option<f64>,
 }
 
+/// An edge rule named by the scenario key `key`: `wrap` or `clamp`.
+pub(super) fn edge_of(key: &str, text: &str) -> Result<Edge> {
+    match text {
+        "wrap" => Ok(Edge::Wrap),
+        "clamp" => Ok(Edge::Clamp),
+        other => Err(Error::parameter(
+            key,
+            format!("must be \"wrap\" or \"clamp\", got \"{other}\""),
+        )),
+    }
+}
+
 fn table(points: &[[f64; 2]]) -> PiecewiseLinear {
     PiecewiseLinear {
         points: points.iter().map(|p| (p[0], p[1])).collect(),
@@ -199,16 +211,7 @@ impl MicrostructureSection {
     /// default texel size of a loaded one; `cache` is the folder for a
     /// synthesized map.
     pub fn setup(&self, base: &Path, patch_width_mm: f64, cache: &Path) -> Result<MicroSetup> {
-        let edge = match self.edge.as_str() {
-            "wrap" => Edge::Wrap,
-            "clamp" => Edge::Clamp,
-            other => {
-                return Err(Error::parameter(
-                    "microstructure.edge",
-                    format!("must be \"wrap\" or \"clamp\", got \"{other}\""),
-                ))
-            }
-        };
+        let edge = edge_of("microstructure.edge", &self.edge)?;
         let (mut png16, mut exr) = (false, false);
         for (k, f) in self.formats.iter().enumerate() {
             match f.as_str() {

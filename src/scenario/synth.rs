@@ -22,7 +22,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::micro::ProceduralSection;
+use super::micro::{edge_of, ProceduralSection};
 use crate::error::{shown, Error, Result};
 use crate::micro::io::{read_map, MapDefaults, TexelSize};
 use crate::micro::procedural::generate;
@@ -246,17 +246,6 @@ impl SynthSources {
             size: self.size,
             edge: self.edge,
         }
-    }
-}
-
-fn edge_of(key: &str, text: &str) -> Result<Edge> {
-    match text {
-        "wrap" => Ok(Edge::Wrap),
-        "clamp" => Ok(Edge::Clamp),
-        other => Err(Error::parameter(
-            key,
-            format!("must be \"wrap\" or \"clamp\", got \"{other}\""),
-        )),
     }
 }
 
@@ -505,13 +494,8 @@ impl SynthesisSection {
             }
         }
         let sources = self.load(base, key)?;
-        if let Some(b) = &sources.mesostructure {
-            let t = sources.texel_um.unwrap_or(sources.exemplar.texel_um);
-            let side = (b.width.max(b.height) as f64 * b.texel_um / t).round() as usize;
-            crate::gpu::precheck_map(side, side)?;
-        } else if let Some((w, h)) = sources.size {
-            crate::gpu::precheck_map(w, h)?;
-        }
+        let (w, h) = sources.inputs().output_size()?;
+        crate::gpu::precheck_map(w, h)?;
         log::info!("neutral map: synthesizing from the exemplar (seed 002 §4)");
         let result = crate::micro::synth::synthesize(&sources.inputs(), &params, &mut |l| {
             log::info!(

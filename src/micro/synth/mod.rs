@@ -62,6 +62,7 @@ use rayon::prelude::*;
 
 use super::convolve::blur_along_axis;
 use super::map::{DisplacementMap, Edge};
+use super::procedural::mix;
 use crate::error::{shown, Error, Result};
 use ann::{squared_distance, KdTree};
 
@@ -225,6 +226,52 @@ pub struct SynthInputs<'a> {
     pub edge: Option<Edge>,
 }
 
+impl SynthInputs<'_> {
+    /// The output texel (µm): the one asked for, else the exemplar's.
+    pub fn output_texel(&self) -> Result<f64> {
+        let texel = self.texel_um.unwrap_or(self.exemplar.texel_um);
+        if !(texel.is_finite() && texel > 0.0) {
+            return Err(Error::parameter(
+                "synthesis.texel_um",
+                format!("must be finite and > 0, got {}", shown(texel)),
+            ));
+        }
+        Ok(texel)
+    }
+
+    /// The output grid (texels): the mesostructure map's area at the output
+    /// texel, else `size`.
+    pub fn output_size(&self) -> Result<(usize, usize)> {
+        let texel = self.output_texel()?;
+        let (width, height) = match (self.mesostructure, self.size) {
+            (Some(_), Some(_)) => {
+                return Err(Error::parameter(
+                    "synthesis.size_px",
+                    "has no effect with a mesostructure map: the output covers the map",
+                ))
+            }
+            (Some(b), None) => (
+                (b.width as f64 * b.texel_um / texel).round() as usize,
+                (b.height as f64 * b.texel_um / texel).round() as usize,
+            ),
+            (None, Some(s)) => s,
+            (None, None) => {
+                return Err(Error::parameter(
+                    "synthesis.size_px",
+                    "is needed without a mesostructure map",
+                ))
+            }
+        };
+        if !(1..=MAX_SIDE).contains(&width) || !(1..=MAX_SIDE).contains(&height) {
+            return Err(Error::parameter(
+                "synthesis",
+                format!("output of {width} × {height} texels at {texel} µm: each side must be in 1 … {MAX_SIDE}"),
+            ));
+        }
+        Ok((width, height))
+    }
+}
+
 /// One level's figures.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LevelReport {
@@ -284,69 +331,34 @@ pub fn synthesize(
     if let Some(b) = inputs.mesostructure {
         check_map("synthesis.mesostructure", b)?;
     }
-    let texel = inputs.texel_um.unwrap_or(exemplar.texel_um);
-    if !(texel.is_finite() && texel > 0.0) {
-        return Err(Error::parameter(
-            "synthesis.texel_um",
-            format!("must be finite and > 0, got {}", shown(texel)),
-        ));
-    }
-    // The output grid.
-    let (width, height) = match (inputs.mesostructure, inputs.size) {
-        (Some(_), Some(_)) => {
-            return Err(Error::parameter(
-                "synthesis.size_px",
-                "has no effect with a mesostructure map: the output covers the map",
-            ))
-        }
-        (Some(b), None) => (
-            (b.width as f64 * b.texel_um / texel).round() as usize,
-            (b.height as f64 * b.texel_um / texel).round() as usize,
-        ),
-        (None, Some(s)) => s,
-        (None, None) => {
-            return Err(Error::parameter(
-                "synthesis.size_px",
-                "is needed without a mesostructure map",
-            ))
-        }
-    };
-    if !(1..=MAX_SIDE).contains(&width) || !(1..=MAX_SIDE).contains(&height) {
-        return Err(Error::parameter(
-            "synthesis",
-            format!("output of {width} × {height} texels at {texel} µm: each side must be in 1 … {MAX_SIDE}"),
-        ));
-    }
+    let texel = inputs.output_texel()?;
+    let (width, height) = inputs.output_size()?;
     let edge = inputs
         .edge
         .or(inputs.mesostructure.map(|b| b.edge))
         .unwrap_or(Edge::Wrap);
-    let exemplar_texels = (exemplar.width as f64 * exemplar.texel_um / texel).round()
-        * (exemplar.height as f64 * exemplar.texel_um / texel).round();
+    // The exemplar's grid at the output texel.
+    let f = exemplar.texel_um / texel;
+    let (ew, eh) = (
+        (exemplar.width as f64 * f).round() as usize,
+        (exemplar.height as f64 * f).round() as usize,
+    );
+    if ew.max(eh) > MAX_SIDE {
+        return Err(Error::parameter(
+            "synthesis.exemplar",
+            format!("at the output texel ({texel} µm) it would be {ew} × {eh} texels, more than {MAX_SIDE} a side"),
+        ));
+    }
     check_memory(
-        estimated_bytes(width * height, exemplar_texels as usize, params),
+        estimated_bytes(width * height, ew * eh, params),
         available_memory(),
     )?;
 
     // 1. Heights in µm at the output texel.
-    let a1 = {
-        let f = exemplar.texel_um / texel;
-        let (w, h) = (
-            (exemplar.width as f64 * f).round() as usize,
-            (exemplar.height as f64 * f).round() as usize,
-        );
-        let resized = if (w, h) == (exemplar.width, exemplar.height) {
-            exemplar.clone()
-        } else {
-            if w.max(h) > MAX_SIDE {
-                return Err(Error::parameter(
-                    "synthesis.exemplar",
-                    format!("at the output texel ({texel} µm) it would be {w} × {h} texels, more than {MAX_SIDE} a side"),
-                ));
-            }
-            exemplar.resampled(w, h)
-        };
-        in_um(&resized, texel)
+    let a1 = if (ew, eh) == (exemplar.width, exemplar.height) {
+        in_um(exemplar, texel)
+    } else {
+        in_um(&exemplar.resampled(ew, eh), texel)
     };
     let guide = match inputs.mesostructure {
         Some(b) => in_um(&b.resampled(width, height), texel),
@@ -412,9 +424,9 @@ pub fn synthesize(
     for level in 0..params.levels {
         let t0 = Instant::now();
         let k = top - level;
-        let lv = LevelData::new(&pa[k], &pa1[k], &pb[k], exemplar.edge, params, level)?;
+        let lv = LevelData::new(&pa[k], &pa1[k], &pb[k], exemplar.edge, params, level);
         s = if level == 0 {
-            lv.random_start(params.seed)
+            lv.start(params.seed)
         } else {
             lv.upsample(&s, pb[k + 1].width, pa1[k + 1].width)
         };
@@ -451,8 +463,8 @@ pub fn synthesize(
         ..guide.with_data(data)
     };
     // 8. The mesostructure restored: B′ += G_m * (B − B′), repeated.
-    let guide_low = gauss(&guide, sigma_m / texel);
-    for _ in 0..params.restore_passes {
+    let guide_low = (params.restore_passes > 0).then(|| gauss(&guide, sigma_m / texel));
+    for guide_low in std::iter::repeat_n(guide_low.as_ref(), params.restore_passes).flatten() {
         let low = gauss(&map, sigma_m / texel);
         map.data
             .par_iter_mut()
@@ -693,13 +705,6 @@ fn reduce(m: &DisplacementMap) -> DisplacementMap {
     out
 }
 
-/// A 64-bit mix (splitmix64's finaliser).
-fn mix(mut z: u64) -> u64 {
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
-}
-
 /// The feature projection: PCA (mean, then rows of the basis) or none.
 struct Projection {
     input: usize,
@@ -826,7 +831,7 @@ impl<'a> LevelData<'a> {
         exemplar_edge: Edge,
         params: &SynthParams,
         level: usize,
-    ) -> Result<LevelData<'a>> {
+    ) -> LevelData<'a> {
         let n = params.window(level);
         let r = (n / 2) as isize;
         let sigma = r.max(1) as f32;
@@ -893,7 +898,7 @@ impl<'a> LevelData<'a> {
         let tree = KdTree::new(d, &features, &ids);
         let finest = (params.levels - 1) as i32;
         let f = 1.0 + 2f64.powi(level as i32 - finest) * params.kappa;
-        Ok(LevelData {
+        LevelData {
             ex_a1,
             guide,
             window: n,
@@ -906,7 +911,7 @@ impl<'a> LevelData<'a> {
             tree,
             ann_leaves: params.ann_leaves,
             coherence_factor: (f * f) as f32,
-        })
+        }
     }
 
     /// The coarsest level's start: blocks of `window × window` output
@@ -914,7 +919,7 @@ impl<'a> LevelData<'a> {
     /// block). Coherent pieces from the start: a start of independent
     /// random texels leaves the coarse levels, where the coherence rule
     /// favours the approximate match, as a patchwork of single texels.
-    fn random_start(&self, seed: u64) -> Vec<u32> {
+    fn start(&self, seed: u64) -> Vec<u32> {
         let (w, h) = (self.guide.width, self.guide.height);
         let (ew, eh) = (self.ex_a1.width, self.ex_a1.height);
         let b = self.window;
