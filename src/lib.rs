@@ -32,6 +32,7 @@ pub mod pipeline;
 pub mod render;
 pub mod scenario;
 pub mod strain;
+pub mod surface;
 #[cfg(feature = "viewer")]
 pub mod viewer;
 

@@ -13,7 +13,10 @@ use super::{bounds, face_key, markers, BoundaryFace, Vec3, TET_FACES};
 /// The top surface of a mesh: the triangles the microstructure lives on.
 #[derive(Clone, Debug, Default)]
 pub struct TopSurface {
-    /// Mesh vertex index of each surface vertex, ascending.
+    /// Mesh vertex index of each surface vertex: ascending for a tet mesh's
+    /// top; for a surface from another tool ([`TopSurface::from_layout`])
+    /// one surface vertex per (position, UV) pair, so a position on a UV
+    /// seam has several surface vertices.
     pub vertices: Vec<usize>,
     /// Triangles as surface-vertex indices, counter-clockwise seen from above.
     pub triangles: Vec<[usize; 3]>,
@@ -34,9 +37,34 @@ impl TopSurface {
         self.triangles.is_empty()
     }
 
-    /// The surface vertex of mesh vertex `v`, if `v` lies on the top surface.
+    /// The surface vertex of mesh vertex `v`, if `v` lies on the top surface
+    /// (the first one where a seam gives it several).
     pub fn surface_vertex(&self, v: usize) -> Option<usize> {
         self.mesh_to_surface.get(&v).copied()
+    }
+
+    /// A surface of any UV layout: `vertices[s]` is the position index of
+    /// surface vertex `s`, `triangles` index surface vertices and `uvs` are
+    /// per surface vertex (charts, seams and UVs outside the unit square
+    /// allowed). It has no owning tets (`face_tet`, `boundary_face` empty).
+    pub fn from_layout(
+        vertices: Vec<usize>,
+        triangles: Vec<[usize; 3]>,
+        uvs: Vec<[f64; 2]>,
+    ) -> TopSurface {
+        debug_assert_eq!(vertices.len(), uvs.len());
+        let mut mesh_to_surface = HashMap::with_capacity(vertices.len());
+        for (s, &v) in vertices.iter().enumerate() {
+            mesh_to_surface.entry(v).or_insert(s);
+        }
+        TopSurface {
+            vertices,
+            triangles,
+            uvs,
+            face_tet: Vec::new(),
+            boundary_face: Vec::new(),
+            mesh_to_surface,
+        }
     }
 
     /// Area of the surface at rest, from the mesh positions (mm²).

@@ -12,7 +12,7 @@ use bytemuck::{Pod, Zeroable};
 use glam::Vec3 as V3;
 
 use crate::fem::contact::{ProbePose, ProbeShape};
-use crate::mesh::{TetMesh, Vec3};
+use crate::mesh::{TetMesh, TopSurface, Vec3};
 use crate::strain::SurfaceField;
 
 /// A top-surface vertex; mirrors WGSL `SurfaceVertex` (lighting.wgsl).
@@ -77,7 +77,7 @@ pub fn build(
     FrameGeometry {
         sides: sides(mesh, x),
         probe: probe.map(probe_mesh).unwrap_or_default(),
-        ..FrameGeometry::of_surface(surface(mesh, x, field, tessellate))
+        ..build_surface(&mesh.top, x, field, tessellate)
     }
 }
 
@@ -100,11 +100,23 @@ impl FrameGeometry {
     }
 }
 
-/// Per-vertex normals (area-weighted) and u-tangents of the deformed top.
-fn surface(mesh: &TetMesh, x: &[Vec3], field: &SurfaceField, k: usize) -> Vec<SurfaceVertex> {
-    let top = &mesh.top;
+/// The deformed surface of an animated surface (or any [`TopSurface`])
+/// alone: `x` indexed like the positions `top.vertices` point into.
+pub fn build_surface(
+    top: &TopSurface,
+    x: &[Vec3],
+    field: &SurfaceField,
+    tessellate: usize,
+) -> FrameGeometry {
+    FrameGeometry::of_surface(surface(top, x, field, tessellate))
+}
+
+/// Per-vertex normals (area-weighted, summed per position so a UV seam does
+/// not split them) and u-tangents (per surface vertex: mirrored charts have
+/// opposite ones) of the deformed top.
+fn surface(top: &TopSurface, x: &[Vec3], field: &SurfaceField, k: usize) -> Vec<SurfaceVertex> {
     let pos: Vec<V3> = top.vertices.iter().map(|&v| v3(&x[v])).collect();
-    let mut normals = vec![V3::ZERO; pos.len()];
+    let mut position_normals = vec![V3::ZERO; x.len()];
     let mut tangents = vec![V3::ZERO; pos.len()];
     for tri in &top.triangles {
         let [a, b, c] = tri.map(|s| pos[s]);
@@ -120,10 +132,11 @@ fn surface(mesh: &TetMesh, x: &[Vec3], field: &SurfaceField, k: usize) -> Vec<Su
             V3::ZERO
         };
         for &s in tri {
-            normals[s] += n;
+            position_normals[top.vertices[s]] += n;
             tangents[s] += dpdu * n.length();
         }
     }
+    let normals: Vec<V3> = top.vertices.iter().map(|&v| position_normals[v]).collect();
     let strain: Vec<[f32; 4]> = field
         .vertices
         .iter()

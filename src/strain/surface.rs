@@ -229,6 +229,39 @@ impl SurfaceField {
         }
     }
 
+    /// The same field over copies of some of its triangles moved in UV:
+    /// `pieces` lists (triangle, UV offset). Vertex data are those of the
+    /// whole field (so a vertex averages over all its triangles, not only
+    /// the copied ones); a vertex copied with two offsets becomes two
+    /// vertices. This is how a UDIM tile (its triangles moved into the unit
+    /// square) or a wrapping layout (triangles also drawn one period over)
+    /// is rasterised.
+    pub fn view(&self, pieces: &[(usize, [f64; 2])]) -> SurfaceField {
+        let mut index = std::collections::HashMap::new();
+        let (mut vertices, mut uvs) = (Vec::new(), Vec::new());
+        let mut tri = Vec::with_capacity(pieces.len());
+        let mut triangles = Vec::with_capacity(pieces.len());
+        for &(k, offset) in pieces {
+            let key_offset = offset.map(f64::to_bits);
+            tri.push(self.tri[k].map(|s| {
+                *index.entry((s, key_offset)).or_insert_with(|| {
+                    vertices.push(self.vertices[s]);
+                    uvs.push(self.uvs[s] + Vector2::new(offset[0], offset[1]));
+                    vertices.len() - 1
+                })
+            }));
+            triangles.push(self.triangles[k]);
+        }
+        SurfaceField {
+            degenerate_triangles: triangles.iter().filter(|t| t.weight == 0.0).count(),
+            triangles,
+            vertices,
+            locator: UvLocator::new(&tri, &uvs),
+            tri,
+            uvs,
+        }
+    }
+
     /// The field at UV point `uv`, or `None` outside the surface's UV image.
     pub fn at(&self, uv: Vector2<f64>) -> Option<SurfaceStrain> {
         let (k, bary) = self.locator.locate(uv, &self.tri, &self.uvs)?;
