@@ -480,6 +480,9 @@ fn run(
     if let Some(dir) = output {
         scenario.output.dir = Some(dir);
     }
+    if scenario.surface.is_some() {
+        return run_surface(path, &scenario, overrides, quiet);
+    }
     let mut setup = Setup::from_scenario(&scenario, path)
         .with_context(|| format!("scenario {}", path.display()))?;
     setup.force_large_output = force;
@@ -513,6 +516,71 @@ fn run(
     let text = serde_json::to_string_pretty(&record)?;
     skinpatch::mesh::io::write_atomically(&summary_path, format!("{text}\n").as_bytes())?;
     let mut report = format!("scenario {}: mesh\n{}", setup.name, summary.quality);
+    if let Some(device) = &summary.micro_device {
+        report += &format!("microstructure stages: {device}\n");
+    }
+    for file in &summary.written {
+        report += &format!("wrote {}\n", file.display());
+    }
+    report += &format!("wrote {}\n", summary_path.display());
+    if quiet {
+        return Ok(());
+    }
+    print_stdout(&report)
+}
+
+/// `skinpatch run` of a scenario with `[surface]`.
+fn run_surface(
+    path: &Path,
+    scenario: &Scenario,
+    overrides: &[String],
+    quiet: bool,
+) -> anyhow::Result<()> {
+    let setup = skinpatch::scenario::SurfaceSetup::from_scenario(scenario, path)
+        .with_context(|| format!("scenario {}", path.display()))?;
+    let progress = (!quiet).then(Progress::new);
+    let result = skinpatch::pipeline::surface::run(&setup, |frame| {
+        if let Some(p) = &progress {
+            p.surface_frame(frame.metrics, frame.total_frames)
+        }
+    });
+    if let Some(p) = &progress {
+        p.finish();
+    }
+    let summary = result.with_context(|| {
+        format!(
+            "running scenario {} (output folder {})",
+            path.display(),
+            setup.output_dir.display()
+        )
+    })?;
+    let record = serde_json::json!({
+        "skinpatch_version": env!("CARGO_PKG_VERSION"),
+        "scenario_file": path,
+        "overrides": overrides,
+        "scenario": scenario,
+        "output_dir": setup.output_dir,
+        "run": summary,
+    });
+    let summary_path = setup.output_dir.join("summary.json");
+    let text = serde_json::to_string_pretty(&record)?;
+    skinpatch::mesh::io::write_atomically(&summary_path, format!("{text}\n").as_bytes())?;
+    let s = &setup.surface;
+    let mut report = format!(
+        "scenario {}: surface {}\n  {} positions, {} surface vertices, {} triangles, {} frames at {} Hz, {:.1} mm² at rest\n",
+        setup.name,
+        s.origin,
+        s.positions.len(),
+        s.top.vertices.len(),
+        s.top.triangles.len(),
+        s.num_frames(),
+        s.frame_rate_hz,
+        s.area()
+    );
+    if setup.pieces.iter().any(|p| p.udim.is_some()) {
+        let tiles: Vec<String> = setup.pieces.iter().filter_map(|p| p.udim).map(|u| u.to_string()).collect();
+        report += &format!("  UDIM tiles {}\n", tiles.join(", "));
+    }
     if let Some(device) = &summary.micro_device {
         report += &format!("microstructure stages: {device}\n");
     }
@@ -894,13 +962,25 @@ impl Progress {
             "t = {:.3} s, probe force ({fx:.3e}, {fy:.3e}, {fz:.3e}) N, {} contact nodes",
             m.time_s, m.contact_nodes
         );
+        self.show(m.frame, total, msg);
+    }
+
+    fn surface_frame(&self, m: &skinpatch::pipeline::surface::SurfaceMetrics, total: usize) {
+        let msg = format!(
+            "t = {:.3} s, r_s {:.4} … {:.4}, r_t {:.4} … {:.4}",
+            m.time_s, m.rs_range[0], m.rs_range[1], m.rt_range[0], m.rt_range[1]
+        );
+        self.show(m.frame, total, msg);
+    }
+
+    fn show(&self, frame: usize, total: usize, msg: String) {
         match &self.bar {
             Some(bar) => {
                 bar.set_length(total as u64);
-                bar.set_position(m.frame as u64 + 1);
+                bar.set_position(frame as u64 + 1);
                 bar.set_message(msg);
             }
-            None => eprintln!("frame {}/{}: {msg}", m.frame + 1, total),
+            None => eprintln!("frame {}/{}: {msg}", frame + 1, total),
         }
     }
 

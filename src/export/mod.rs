@@ -210,6 +210,7 @@ pub fn frame_grid(
     Grid {
         points: x.to_vec(),
         tets: mesh.tets.clone(),
+        triangles: Vec::new(),
         point_data: vec![
             Field::f64("displacement_mm", 3, displacement).named(&XYZ),
             Field::f64("surface_stretch", 2, surface_stretch).named(&["r_s", "r_t"]),
@@ -232,6 +233,58 @@ pub fn frame_grid(
             }
             cells
         },
+    }
+}
+
+/// An animated surface's frame as a triangle grid: one point per surface
+/// vertex (a UV seam has a point per chart) at its position in `x` (indexed
+/// like `surface.positions`). Point data: `displacement_mm`, `uv`,
+/// `surface_stretch` (r_s, r_t), `surface_axis_s`, `surface_axis_t` (unit
+/// principal directions on the deformed surface). Cell data: the
+/// triangle's own `triangle_stretch` (r_s, r_t of its T) and `degenerate`
+/// (1 where it has no area at rest or in UV, or none now).
+pub fn surface_grid(
+    surface: &crate::surface::AnimatedSurface,
+    x: &[Vec3],
+    field: &SurfaceField,
+) -> Grid {
+    let top = &surface.top;
+    let n = top.vertices.len();
+    let (mut displacement, mut stretch) = (Vec::with_capacity(3 * n), Vec::with_capacity(2 * n));
+    let (mut axis_s, mut axis_t) = (Vec::with_capacity(3 * n), Vec::with_capacity(3 * n));
+    for (s, &v) in top.vertices.iter().enumerate() {
+        displacement.extend((x[v] - surface.positions[v]).iter());
+        let vs = &field.vertices[s];
+        let svd = crate::strain::Svd2::of(&vs.t);
+        stretch.extend([svd.rs, svd.rt]);
+        let [a, b] = vs.deformed_axes();
+        axis_s.extend(a.iter());
+        axis_t.extend(b.iter());
+    }
+    let mut tri_stretch = Vec::with_capacity(2 * top.triangles.len());
+    for t in &field.triangles {
+        let svd = crate::strain::Svd2::of(&t.t);
+        tri_stretch.extend([svd.rs, svd.rt]);
+    }
+    Grid {
+        points: top.vertices.iter().map(|&v| x[v]).collect(),
+        tets: Vec::new(),
+        triangles: top.triangles.clone(),
+        point_data: vec![
+            Field::f64("displacement_mm", 3, displacement).named(&XYZ),
+            Field::f64("uv", 2, top.uvs.iter().flatten().copied().collect()).named(&["u", "v"]),
+            Field::f64("surface_stretch", 2, stretch).named(&["r_s", "r_t"]),
+            Field::f64("surface_axis_s", 3, axis_s).named(&XYZ),
+            Field::f64("surface_axis_t", 3, axis_t).named(&XYZ),
+        ],
+        cell_data: vec![
+            Field::f64("triangle_stretch", 2, tri_stretch).named(&["r_s", "r_t"]),
+            Field::i32(
+                "degenerate",
+                1,
+                field.triangles.iter().map(|t| i32::from(t.weight == 0.0)).collect(),
+            ),
+        ],
     }
 }
 

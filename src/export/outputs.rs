@@ -11,10 +11,11 @@ use std::path::{Path, PathBuf};
 use crate::error::{Error, Result};
 
 /// Subfolders a run writes into, with the names it writes there.
-const SUBFOLDERS: [&str; 4] = ["frames", "strain", "micro", "render"];
+const SUBFOLDERS: [&str; 5] = ["frames", "strain", "micro", "render", "surface"];
 
 /// Whether `name`, found in `folder` (relative to the output folder: `""`,
-/// `frames`, `strain`, `micro` or `render/<mode>`), is a file a run writes.
+/// `frames`, `strain`, `micro`, `surface` or `render/<mode>`), is a file a
+/// run writes. Frame numbers may carry a UDIM tile (`rs_1001_0004.png`).
 pub fn is_run_output(folder: &str, name: &str) -> bool {
     if is_temporary(name) {
         return true;
@@ -22,8 +23,13 @@ pub fn is_run_output(folder: &str, name: &str) -> bool {
     let numbered = |prefix: &str, extensions: &[&str]| {
         name.strip_prefix(prefix).is_some_and(|rest| {
             extensions.iter().any(|ext| {
-                rest.strip_suffix(ext)
-                    .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
+                rest.strip_suffix(ext).is_some_and(|n| {
+                    let n = match n.split_once('_') {
+                        Some((tile, n)) if tile.len() == 4 && all_digits(tile) => n,
+                        _ => n,
+                    };
+                    all_digits(n)
+                })
             })
         })
     };
@@ -38,7 +44,10 @@ pub fn is_run_output(folder: &str, name: &str) -> bool {
                 | "frames.pvd"
                 | "frames.vtkhdf"
                 | "summary.json"
+                | "surface.glb"
+                | "surface.vtu"
         ),
+        "surface" => numbered("frame_", &[".obj"]),
         "frames" => numbered("frame_", &[".vtu"]),
         "strain" => ["rs_", "rt_", "axes_"]
             .iter()

@@ -123,10 +123,16 @@ impl StrainImages {
     /// Writes `strain/rs_NNNN.png`, `rt_NNNN.png` and `axes_NNNN.png` under
     /// `dir`, each atomically; returns their paths.
     pub fn write(&self, dir: &Path, frame: usize) -> Result<Vec<PathBuf>> {
+        self.write_tagged(dir, "", frame)
+    }
+
+    /// [`Self::write`] with a tag before the frame number (`rs_1001_0004.png`
+    /// for UDIM tile 1001's maps, tag `"1001_"`).
+    pub fn write_tagged(&self, dir: &Path, tag: &str, frame: usize) -> Result<Vec<PathBuf>> {
         let folder = dir.join("strain");
         let mut written = Vec::new();
         for (name, image) in [("rs", &self.rs), ("rt", &self.rt), ("axes", &self.axes)] {
-            let path = folder.join(format!("{name}_{frame:04}.png"));
+            let path = folder.join(format!("{name}_{tag}{frame:04}.png"));
             let mut bytes = Vec::new();
             image
                 .write_to(

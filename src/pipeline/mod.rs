@@ -16,6 +16,7 @@ use std::time::Instant;
 
 pub mod plan;
 mod render;
+pub mod surface;
 pub mod synth;
 mod vtkhdf;
 
@@ -272,7 +273,10 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<RunSum
             r,
             setup.micro.as_ref(),
             engine.as_ref(),
-            mesh,
+            {
+                let (lo, hi) = mesh.bounds();
+                (hi.x - lo.x, texel_mm((lo, hi), r.texture_px))
+            },
         )?),
         None => None,
     };
@@ -306,9 +310,24 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<RunSum
         std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
     }
     if let Some(micro) = &setup.micro {
-        written.extend(write_neutral(dir, setup, micro)?);
+        let (lo, hi) = setup.mesh.bounds();
+        written.extend(write_neutral(dir, hi.x - lo.x, micro)?);
     }
     let mut hdf = None;
+    // The top surface's animation, when exported.
+    let mut exported = (setup.write_surface_glb || setup.write_surface_obj).then(|| {
+        crate::surface::AnimatedSurface::from_top(
+            &setup.name,
+            &mesh.top,
+            &mesh.positions,
+            &[],
+            1.0 / setup.simulation.frame_dt,
+        )
+    });
+    if setup.write_surface_obj {
+        let folder = dir.join("surface");
+        std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
+    }
     let result = simulate(setup, |m, sim| {
         let mut m = *m;
         let field = SurfaceField::new(&mesh.top, &mesh.positions, &sim.x);
@@ -338,6 +357,15 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<RunSum
             let raster = StrainRaster::new(&field, images.px, images.px);
             export::strain_images::StrainImages::new(&raster, images.range).write(dir, m.frame)?;
         }
+        if let Some(surface) = exported.as_mut() {
+            surface
+                .frames
+                .push(mesh.top.vertices.iter().map(|&v| sim.x[v]).collect());
+            if setup.write_surface_obj {
+                let path = dir.join("surface").join(format!("frame_{:04}.obj", m.frame));
+                crate::surface::obj::write_obj(&path, surface, Some(surface.frames.len() - 1))?;
+            }
+        }
         let mut fresh_normals = false;
         if let (Some(micro), Some(engine)) = (&setup.micro, engine.as_mut()) {
             if m.frame % micro.frame_stride == 0 && matches!(engine, MicroEngine::Tiled(_)) {
@@ -364,16 +392,14 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<RunSum
         if let (Some(r), Some(renderer)) = (&setup.render, renderer.as_mut()) {
             if m.frame % r.frame_stride == 0 {
                 let probe = setup.simulation.probe.as_ref().map(|p| p.pose(m.time_s));
-                renderer.frame(
-                    r,
+                let geometry = crate::render::scene::build(
                     mesh,
                     &sim.x,
                     &field,
                     probe.as_ref(),
-                    engine.as_mut(),
-                    m.frame,
-                    fresh_normals,
-                )?;
+                    r.tessellate,
+                );
+                renderer.frame(&geometry, &field, engine.as_mut(), m.frame, fresh_normals)?;
             }
         }
         frames.push(m);
@@ -395,6 +421,14 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<RunSum
     let closed = vtkhdf::finish(hdf);
     result?;
     written.extend(closed?);
+    if setup.write_surface_obj {
+        written.push(dir.join("surface"));
+    }
+    if let (true, Some(surface)) = (setup.write_surface_glb, &exported) {
+        let path = dir.join("surface.glb");
+        crate::surface::gltf::write_glb(&path, surface)?;
+        written.push(path);
+    }
     if let (Some(r), Some(renderer)) = (&setup.render, &renderer) {
         written.extend(renderer.finish(r, 1.0 / setup.simulation.frame_dt)?);
     }
@@ -408,21 +442,24 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<RunSum
 
 /// Writes the neutral map (and its normals) under `micro/`; warns when the
 /// map's texel size disagrees with the patch it is stretched over.
-fn write_neutral(dir: &std::path::Path, setup: &Setup, micro: &MicroSetup) -> Result<Vec<PathBuf>> {
+fn write_neutral(
+    dir: &std::path::Path,
+    patch_width_mm: f64,
+    micro: &MicroSetup,
+) -> Result<Vec<PathBuf>> {
     let folder = dir.join("micro");
     std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
     let map = match &micro.neutral {
         NeutralMap::Whole(map) => map,
         NeutralMap::Tiled(tiled) => return write_neutral_tiles(&folder, micro, tiled),
     };
-    let (lo, hi) = setup.mesh.bounds();
-    let patch_texel_um = (hi.x - lo.x) * 1000.0 / map.width as f64;
+    let patch_texel_um = patch_width_mm * 1000.0 / map.width as f64;
     if (map.texel_um / patch_texel_um - 1.0).abs() > 0.01 {
         log::warn!(
             "the microstructure map has {:.3} µm texels but spans the {:.1} mm patch at {:.3} µm per texel; \
              kernel widths follow the patch",
             map.texel_um,
-            hi.x - lo.x,
+            patch_width_mm,
             patch_texel_um
         );
     }

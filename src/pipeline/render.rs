@@ -9,11 +9,11 @@ use std::path::{Path, PathBuf};
 use super::MicroEngine;
 use crate::error::{Error, Result};
 use crate::export::frames;
-use crate::fem::contact::ProbePose;
 use crate::gpu::micro::GpuMicro;
 use crate::gpu::Context;
-use crate::mesh::{TetMesh, Vec3};
+use crate::mesh::Vec3;
 use crate::render::albedo::Albedo;
+use crate::render::scene::FrameGeometry;
 use crate::render::{FrameStage, Mode, NormalMap, RenderSetup, Renderer, Roughness};
 use crate::scenario::MicroSetup;
 use crate::strain::SurfaceField;
@@ -23,6 +23,7 @@ pub(super) struct RenderEngine {
     renderer: Renderer,
     own: Option<Context>,
     folders: Vec<(Mode, PathBuf)>,
+    format: crate::render::FrameFormat,
     /// `render/difference/` when asked.
     difference: Option<PathBuf>,
     rendered: Vec<usize>,
@@ -67,7 +68,7 @@ impl RenderEngine {
         setup: &RenderSetup,
         micro: Option<&MicroSetup>,
         engine: Option<&MicroEngine>,
-        mesh: &TetMesh,
+        (albedo_extent_mm, texel_mm): (f64, f64),
     ) -> Result<RenderEngine> {
         if setup.mp4 && !frames::ffmpeg_available() {
             return Err(Error::MissingTool(
@@ -91,9 +92,7 @@ impl RenderEngine {
         } else {
             None
         };
-        let (lo, hi) = mesh.bounds();
-        let albedo = Albedo::from_source(&setup.albedo, setup.texture_px, hi.x - lo.x)?;
-        let texel_mm = texel_mm((lo, hi), setup.texture_px);
+        let albedo = Albedo::from_source(&setup.albedo, setup.texture_px, albedo_extent_mm)?;
         let neutral_map = micro.map(|m| m.neutral.whole("[render]")).transpose()?;
         let neutral_normals = neutral_map.map(crate::micro::normals::normal_map);
         let neutral = match (neutral_map, &neutral_normals) {
@@ -137,26 +136,24 @@ impl RenderEngine {
             renderer,
             own,
             folders,
+            format: setup.format,
             difference,
             rendered: Vec::new(),
         })
     }
 
-    /// Renders frame `frame` in every mode. `fresh_normals` says whether the
-    /// chain already computed this frame's D′ normals.
-    #[allow(clippy::too_many_arguments)]
+    /// Renders frame `frame` (its geometry, and the surface field the
+    /// chain deforms the map with) in every mode. `fresh_normals` says
+    /// whether the chain already computed this frame's D′ normals.
     pub(super) fn frame(
         &mut self,
-        setup: &RenderSetup,
-        mesh: &TetMesh,
-        x: &[Vec3],
+        geometry: &FrameGeometry,
         field: &SurfaceField,
-        probe: Option<&ProbePose>,
         engine: Option<&mut MicroEngine>,
         frame: usize,
         fresh_normals: bool,
     ) -> Result<()> {
-        let needs_dynamic = setup.modes.contains(&Mode::Dynamic);
+        let needs_dynamic = self.folders.iter().any(|(m, _)| *m == Mode::Dynamic);
         let ctx: &Context = match (engine, &self.own) {
             (Some(MicroEngine::Gpu(chain)), _) => {
                 if needs_dynamic && !fresh_normals {
@@ -167,8 +164,7 @@ impl RenderEngine {
             (_, Some(ctx)) => ctx,
             _ => return Err(no_gpu()),
         };
-        let geometry = crate::render::scene::build(mesh, x, field, probe, setup.tessellate);
-        self.renderer.set_geometry(ctx, &geometry);
+        self.renderer.set_geometry(ctx, geometry);
         let mut kept = [None, None];
         for (mode, folder) in &self.folders {
             let image = self
@@ -182,8 +178,8 @@ impl RenderEngine {
                 4,
                 image.pixels.iter().flatten(),
             )?;
-            let path = folder.join(frames::frame_name(frame, setup.format));
-            frames::write_image(&path, &image, setup.format)?;
+            let path = folder.join(frames::frame_name(frame, self.format));
+            frames::write_image(&path, &image, self.format)?;
             match mode {
                 Mode::Static => kept[0] = Some(image),
                 Mode::Dynamic => kept[1] = Some(image),

@@ -26,6 +26,7 @@ mod mesh;
 mod micro;
 mod render;
 mod simulation;
+mod surface;
 mod synth;
 
 pub use mesh::{MeshSection, RefineSection, ZoneKind};
@@ -38,6 +39,7 @@ pub use simulation::{
     BoundarySection, CaliperSection, MaterialSection, PrescribedSection, ProbeSection,
     SimulationSetup, SolverSection, TimeSection,
 };
+pub use surface::{SurfaceSection, SurfaceSetup};
 pub use synth::{GeneratedSection, SynthFile, SynthOutputSection, SynthSources, SynthesisSection};
 
 /// Region id of the top layer (epidermis + dermis) in generated meshes.
@@ -73,6 +75,9 @@ pub struct Scenario {
     pub microstructure: Option<MicrostructureSection>,
     /// The rendered frames (none: nothing rendered).
     pub render: Option<RenderSection>,
+    /// An animated surface from another tool in place of the FEM patch
+    /// (none: the FEM patch). Runs through [`SurfaceSetup`].
+    pub surface: Option<SurfaceSection>,
 }
 
 /// `[output]`: where results go.
@@ -102,6 +107,14 @@ pub struct OutputSection {
     pub strain_image_px: usize,
     /// Stretch ratios `1 ± strain_image_range` saturate the colour map. Default 0.25.
     pub strain_image_range: f64,
+    /// Write the top surface's animation as `surface.glb` at the end of the
+    /// run: one glTF morph target per frame and a step animation (Blender
+    /// imports them as shape keys; a `[surface]` scenario reads it back).
+    /// Default false.
+    pub surface_glb: bool,
+    /// Write the top surface of every frame as `surface/frame_NNNN.obj`
+    /// (mm, full precision). Default false.
+    pub surface_obj: bool,
     /// Float arrays and points of the VTU files: `f64` (default) or `f32`
     /// (7 significant digits, half the size before compression).
     pub vtu_precision: String,
@@ -120,6 +133,8 @@ impl Default for OutputSection {
             strain_images: false,
             strain_image_px: 512,
             strain_image_range: 0.25,
+            surface_glb: false,
+            surface_obj: false,
             vtu_precision: "f64".into(),
             vtu_compression: "zlib".into(),
         }
@@ -145,6 +160,10 @@ pub struct Setup {
     pub write_frames: bool,
     /// Write every frame into `frames.vtkhdf`.
     pub write_vtkhdf: bool,
+    /// Write the top surface's animation as `surface.glb`.
+    pub write_surface_glb: bool,
+    /// Write the top surface of every frame as `surface/frame_NNNN.obj`.
+    pub write_surface_obj: bool,
     /// How the VTU files store their arrays.
     pub vtu_format: crate::mesh::io::VtuFormat,
     /// Strain maps per frame, if asked for.
@@ -497,6 +516,13 @@ impl Setup {
     /// Validates a scenario and builds or loads its mesh. `path` is the
     /// scenario file (its folder resolves `mesh.file`; its stem names the run).
     pub fn from_scenario(scenario: &Scenario, path: &Path) -> Result<Setup> {
+        if scenario.surface.is_some() {
+            return Err(Error::parameter(
+                "surface",
+                "makes this an animated-surface scenario, which SurfaceSetup validates and \
+                 pipeline::surface::run runs (`skinpatch run` chooses by itself)",
+            ));
+        }
         let name = path
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
@@ -525,6 +551,10 @@ impl Setup {
                     scenario.microstructure.is_some(),
                 ),
                 ("rendering ([render])", scenario.render.is_some()),
+                (
+                    "the surface export (output.surface_glb, output.surface_obj)",
+                    scenario.output.surface_glb || scenario.output.surface_obj,
+                ),
             ];
             if let Some((stage, _)) = needs.iter().find(|(_, asked)| *asked) {
                 return Err(Error::InvalidMesh {
@@ -569,6 +599,8 @@ impl Setup {
             write_mesh_tetgen: scenario.output.mesh_tetgen,
             write_frames: scenario.output.frames_vtu,
             write_vtkhdf: scenario.output.vtkhdf()?,
+            write_surface_glb: scenario.output.surface_glb,
+            write_surface_obj: scenario.output.surface_obj,
             vtu_format: scenario.output.vtu_format()?,
             strain_images,
             micro,

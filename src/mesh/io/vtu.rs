@@ -77,16 +77,19 @@ impl Field {
     }
 }
 
-/// An unstructured tetrahedral grid with point and cell data.
+/// An unstructured grid of tetrahedra and triangles with point and cell
+/// data (cells are the tets, then the triangles).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Grid {
     /// Point positions.
     pub points: Vec<Vec3>,
     /// Tets as point indices.
     pub tets: Vec<[usize; 4]>,
+    /// Triangles as point indices (a surface grid).
+    pub triangles: Vec<[usize; 3]>,
     /// Arrays with one entry per point.
     pub point_data: Vec<Field>,
-    /// Arrays with one entry per tet.
+    /// Arrays with one entry per cell.
     pub cell_data: Vec<Field>,
 }
 
@@ -104,6 +107,7 @@ impl Grid {
         Grid {
             points: mesh.positions.clone(),
             tets: mesh.tets.clone(),
+            triangles: Vec::new(),
             point_data: vec![
                 Field::i32("on_top", 1, on_top),
                 Field::f64("uv", 2, uv).named(&["u", "v"]),
@@ -119,11 +123,16 @@ impl Grid {
         }
     }
 
+    /// Tets plus triangles.
+    pub fn num_cells(&self) -> usize {
+        self.tets.len() + self.triangles.len()
+    }
+
     /// Checks that every array has `components × count` values.
     fn check(&self) -> Result<()> {
         for (fields, count, kind) in [
             (&self.point_data, self.points.len(), "point"),
-            (&self.cell_data, self.tets.len(), "cell"),
+            (&self.cell_data, self.num_cells(), "cell"),
         ] {
             for f in fields {
                 if f.values.len() != f.components * count {
@@ -291,7 +300,7 @@ pub fn write_vtu_as(path: &Path, grid: &Grid, format: VtuFormat) -> Result<()> {
     out.push_str(&format!(
         "<Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">\n<PointData>\n",
         grid.points.len(),
-        grid.tets.len()
+        grid.num_cells()
     ));
     grid.point_data
         .iter()
@@ -304,14 +313,24 @@ pub fn write_vtu_as(path: &Path, grid: &Grid, format: VtuFormat) -> Result<()> {
     let points: Vec<f64> = grid.points.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
     float_array(&mut out, format, "Points", 3, &[], &points);
     out.push_str("</Points>\n<Cells>\n");
-    let connectivity: Vec<i64> = grid.tets.iter().flat_map(|t| t.map(|v| v as i64)).collect();
-    let offsets: Vec<i64> = (1..=grid.tets.len() as i64).map(|k| 4 * k).collect();
+    let connectivity: Vec<i64> = grid
+        .tets
+        .iter()
+        .flat_map(|t| t.map(|v| v as i64))
+        .chain(grid.triangles.iter().flat_map(|t| t.map(|v| v as i64)))
+        .collect();
+    let tet_end = 4 * grid.tets.len() as i64;
+    let offsets: Vec<i64> = (1..=grid.tets.len() as i64)
+        .map(|k| 4 * k)
+        .chain((1..=grid.triangles.len() as i64).map(|k| tet_end + 3 * k))
+        .collect();
     for (name, values) in [("connectivity", connectivity), ("offsets", offsets)] {
         let bytes = le_bytes(&values, |x| x.to_le_bytes());
         data_array(&mut out, format, ("Int64", name, 1), &[], &bytes);
     }
-    // VTK_TETRA.
-    let types = vec![10u8; grid.tets.len()];
+    // VTK_TETRA, then VTK_TRIANGLE.
+    let mut types = vec![10u8; grid.tets.len()];
+    types.resize(grid.num_cells(), 5);
     data_array(&mut out, format, ("UInt8", "types", 1), &[], &types);
     out.push_str("</Cells>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
     write_atomically(path, out.as_bytes())
@@ -349,17 +368,26 @@ pub fn read_vtu(path: &Path) -> Result<Grid> {
         } => (connectivity, offsets),
         VertexNumbers::Legacy { .. } => return Err(bad("unexpected legacy cell layout".into())),
     };
-    if piece.cells.types.iter().any(|&t| t != CellType::Tetra) {
-        return Err(bad("only tetrahedral cells are supported".into()));
-    }
-    let mut tets = Vec::with_capacity(offsets.len());
+    let (mut tets, mut triangles) = (Vec::with_capacity(offsets.len()), Vec::new());
     let mut start = 0usize;
-    for (k, &end) in offsets.iter().enumerate() {
+    for (k, (&end, kind)) in offsets.iter().zip(&piece.cells.types).enumerate() {
         let end = end as usize;
-        if end != start + 4 || end > connectivity.len() {
-            return Err(bad(format!("cell {k} is not a 4-node tetrahedron")));
+        let nodes = match kind {
+            CellType::Tetra => 4,
+            CellType::Triangle => 3,
+            other => return Err(bad(format!("cell {k} is a {other:?}; only tetrahedra and triangles are supported"))),
+        };
+        if end != start + nodes || end > connectivity.len() {
+            return Err(bad(format!("cell {k} does not have {nodes} nodes")));
         }
-        tets.push(std::array::from_fn(|i| connectivity[start + i] as usize));
+        if nodes == 4 {
+            if !triangles.is_empty() {
+                return Err(bad(format!("cell {k}: tetrahedra after triangles are not supported")));
+            }
+            tets.push(std::array::from_fn(|i| connectivity[start + i] as usize));
+        } else {
+            triangles.push(std::array::from_fn(|i| connectivity[start + i] as usize));
+        }
         start = end;
     }
     let fields = |attrs: &[Attribute]| -> Result<Vec<Field>> {
@@ -391,6 +419,7 @@ pub fn read_vtu(path: &Path) -> Result<Grid> {
     Ok(Grid {
         points,
         tets,
+        triangles,
         point_data: fields(&piece.data.point)?,
         cell_data: fields(&piece.data.cell)?,
     })

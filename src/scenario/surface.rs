@@ -1,0 +1,200 @@
+//! `[surface]`: an animated surface from another tool in place of the FEM
+//! patch, validated into a [`SurfaceSetup`] (run by
+//! [`crate::pipeline::surface::run`]).
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use super::{Scenario, StrainImageSettings};
+use crate::error::{Error, Result};
+use crate::surface::{AnimatedSurface, ReadOptions, UvLayout, UvPiece};
+
+/// `[surface]`: the rest mesh with UVs and its animation.
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SurfaceSection {
+    /// The surface: `.gltf`/`.glb` (mesh with `TEXCOORD_0`, morph targets
+    /// and an animation of their weights), one `.obj`, or an OBJ sequence
+    /// named by a pattern (`frames/frame_%04d.obj`). Relative to the
+    /// scenario file.
+    pub file: PathBuf,
+    /// OBJ: the rest mesh, when it is not the first frame.
+    pub rest: Option<PathBuf>,
+    /// glTF: the node whose mesh is read. Default: the only node with a mesh.
+    pub node: Option<String>,
+    /// glTF: the animation to sample. Default: the first that animates the
+    /// node's morph weights.
+    pub animation: Option<String>,
+    /// Length unit of the file: `"mm"`, `"cm"`, `"m"` or `"in"`. Default
+    /// `"m"` for glTF (the format's unit); required for OBJ.
+    pub units: Option<String>,
+    /// Frames per second: the sampling of a glTF animation, the rate of an
+    /// OBJ sequence. Default 30.
+    pub frame_rate_hz: Option<f64>,
+    /// UVs outside [0, 1]: `"unit"` (refused, default), `"udim"` (UDIM
+    /// tiles, maps per tile) or `"wrap"` (one repeating texture).
+    pub uv_layout: Option<String>,
+}
+
+/// A validated surface scenario, ready to run.
+#[derive(Clone, Debug)]
+pub struct SurfaceSetup {
+    /// Scenario name (the file stem).
+    pub name: String,
+    /// The surface and its frames (mm).
+    pub surface: AnimatedSurface,
+    /// How its UVs are laid out.
+    pub layout: UvLayout,
+    /// The maps: one per UDIM tile, or the unit square.
+    pub pieces: Vec<UvPiece>,
+    /// Output folder.
+    pub output_dir: PathBuf,
+    /// Write the rest surface as `surface.vtu`.
+    pub write_surface_vtu: bool,
+    /// Write `frames/frame_NNNN.vtu` and `frames.pvd`.
+    pub write_frames: bool,
+    /// How the VTU files store their arrays.
+    pub vtu_format: crate::mesh::io::VtuFormat,
+    /// Strain maps per frame, if asked for.
+    pub strain_images: Option<StrainImageSettings>,
+    /// The microstructure stage, if the scenario has one.
+    pub micro: Option<super::MicroSetup>,
+    /// The renderer, if the scenario has one.
+    pub render: Option<crate::render::RenderSetup>,
+}
+
+impl SurfaceSetup {
+    /// Validates a scenario with a `[surface]` and reads the surface.
+    /// `path` is the scenario file (its folder resolves `surface.file`).
+    pub fn from_scenario(scenario: &Scenario, path: &Path) -> Result<SurfaceSetup> {
+        let Some(section) = &scenario.surface else {
+            return Err(Error::parameter(
+                "surface",
+                "is missing: this scenario simulates the FEM patch (use Setup)",
+            ));
+        };
+        refuse_fem_sections(scenario)?;
+        let name = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "scenario".into());
+        let base = path.parent().unwrap_or(Path::new("."));
+        let output_dir = scenario
+            .output
+            .dir
+            .clone()
+            .unwrap_or_else(|| Path::new("out").join(&name));
+        let rate = section.frame_rate_hz.unwrap_or(30.0);
+        if !(rate.is_finite() && rate > 0.0) {
+            return Err(Error::parameter(
+                "surface.frame_rate_hz",
+                format!("must be > 0, got {rate}"),
+            ));
+        }
+        let layout = UvLayout::parse(
+            "surface.uv_layout",
+            section.uv_layout.as_deref().unwrap_or("unit"),
+        )?;
+        let options = ReadOptions {
+            mm_per_unit: section
+                .units
+                .as_deref()
+                .map(|u| crate::surface::unit_mm("surface.units", u))
+                .transpose()?,
+            frame_rate_hz: rate,
+            node: section.node.clone(),
+            animation: section.animation.clone(),
+            rest: section.rest.as_ref().map(|r| base.join(r)),
+        };
+        let file = base.join(&section.file);
+        let is_obj = file.to_string_lossy().to_lowercase().ends_with(".obj");
+        if !is_obj && section.rest.is_some() {
+            return Err(Error::parameter(
+                "surface.rest",
+                "applies to OBJ files only (a glTF's rest is its mesh without morph targets)",
+            ));
+        }
+        if is_obj && (section.node.is_some() || section.animation.is_some()) {
+            return Err(Error::parameter(
+                if section.node.is_some() { "surface.node" } else { "surface.animation" },
+                "applies to glTF files only",
+            ));
+        }
+        let surface = AnimatedSurface::read(&file, &options)?;
+        let pieces = surface.pieces(layout)?;
+        let micro = match &scenario.microstructure {
+            Some(m) => {
+                let micro = m.setup(base, surface.mm_per_uv(), &output_dir.join("cache"))?;
+                if let super::NeutralMap::Tiled(_) = micro.neutral {
+                    return Err(Error::parameter(
+                        "microstructure.map",
+                        "is a tiled map, which [surface] scenarios do not take; use one map \
+                         file (UDIM tiles each get their own deformed map from it)",
+                    ));
+                }
+                Some(micro)
+            }
+            None => None,
+        };
+        let render = scenario
+            .render
+            .as_ref()
+            .map(|r| r.setup(base, micro.is_some()))
+            .transpose()?;
+        if render.is_some() && layout != UvLayout::Unit {
+            return Err(Error::parameter(
+                "surface.uv_layout",
+                format!(
+                    "is \"{}\", but [render] draws surfaces whose UVs lie in [0, 1] only; \
+                     remove [render] or lay the UVs out in the unit square",
+                    section.uv_layout.as_deref().unwrap_or_default()
+                ),
+            ));
+        }
+        Ok(SurfaceSetup {
+            name,
+            surface,
+            layout,
+            pieces,
+            output_dir,
+            write_surface_vtu: scenario.output.mesh_vtu,
+            write_frames: scenario.output.frames_vtu,
+            vtu_format: scenario.output.vtu_format()?,
+            strain_images: scenario.output.strain_image_settings()?,
+            micro,
+            render,
+        })
+    }
+
+    /// Loads and validates a surface scenario file.
+    pub fn load(path: &Path) -> Result<SurfaceSetup> {
+        SurfaceSetup::from_scenario(&Scenario::load(path)?, path)
+    }
+}
+
+/// The FEM's sections mean nothing beside `[surface]` (its animation
+/// replaces the simulation): each one that differs from its default is an
+/// error naming it.
+fn refuse_fem_sections(s: &Scenario) -> Result<()> {
+    let given = [
+        ("mesh", s.mesh != Default::default()),
+        ("material", !s.material.is_empty()),
+        ("boundary", s.boundary != Default::default()),
+        ("probe", s.probe.is_some()),
+        ("solver", s.solver != Default::default()),
+        ("time", s.time != Default::default()),
+        ("output.mesh_tetgen", s.output.mesh_tetgen),
+        ("output.frames_vtkhdf", s.output.frames_vtkhdf),
+        ("output.surface_glb", s.output.surface_glb),
+        ("output.surface_obj", s.output.surface_obj),
+    ];
+    match given.iter().find(|(_, g)| *g) {
+        Some((key, _)) => Err(Error::parameter(
+            *key,
+            "has no meaning beside [surface]: the surface's own animation replaces the FEM \
+             patch (its frame rate is surface.frame_rate_hz); remove it",
+        )),
+        None => Ok(()),
+    }
+}
