@@ -495,6 +495,11 @@ fn sample(
 pub fn write_glb(path: &Path, surface: &AnimatedSurface) -> Result<()> {
     let top = &surface.top;
     let n = top.vertices.len();
+    // Positions relative to the centre of the bounds (the node's
+    // translation), so f32 keeps more of them; displacements from the f64
+    // difference, so a frame's strain loses only the rounding of the rest.
+    let (lo, hi) = surface.bounds();
+    let centre = ((lo + hi) * 0.5).map(|c| ((c / 1000.0) as f32) as f64 * 1000.0);
     let metres = |p: &Vec3| [p.x, p.y, p.z].map(|c| (c / 1000.0) as f32);
     let mut bin: Vec<u8> = Vec::new();
     let mut views = Vec::new();
@@ -529,7 +534,7 @@ pub fn write_glb(path: &Path, surface: &AnimatedSurface) -> Result<()> {
     let rest: Vec<f32> = top
         .vertices
         .iter()
-        .flat_map(|&v| metres(&surface.positions[v]))
+        .flat_map(|&v| metres(&(surface.positions[v] - centre)))
         .collect();
     let position = push(&rest, "VEC3", 3, true);
     let uvs: Vec<f32> = top
@@ -543,10 +548,7 @@ pub fn write_glb(path: &Path, surface: &AnimatedSurface) -> Result<()> {
         let delta: Vec<f32> = top
             .vertices
             .iter()
-            .flat_map(|&v| {
-                let (a, b) = (metres(&surface.positions[v]), metres(&frame[v]));
-                [0, 1, 2].map(|i| b[i] - a[i])
-            })
+            .flat_map(|&v| metres(&(frame[v] - surface.positions[v])))
             .collect();
         targets.push(serde_json::json!({ "POSITION": push(&delta, "VEC3", 3, true) }));
     }
@@ -581,7 +583,7 @@ pub fn write_glb(path: &Path, surface: &AnimatedSurface) -> Result<()> {
         "asset": { "version": "2.0", "generator": concat!("skinpatch ", env!("CARGO_PKG_VERSION")) },
         "scene": 0,
         "scenes": [{ "nodes": [0] }],
-        "nodes": [{ "name": name, "mesh": 0 }],
+        "nodes": [{ "name": name, "mesh": 0, "translation": [centre.x / 1000.0, centre.y / 1000.0, centre.z / 1000.0] }],
         "meshes": [{
             "name": name,
             "primitives": [{

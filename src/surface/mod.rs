@@ -211,6 +211,36 @@ impl AnimatedSurface {
         Ok(surface)
     }
 
+    /// A surface from per-vertex data in millimetres: one vertex per
+    /// (position, UV) pair as in glTF, `frames[f][k]` the position of
+    /// vertex `k` in frame `f`. Vertices with the same rest position and
+    /// trajectory are welded into one position; the checks of the readers
+    /// apply (finite values, indices in range, some area).
+    pub fn from_vertices(
+        origin: &str,
+        rest: Vec<Vec3>,
+        uvs: Vec<[f64; 2]>,
+        triangles: Vec<[usize; 3]>,
+        frames: Vec<Vec<Vec3>>,
+        frame_rate_hz: f64,
+    ) -> Result<AnimatedSurface> {
+        if uvs.len() != rest.len() {
+            return Err(Error::InvalidMesh {
+                origin: origin.into(),
+                message: format!("has {} UVs for {} vertices", uvs.len(), rest.len()),
+            });
+        }
+        let split = SplitSurface {
+            origin: origin.into(),
+            rest,
+            uvs,
+            triangles,
+            frames,
+            labels: Vec::new(),
+        };
+        AnimatedSurface::from_split(split, 1.0, frame_rate_hz)
+    }
+
     /// An FEM patch's top surface with the positions of its frames (`x[f]`
     /// indexed like the tet mesh), e.g. to export it as an animation.
     pub fn from_top(

@@ -1,0 +1,501 @@
+//! Animated surfaces from other tools (seed 000 §5): round trips of the FEM
+//! top surface through glTF and OBJ, analytic deformations on curved
+//! surfaces with UV seams and mirrored charts, UDIM and wrapping layouts,
+//! GPU parity and bad input.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use skinpatch::mesh::Vec3;
+use skinpatch::micro::io::{MapDefaults, TexelSize};
+use skinpatch::micro::map::Edge;
+use skinpatch::scenario::{Setup, SurfaceSetup};
+use skinpatch::strain::{StrainRaster, Svd2, SurfaceField};
+use skinpatch::surface::{AnimatedSurface, UvLayout};
+
+fn read_map(path: &Path) -> skinpatch::micro::DisplacementMap {
+    let defaults = MapDefaults {
+        texel: TexelSize::Required("test"),
+        height_unit_um: 1.0,
+        edge: Edge::Wrap,
+    };
+    skinpatch::micro::io::read_map(path, &defaults).unwrap()
+}
+
+fn temp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("skinpatch-surface-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// (r_s, r_t) at every inside texel of a `px`² raster of `field`.
+fn raster_stretch(field: &SurfaceField, px: usize) -> Vec<Option<(f64, f64)>> {
+    let raster = StrainRaster::new(field, px, px);
+    (0..px * px)
+        .map(|i| {
+            raster.inside[i].then(|| {
+                let svd = Svd2::of(&raster.t[i]);
+                (svd.rs, svd.rt)
+            })
+        })
+        .collect()
+}
+
+const PRESS: &str = r#"
+[boundary]
+bottom = "fixed"
+sides = "rollers"
+[probe]
+shape = "sphere"
+radius_mm = 1.5
+path_mm = [[0.0, 0.0, 0.0, 1.5], [0.5, 0.0, 0.0, 1.0], [1.0, 0.5, 0.0, 1.0]]
+contact = "coulomb"
+friction = 0.8
+[time]
+duration_s = 1.0
+frame_rate_hz = 6.0
+"#;
+
+const MICRO: &str = r#"
+[microstructure]
+formats = ["exr"]
+[microstructure.procedural]
+size_px = 192
+"#;
+
+/// The FEM patch's top surface exported as glTF and as an OBJ sequence and
+/// read back as animated surfaces gives the FEM run's strain maps and
+/// deformed microstructure.
+#[test]
+fn fem_top_surface_round_trips_through_gltf_and_obj() {
+    let dir = temp("roundtrip");
+    let mesh = common::root().join("meshes/patch_3k.node");
+    let fem_toml = format!(
+        "[mesh]\nfile = \"{}\"\n{PRESS}[output]\ndir = \"{}\"\nsurface_glb = true\nsurface_obj = true\nframes_vtu = false\nmesh_vtu = false\n{MICRO}",
+        mesh.display(),
+        dir.join("fem").display()
+    );
+    std::fs::write(dir.join("fem.toml"), fem_toml).unwrap();
+    let setup = Setup::load(&dir.join("fem.toml")).unwrap();
+    let px = 160;
+    let mut fem_maps = Vec::new();
+    skinpatch::pipeline::run(&setup, |frame| {
+        fem_maps.push(raster_stretch(frame.surface, px))
+    })
+    .unwrap();
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for (rs, rt) in fem_maps.iter().flatten().flatten() {
+        lo = lo.min(rs.min(*rt));
+        hi = hi.max(rs.max(*rt));
+    }
+    let range = hi - lo;
+    assert!(range > 0.05, "the press strains the skin: r in [{lo}, {hi}]");
+    let neutral = read_map(&dir.join("fem/micro/height_neutral.exr"));
+    for (format, file, units) in [
+        ("glb", "fem/surface.glb", ""),
+        ("obj", "fem/surface/frame_%04d.obj", "units = \"mm\"\n"),
+    ] {
+        let toml = format!(
+            "[surface]\nfile = \"{file}\"\n{units}frame_rate_hz = 6.0\n[output]\ndir = \"{}\"\nmesh_vtu = false\n{MICRO}",
+            dir.join(format).display()
+        );
+        let path = dir.join(format!("{format}.toml"));
+        std::fs::write(&path, toml).unwrap();
+        let setup = SurfaceSetup::load(&path).unwrap();
+        assert_eq!(setup.surface.num_frames(), fem_maps.len(), "{format}");
+        let mut worst: f64 = 0.0;
+        let mut frame = 0;
+        skinpatch::pipeline::surface::run(&setup, |f| {
+            let maps = raster_stretch(f.field, px);
+            for (a, b) in maps.iter().zip(&fem_maps[frame]) {
+                match (a, b) {
+                    (Some(a), Some(b)) => {
+                        worst = worst.max((a.0 - b.0).abs()).max((a.1 - b.1).abs())
+                    }
+                    (None, None) => {}
+                    _ => panic!("{format}: the rasters cover different texels"),
+                }
+            }
+            frame += 1;
+        })
+        .unwrap();
+        let strain = worst / range;
+        let mut micro: f64 = 0.0;
+        for f in 0..fem_maps.len() {
+            let name = format!("micro/height_{f:04}.exr");
+            let a = read_map(&dir.join("fem").join(&name));
+            let b = read_map(&dir.join(format).join(&name));
+            assert_eq!((a.width, a.height), (neutral.width, neutral.height));
+            micro = micro.max(a.max_difference(&b));
+        }
+        eprintln!(
+            "{format}: strain maps within {strain:.2e} of the r range, deformed maps within \
+             {micro:.2e} of the height range"
+        );
+        assert!(strain <= 1e-6, "{format}: strain {strain:e}");
+        assert!(micro <= 1e-6, "{format}: microstructure {micro:e}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A 90° cylinder patch (radius 5 mm, 8 mm long) in two UV charts: the
+/// first θ → u, z → v; the second swapped (z → u, θ → v: rotated and
+/// mirrored), meeting along θ = 45° where the positions are shared and the
+/// UVs are not. Frames: rest, stretched by `a` along the axis, and the
+/// same stretch followed by a rigid rotation.
+fn cylinder(a: f64, shift_second: [f64; 2], shift_first: [f64; 2]) -> AnimatedSurface {
+    let (radius, length, n_theta, n_z) = (5.0, 8.0, 12, 10);
+    let theta_max = std::f64::consts::FRAC_PI_2;
+    let rotation = nalgebra::Rotation3::from_euler_angles(0.3, -0.2, 0.7);
+    let (mut rest, mut uvs, mut triangles) = (Vec::new(), Vec::new(), Vec::new());
+    let half = n_theta / 2;
+    for chart in 0..2 {
+        let base = rest.len();
+        let thetas: Vec<usize> = if chart == 0 { (0..=half).collect() } else { (half..=n_theta).collect() };
+        for j in 0..=n_z {
+            for &i in &thetas {
+                let theta = theta_max * i as f64 / n_theta as f64;
+                let z = length * j as f64 / n_z as f64;
+                rest.push(Vec3::new(radius * theta.cos(), radius * theta.sin(), z));
+                let t = (i - thetas[0]) as f64 / half as f64;
+                let s = j as f64 / n_z as f64;
+                uvs.push(if chart == 0 {
+                    [0.05 + 0.4 * t + shift_first[0], 0.05 + 0.9 * s + shift_first[1]]
+                } else {
+                    [0.55 + 0.4 * s + shift_second[0], 0.05 + 0.9 * t + shift_second[1]]
+                });
+            }
+        }
+        let row = thetas.len();
+        for j in 0..n_z {
+            for i in 0..row - 1 {
+                let v = |di: usize, dj: usize| base + (j + dj) * row + i + di;
+                triangles.push([v(0, 0), v(1, 0), v(1, 1)]);
+                triangles.push([v(0, 0), v(1, 1), v(0, 1)]);
+            }
+        }
+    }
+    let stretched: Vec<Vec3> = rest.iter().map(|p| Vec3::new(p.x, p.y, a * p.z)).collect();
+    let turned = stretched.iter().map(|p| rotation * p).collect();
+    AnimatedSurface::from_vertices("cylinder", rest.clone(), uvs, triangles, vec![rest, stretched, turned], 24.0)
+        .unwrap()
+}
+
+#[test]
+fn cylinder_stretched_along_its_axis_is_exact_across_seams_and_mirrored_charts() {
+    let a = 1.2;
+    let s = cylinder(a, [0.0, 0.0], [0.0, 0.0]);
+    // Positions along the seam are shared: 11 × 13 positions, 11 × 14 surface vertices.
+    assert_eq!(s.positions.len(), 11 * 13);
+    assert_eq!(s.top.vertices.len(), 11 * 14);
+    let rotation = nalgebra::Rotation3::from_euler_angles(0.3, -0.2, 0.7);
+    let mut worst: f64 = 0.0;
+    for (f, x) in s.frames.iter().enumerate().skip(1) {
+        let field = SurfaceField::new(&s.top, &s.positions, x);
+        assert_eq!(field.degenerate_triangles, 0);
+        let axis = if f == 1 { Vec3::z() } else { rotation * Vec3::z() };
+        for (k, v) in field.vertices.iter().enumerate() {
+            let st = v.strain();
+            worst = worst.max((st.rs() - a).abs()).max((st.rt() - 1.0).abs());
+            // The s axis: v in the first chart, u in the swapped one.
+            let first_chart = k < 11 * 7;
+            let s_uv = st.s_uv();
+            let along = if first_chart { s_uv.y.abs() } else { s_uv.x.abs() };
+            worst = worst.max((along - 1.0).abs());
+            let deformed = v.deformed_axes()[0];
+            worst = worst.max((deformed.dot(&axis).abs() - 1.0).abs());
+        }
+        // And at every texel inside the charts.
+        for (rs, rt) in raster_stretch(&field, 96).into_iter().flatten() {
+            worst = worst.max((rs - a).abs()).max((rt - 1.0).abs());
+        }
+    }
+    eprintln!("cylinder: r_s, r_t and axes within {worst:.1e}");
+    assert!(worst < 1e-12, "{worst:e}");
+
+    // Averaging across the seam would mix the charts' frames (T = diag(1, a)
+    // in one, diag(a, 1) in the other): the same surface welded into one
+    // chart-less vertex set must not be what we compute.
+    let mixed = {
+        let t1 = nalgebra::Matrix2::new(1.0, 0.0, 0.0, a);
+        let t2 = nalgebra::Matrix2::new(a, 0.0, 0.0, 1.0);
+        Svd2::of(&((t1 + t2) * 0.5))
+    };
+    assert!((mixed.rs - a).abs() > 0.05, "the test can tell mixed charts apart");
+}
+
+#[test]
+fn sphere_cap_scaled_tangentially_with_a_mirrored_half() {
+    let (rho, k, n) = (6.0, 1.1, 16);
+    let (mut rest, mut uvs, mut triangles) = (Vec::new(), Vec::new(), Vec::new());
+    for half in 0..2 {
+        let base = rest.len();
+        let cols: Vec<usize> = if half == 0 { (0..=n / 2).collect() } else { (n / 2..=n).collect() };
+        for j in 0..=n {
+            for &i in &cols {
+                let (u, v) = (0.1 + 0.8 * i as f64 / n as f64, 0.1 + 0.8 * j as f64 / n as f64);
+                let (x, y) = ((u - 0.5) * 6.0, (v - 0.5) * 6.0);
+                rest.push(Vec3::new(x, y, (rho * rho - x * x - y * y).sqrt()));
+                // The second half mirrored in u.
+                uvs.push(if half == 0 { [u, v] } else { [1.4 - u, v] });
+            }
+        }
+        let row = cols.len();
+        for j in 0..n {
+            for i in 0..row - 1 {
+                let v = |di: usize, dj: usize| base + (j + dj) * row + i + di;
+                triangles.push([v(0, 0), v(1, 0), v(1, 1)]);
+                triangles.push([v(0, 0), v(1, 1), v(0, 1)]);
+            }
+        }
+    }
+    let scaled = rest.iter().map(|p| p * k).collect();
+    let s = AnimatedSurface::from_vertices("cap", rest.clone(), uvs, triangles, vec![scaled], 30.0).unwrap();
+    let field = SurfaceField::new(&s.top, &s.positions, &s.frames[0]);
+    let mut worst: f64 = 0.0;
+    for v in &field.vertices {
+        let st = v.strain();
+        worst = worst.max((st.rs() - k).abs()).max((st.rt() - k).abs());
+    }
+    for (rs, rt) in raster_stretch(&field, 64).into_iter().flatten() {
+        worst = worst.max((rs - k).abs()).max((rt - k).abs());
+    }
+    eprintln!("sphere cap: r_s = r_t = {k} within {worst:.1e}");
+    assert!(worst < 1e-12, "{worst:e}");
+}
+
+#[test]
+fn udim_tiles_and_wrapped_uvs_raster_each_chart() {
+    let a = 1.3;
+    // The second chart in UDIM tile 1002 (u + 1).
+    let s = cylinder(a, [1.0, 0.0], [0.0, 0.0]);
+    assert!(s.pieces(UvLayout::Unit).is_err());
+    let pieces = s.pieces(UvLayout::Udim).unwrap();
+    assert_eq!(pieces.iter().map(|p| p.udim).collect::<Vec<_>>(), vec![Some(1001), Some(1002)]);
+    let field = SurfaceField::new(&s.top, &s.positions, &s.frames[1]);
+    for piece in &pieces {
+        let view = field.view(&piece.triangles);
+        let texels: Vec<(f64, f64)> = raster_stretch(&view, 64).into_iter().flatten().collect();
+        assert!(texels.len() > 64 * 64 / 4, "tile {:?}: {} texels", piece.udim, texels.len());
+        for (rs, rt) in texels {
+            assert!((rs - a).abs() < 1e-12 && (rt - 1.0).abs() < 1e-12);
+        }
+    }
+    // The first chart across u = 1 (u in 0.75 … 1.15) on a wrapping map:
+    // texels on both sides of the edge are covered.
+    let s = cylinder(a, [0.0, 0.0], [0.7, 0.0]);
+    let pieces = s.pieces(UvLayout::Wrap).unwrap();
+    let field = SurfaceField::new(&s.top, &s.positions, &s.frames[1]);
+    let view = field.view(&pieces[0].triangles);
+    let raster = raster_stretch(&view, 100);
+    let at = |u: f64, v: f64| raster[(v * 100.0) as usize * 100 + (u * 100.0) as usize];
+    for (u, v) in [(0.05, 0.5), (0.9, 0.5), (0.7, 0.5)] {
+        let (rs, rt) = at(u, v).unwrap_or_else(|| panic!("({u}, {v}) is covered"));
+        assert!((rs - a).abs() < 1e-12 && (rt - 1.0).abs() < 1e-12);
+    }
+    assert!(at(0.3, 0.5).is_none(), "between the charts nothing is drawn");
+}
+
+/// The GPU chain on a surface with seams and a mirrored chart equals the
+/// CPU reference.
+#[test]
+fn gpu_chain_on_seamed_mirrored_surface_matches_cpu() {
+    let Some(ctx) = common::context() else { return };
+    let s = cylinder(1.25, [0.0, 0.0], [0.0, 0.0]);
+    let field = SurfaceField::new(&s.top, &s.positions, &s.frames[2]);
+    let params = skinpatch::micro::procedural::SkinParams {
+        size_px: 256,
+        extent_mm: s.mm_per_uv(),
+        ..Default::default()
+    };
+    let neutral = skinpatch::micro::procedural::generate(&params).unwrap();
+    let model = skinpatch::micro::kernel::KernelModel::forehead();
+    let cpu = skinpatch::micro::convolve::deform(&neutral, &model, &field);
+    let mut chain = skinpatch::gpu::micro::GpuMicro::new(
+        ctx,
+        &neutral,
+        &model,
+        skinpatch::strain::raster::DILATE_TEXELS,
+    )
+    .unwrap();
+    let gpu = chain.deform(&field, false).unwrap();
+    let d = cpu.max_difference(&gpu.map);
+    eprintln!("seamed cylinder: GPU − CPU ≤ {d:.2e} of the height range");
+    assert!(d < 1e-4, "{d:e}");
+    assert!(neutral.max_difference(&cpu) > 0.02, "the surface is deformed");
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn read_error(path: &Path, units: Option<f64>) -> String {
+    let options = skinpatch::surface::ReadOptions {
+        mm_per_unit: units,
+        ..Default::default()
+    };
+    AnimatedSurface::read(path, &options).unwrap_err().to_string()
+}
+
+const QUAD: &str = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n";
+
+#[test]
+fn bad_obj_input_names_file_and_element() {
+    let dir = temp("badobj");
+    // Missing UVs.
+    let path = write(&dir, "nouv.obj", "o Face\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    let e = read_error(&path, Some(1.0));
+    assert!(e.contains("nouv.obj") && e.contains("'Face'") && e.contains("texture"), "{e}");
+    // No unit for an OBJ.
+    let e = read_error(&path, None);
+    assert!(e.contains("surface.units"), "{e}");
+    // NaN position.
+    let path = write(&dir, "nan.obj", &format!("{QUAD}v nan 0 0\nvt 0.5 0.5\nf 1/1 2/2 3/3\nf 1/1 3/3 5/5\n"));
+    let e = read_error(&path, Some(1.0));
+    assert!(e.contains("nan.obj") && e.contains("non-finite position"), "{e}");
+    // Unparsable number: the line is named.
+    let path = write(&dir, "syntax.obj", "v 0 0 0\nv 1 x 0\nv 0 1 0\nvt 0 0\nf 1/1 2/1 3/1\n");
+    let e = read_error(&path, Some(1.0));
+    assert!(e.contains("syntax.obj:2"), "{e}");
+    // Topology change between frames.
+    let seq = dir.join("seq");
+    std::fs::create_dir_all(&seq).unwrap();
+    write(&seq, "f_0001.obj", &format!("{QUAD}f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"));
+    write(&seq, "f_0002.obj", &format!("{QUAD}f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"));
+    write(&seq, "f_0003.obj", &format!("{QUAD}f 1/1 2/2 4/4\nf 2/2 3/3 4/4\n"));
+    let e = read_error(&seq.join("f_%04d.obj"), Some(1.0));
+    assert!(e.contains("f_0003.obj") && e.contains("triangle 1") && e.contains("topology"), "{e}");
+    // A gap in the sequence.
+    std::fs::remove_file(seq.join("f_0002.obj")).unwrap();
+    let e = read_error(&seq.join("f_%04d.obj"), Some(1.0));
+    assert!(e.contains("f_0002.obj"), "{e}");
+    // A good sequence reads, with its frames in order.
+    write(&seq, "f_0002.obj", &format!("{QUAD}f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"));
+    write(&seq, "f_0003.obj", &format!("{}f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n", QUAD.replace("v 1 1 0", "v 1 1.5 0")));
+    let options = skinpatch::surface::ReadOptions {
+        mm_per_unit: Some(10.0),
+        frame_rate_hz: 12.0,
+        ..Default::default()
+    };
+    let s = AnimatedSurface::read(&seq.join("f_%04d.obj"), &options).unwrap();
+    assert_eq!(s.num_frames(), 3);
+    assert_eq!(s.frames[2][2], Vec3::new(10.0, 15.0, 0.0));
+    assert!((s.time(2) - 1.0 / 6.0).abs() < 1e-15);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A glTF with one triangle, `targets` morph targets and a weight
+/// animation with `values` outputs over two keyframes, buffers embedded as
+/// a data URI; `uv` says whether it has TEXCOORD_0.
+fn tiny_gltf(targets: usize, values: usize, uv: bool, x0: f32) -> String {
+    use base64::Engine;
+    let mut bin: Vec<u8> = Vec::new();
+    let mut f32s = |v: &[f32]| {
+        let offset = bin.len();
+        for x in v {
+            bin.extend(x.to_le_bytes());
+        }
+        (offset, v.len() * 4)
+    };
+    let pos = f32s(&[x0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
+    let tex = f32s(&[0.0, 1.0, 1.0, 1.0, 0.0, 0.0]);
+    let delta = f32s(&[0.0, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    let times = f32s(&[0.0, 1.0]);
+    let weights: Vec<f32> = (0..values).map(|i| (i % 2) as f32).collect();
+    let out = f32s(&weights);
+    let uri = format!(
+        "data:application/octet-stream;base64,{}",
+        base64::engine::general_purpose::STANDARD.encode(&bin)
+    );
+    let view = |(o, l): (usize, usize)| format!("{{\"buffer\":0,\"byteOffset\":{o},\"byteLength\":{l}}}");
+    let views = [pos, tex, delta, times, out].map(view).join(",");
+    let targets_json = vec!["{\"POSITION\":2}"; targets].join(",");
+    let attributes = if uv { "\"POSITION\":0,\"TEXCOORD_0\":1" } else { "\"POSITION\":0" };
+    format!(
+        r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0]}}],
+"nodes":[{{"name":"Face","mesh":0}}],
+"meshes":[{{"name":"FaceMesh","primitives":[{{"attributes":{{{attributes}}},"targets":[{targets_json}]}}]}}],
+"animations":[{{"name":"smile","samplers":[{{"input":3,"output":4,"interpolation":"LINEAR"}}],"channels":[{{"sampler":0,"target":{{"node":0,"path":"weights"}}}}]}}],
+"buffers":[{{"byteLength":{len},"uri":"{uri}"}}],
+"bufferViews":[{views}],
+"accessors":[
+{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}},
+{{"bufferView":1,"componentType":5126,"count":3,"type":"VEC2"}},
+{{"bufferView":2,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[0.5,0,0]}},
+{{"bufferView":3,"componentType":5126,"count":2,"type":"SCALAR","min":[0],"max":[1]}},
+{{"bufferView":4,"componentType":5126,"count":{values},"type":"SCALAR"}}]}}"#,
+        len = bin.len()
+    )
+}
+
+#[test]
+fn gltf_input_is_read_and_bad_gltf_is_named() {
+    let dir = temp("gltf");
+    // One target, linear weights 0 → 1 over 1 s, sampled at 4 Hz: 5 frames,
+    // vertex 1 moving 0.5 m along x (500 mm) in steps of 125 mm.
+    let path = write(&dir, "good.gltf", &tiny_gltf(1, 2, true, 0.0));
+    let options = skinpatch::surface::ReadOptions {
+        frame_rate_hz: 4.0,
+        ..Default::default()
+    };
+    let s = AnimatedSurface::read(&path, &options).unwrap();
+    assert_eq!(s.num_frames(), 5);
+    for f in 0..5 {
+        assert!((s.frames[f][1].x - (1000.0 + 125.0 * f as f64)).abs() < 1e-9, "{f}");
+    }
+    // glTF's v runs down: v = 1 − v_glTF.
+    assert_eq!(s.top.uvs[0], [0.0, 0.0]);
+    // The uniaxial stretch of the last frame: r_s = 1.5.
+    let field = SurfaceField::new(&s.top, &s.positions, &s.frames[4]);
+    assert!((field.triangles[0].t.determinant() - 1.5).abs() < 1e-12);
+
+    let e = read_error(&write(&dir, "nouv.gltf", &tiny_gltf(1, 2, false, 0.0)), None);
+    assert!(e.contains("nouv.gltf") && e.contains("FaceMesh") && e.contains("TEXCOORD_0"), "{e}");
+    let e = read_error(&write(&dir, "count.gltf", &tiny_gltf(1, 3, true, 0.0)), None);
+    assert!(e.contains("count.gltf") && e.contains("morph target count mismatch"), "{e}");
+    let e = read_error(&write(&dir, "nan.gltf", &tiny_gltf(1, 2, true, f32::NAN)), None);
+    assert!(e.contains("nan.gltf") && e.contains("primitive 0 vertex 0") && e.contains("non-finite"), "{e}");
+    let e = read_error(&write(&dir, "broken.gltf", "{\"asset\": "), None);
+    assert!(e.contains("broken.gltf") && e.contains("glTF"), "{e}");
+    let options = skinpatch::surface::ReadOptions {
+        node: Some("Nose".into()),
+        ..Default::default()
+    };
+    let e = AnimatedSurface::read(&path, &options).unwrap_err().to_string();
+    assert!(e.contains("'Nose'") && e.contains("'Face'"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn surface_scenarios_refuse_fem_sections_and_bad_keys() {
+    let dir = temp("scenario");
+    let obj = write(&dir, "quad.obj", &format!("{QUAD}f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"));
+    let load = |extra: &str| {
+        let path = write(
+            &dir,
+            "s.toml",
+            &format!("[surface]\nfile = \"{}\"\n{extra}", obj.display()),
+        );
+        SurfaceSetup::load(&path).map(|_| ()).map_err(|e| e.to_string())
+    };
+    load("units = \"mm\"\n").unwrap();
+    let e = load("").unwrap_err();
+    assert!(e.contains("surface.units"), "{e}");
+    let e = load("units = \"mm\"\n[probe]\nshape = \"sphere\"\nradius_mm = 1.0\npath_mm = [[0.0, 0.0, 0.0, 1.0]]\n").unwrap_err();
+    assert!(e.contains("probe") && e.contains("[surface]"), "{e}");
+    let e = load("units = \"mm\"\nuv_layout = \"tiles\"\n").unwrap_err();
+    assert!(e.contains("surface.uv_layout"), "{e}");
+    let e = load("units = \"mm\"\nframe_rate_hz = -3\n").unwrap_err();
+    assert!(e.contains("surface.frame_rate_hz"), "{e}");
+    let e = load("units = \"furlong\"\n").unwrap_err();
+    assert!(e.contains("units"), "{e}");
+    let e = load("units = \"mm\"\nnod = \"x\"\n").unwrap_err();
+    assert!(e.contains("surface.nod") && e.contains("node"), "{e}");
+    let e = load("units = \"mm\"\nnode = \"x\"\n").unwrap_err();
+    assert!(e.contains("surface.node") && e.contains("glTF"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}
