@@ -499,3 +499,89 @@ fn surface_scenarios_refuse_fem_sections_and_bad_keys() {
     assert!(e.contains("surface.node") && e.contains("glTF"), "{e}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `examples/surfaces/forehead.glb`: a 12 × 10 mm forehead patch (curved
+/// with radii 60 and 90 mm) with two shape keys — `brow_raise` (the lower
+/// forehead pushed up, compressing it vertically by up to 24%) and `frown`
+/// (skin between the brows pulled towards the centre line, compressed
+/// there and stretched beside it) — animated over 2 s.
+fn forehead() -> (AnimatedSurface, skinpatch::surface::gltf::MorphAnimation) {
+    let (nx, ny) = (48usize, 40usize);
+    let (mut rest, mut uvs, mut triangles) = (Vec::new(), Vec::new(), Vec::new());
+    for j in 0..=ny {
+        for i in 0..=nx {
+            let (x, y) = (-6.0 + 12.0 * i as f64 / nx as f64, -5.0 + 10.0 * j as f64 / ny as f64);
+            rest.push(Vec3::new(x, y, -x * x / 120.0 - y * y / 180.0));
+            uvs.push([(x + 6.0) / 12.0, (y + 6.0) / 12.0]);
+        }
+    }
+    for j in 0..ny {
+        for i in 0..nx {
+            let v = |di: usize, dj: usize| (j + dj) * (nx + 1) + i + di;
+            triangles.push([v(0, 0), v(1, 0), v(1, 1)]);
+            triangles.push([v(0, 0), v(1, 1), v(0, 1)]);
+        }
+    }
+    let brow: Vec<Vec3> = rest
+        .iter()
+        .map(|p| {
+            let b = ((5.0 - p.y) / 10.0).powi(2) * (-(p.x / 8.0).powi(2)).exp();
+            Vec3::new(0.0, 1.2 * b, 0.1 * b)
+        })
+        .collect();
+    let frown: Vec<Vec3> = rest
+        .iter()
+        .map(|p| {
+            let h = (-((p.y + 2.0) / 3.0).powi(2)).exp();
+            Vec3::new(-0.8 / 6.0 * p.x * (-(p.x * p.x) / 9.0).exp() * h, 0.0, 0.0)
+        })
+        .collect();
+    let surface = AnimatedSurface::from_vertices("forehead", rest.clone(), uvs, triangles, vec![rest], 12.0).unwrap();
+    let animation = skinpatch::surface::gltf::MorphAnimation {
+        names: vec!["brow_raise".into(), "frown".into()],
+        targets: vec![brow, frown],
+        times_s: vec![0.0, 0.5, 1.0, 1.5, 2.0],
+        weights: vec![vec![0.0, 0.0], vec![1.0, 0.0], vec![1.0, 0.8], vec![0.0, 0.8], vec![0.0, 0.0]],
+        linear: true,
+    };
+    (surface, animation)
+}
+
+/// The shipped example surface is what `forehead()` writes
+/// (`SKINPATCH_REGENERATE=1` rewrites it), and reads back as 25 frames at
+/// 12 Hz with the keyed shapes at the keyframes.
+#[test]
+fn shipped_forehead_example_is_the_generated_one() {
+    let (surface, animation) = forehead();
+    let shipped = common::root().join("examples/surfaces/forehead.glb");
+    let dir = temp("forehead");
+    let fresh = dir.join("forehead.glb");
+    skinpatch::surface::gltf::write_glb_animation(&fresh, &surface, &animation).unwrap();
+    if std::env::var("SKINPATCH_REGENERATE").as_deref() == Ok("1") {
+        std::fs::copy(&fresh, &shipped).unwrap();
+    }
+    assert_eq!(
+        std::fs::read(&fresh).unwrap(),
+        std::fs::read(&shipped).unwrap(),
+        "examples/surfaces/forehead.glb is stale: rerun this test with SKINPATCH_REGENERATE=1"
+    );
+    let options = skinpatch::surface::ReadOptions {
+        frame_rate_hz: 12.0,
+        ..Default::default()
+    };
+    let s = AnimatedSurface::read(&shipped, &options).unwrap();
+    assert_eq!(s.num_frames(), 25);
+    // Frame 12 (t = 1 s) is brow_raise + 0.8 frown, within f32 storage.
+    let worst = (0..s.positions.len())
+        .map(|v| {
+            let want = surface.positions[v] + animation.targets[0][v] + animation.targets[1][v] * 0.8;
+            (s.frames[12][v] - want).norm()
+        })
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-5, "{worst} mm");
+    let field = SurfaceField::new(&s.top, &s.positions, &s.frames[12]);
+    let ((_, rs_max), (rt_min, _), folded) = field.extremes();
+    eprintln!("forehead at 1 s: r_s up to {rs_max:.3}, r_t down to {rt_min:.3}");
+    assert!(rt_min < 0.8 && rs_max > 1.02 && folded == 0);
+    std::fs::remove_dir_all(&dir).ok();
+}

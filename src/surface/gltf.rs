@@ -493,8 +493,47 @@ fn sample(
 /// per frame and a step animation showing frame `k` at `k / rate` seconds.
 /// Vertices are the surface vertices (split at UV seams, as glTF needs).
 pub fn write_glb(path: &Path, surface: &AnimatedSurface) -> Result<()> {
+    let n = surface.frames.len();
+    let animation = MorphAnimation {
+        names: (0..n).map(|k| format!("frame_{k:04}")).collect(),
+        targets: surface
+            .frames
+            .iter()
+            .map(|x| x.iter().zip(&surface.positions).map(|(a, b)| a - b).collect())
+            .collect(),
+        times_s: (0..n).map(|k| surface.time(k)).collect(),
+        weights: (0..n)
+            .map(|k| (0..n).map(|t| if t == k { 1.0 } else { 0.0 }).collect())
+            .collect(),
+        linear: false,
+    };
+    write_glb_animation(path, surface, &animation)
+}
+
+/// Named morph targets and an animation of their weights.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MorphAnimation {
+    /// Target names (glTF `extras.targetNames`, Blender's shape key names).
+    pub names: Vec<String>,
+    /// Per target, the displacement of every position (mm).
+    pub targets: Vec<Vec<Vec3>>,
+    /// Keyframe times (s), increasing.
+    pub times_s: Vec<f64>,
+    /// Per keyframe, the weight of every target.
+    pub weights: Vec<Vec<f64>>,
+    /// Linear interpolation between keyframes (else step).
+    pub linear: bool,
+}
+
+/// Writes the rest of `surface` (its positions and UV layout; its frames are
+/// not used) with the morph targets and weight animation of `animation` as
+/// a binary glTF, positions in metres.
+pub fn write_glb_animation(
+    path: &Path,
+    surface: &AnimatedSurface,
+    animation: &MorphAnimation,
+) -> Result<()> {
     let top = &surface.top;
-    let n = top.vertices.len();
     // Positions relative to the centre of the bounds (the node's
     // translation), so f32 keeps more of them; displacements from the f64
     // difference, so a frame's strain loses only the rounding of the rest.
@@ -544,19 +583,21 @@ pub fn write_glb(path: &Path, surface: &AnimatedSurface) -> Result<()> {
         .collect();
     let texcoord = push(&uvs, "VEC2", 2, false);
     let mut targets = Vec::new();
-    for frame in &surface.frames {
+    for displacement in &animation.targets {
         let delta: Vec<f32> = top
             .vertices
             .iter()
-            .flat_map(|&v| metres(&(frame[v] - surface.positions[v])))
+            .flat_map(|&v| metres(&displacement[v]))
             .collect();
         targets.push(serde_json::json!({ "POSITION": push(&delta, "VEC3", 3, true) }));
     }
-    let frames = surface.frames.len();
-    let times: Vec<f32> = (0..frames).map(|k| surface.time(k) as f32).collect();
+    let n_targets = animation.targets.len();
+    let times: Vec<f32> = animation.times_s.iter().map(|&t| t as f32).collect();
     let input = push(&times, "SCALAR", 1, true);
-    let weights: Vec<f32> = (0..frames * frames)
-        .map(|i| if i / frames == i % frames { 1.0 } else { 0.0 })
+    let weights: Vec<f32> = animation
+        .weights
+        .iter()
+        .flat_map(|w| w.iter().map(|&x| x as f32))
         .collect();
     let output = push(&weights, "SCALAR", 1, false);
     // Indices (u32), after the floats so every view stays 4-byte aligned.
@@ -592,19 +633,21 @@ pub fn write_glb(path: &Path, surface: &AnimatedSurface) -> Result<()> {
                 "mode": 4,
                 "targets": targets
             }],
-            "weights": vec![0.0; frames],
-            "extras": { "targetNames": (0..frames).map(|k| format!("frame_{k:04}")).collect::<Vec<_>>() }
+            "weights": vec![0.0; n_targets],
+            "extras": { "targetNames": animation.names }
         }],
         "animations": [{
-            "name": "frames",
-            "samplers": [{ "input": input, "output": output, "interpolation": "STEP" }],
+            "name": "animation",
+            "samplers": [{
+                "input": input, "output": output,
+                "interpolation": if animation.linear { "LINEAR" } else { "STEP" }
+            }],
             "channels": [{ "sampler": 0, "target": { "node": 0, "path": "weights" } }]
         }],
         "buffers": [{ "byteLength": bin.len() }],
         "bufferViews": views,
         "accessors": accessors
     });
-    debug_assert_eq!(n * 2 * 4, uvs.len() * 4);
     let mut text = serde_json::to_vec(&json).map_err(|e| Error::malformed(path, e.to_string()))?;
     while text.len() % 4 != 0 {
         text.push(b' ');
