@@ -578,7 +578,12 @@ fn run_surface(
         s.area()
     );
     if setup.pieces.iter().any(|p| p.udim.is_some()) {
-        let tiles: Vec<String> = setup.pieces.iter().filter_map(|p| p.udim).map(|u| u.to_string()).collect();
+        let tiles: Vec<String> = setup
+            .pieces
+            .iter()
+            .filter_map(|p| p.udim)
+            .map(|u| u.to_string())
+            .collect();
         report += &format!("  UDIM tiles {}\n", tiles.join(", "));
     }
     if let Some(device) = &summary.micro_device {

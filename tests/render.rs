@@ -748,10 +748,11 @@ fn an_interrupted_run_leaves_only_complete_frames() {
 }
 
 /// Every shipped example validates (meshes loaded or generated, render
-/// settings checked; a synthesis file's parameters, inputs and outputs).
+/// settings checked; a synthesis file's parameters, inputs and outputs; an
+/// animated surface read).
 #[test]
 fn every_example_validates() {
-    let (mut count, mut synth) = (0, 0);
+    let (mut count, mut synth, mut surfaces) = (0, 0, 0);
     for entry in std::fs::read_dir(root().join("examples")).unwrap() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "toml") {
@@ -768,6 +769,12 @@ fn every_example_validates() {
                 synth += 1;
                 continue;
             }
+            if text.lines().any(|l| l.trim() == "[surface]") {
+                skinpatch::scenario::SurfaceSetup::load(&path)
+                    .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+                surfaces += 1;
+                continue;
+            }
             skinpatch::scenario::Setup::load(&path)
                 .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
             count += 1;
@@ -775,6 +782,7 @@ fn every_example_validates() {
     }
     assert!(count >= 6, "{count} examples");
     assert!(synth >= 1, "{synth} synthesis examples");
+    assert!(surfaces >= 1, "{surfaces} animated-surface examples");
 }
 
 /// `render.mp4 = true` without ffmpeg stops before any work with a message

@@ -11,7 +11,7 @@ use skinpatch::mesh::Vec3;
 use skinpatch::micro::io::{MapDefaults, TexelSize};
 use skinpatch::micro::map::Edge;
 use skinpatch::scenario::{Setup, SurfaceSetup};
-use skinpatch::strain::{StrainRaster, Svd2, SurfaceField};
+use skinpatch::strain::{StrainRaster, SurfaceField, Svd2};
 use skinpatch::surface::{AnimatedSurface, UvLayout};
 
 fn read_map(path: &Path) -> skinpatch::micro::DisplacementMap {
@@ -91,7 +91,10 @@ fn fem_top_surface_round_trips_through_gltf_and_obj() {
         hi = hi.max(rs.max(*rt));
     }
     let range = hi - lo;
-    assert!(range > 0.05, "the press strains the skin: r in [{lo}, {hi}]");
+    assert!(
+        range > 0.05,
+        "the press strains the skin: r in [{lo}, {hi}]"
+    );
     let neutral = read_map(&dir.join("fem/micro/height_neutral.exr"));
     for (format, file, units) in [
         ("glb", "fem/surface.glb", ""),
@@ -153,7 +156,11 @@ fn cylinder(a: f64, shift_second: [f64; 2], shift_first: [f64; 2]) -> AnimatedSu
     let half = n_theta / 2;
     for chart in 0..2 {
         let base = rest.len();
-        let thetas: Vec<usize> = if chart == 0 { (0..=half).collect() } else { (half..=n_theta).collect() };
+        let thetas: Vec<usize> = if chart == 0 {
+            (0..=half).collect()
+        } else {
+            (half..=n_theta).collect()
+        };
         for j in 0..=n_z {
             for &i in &thetas {
                 let theta = theta_max * i as f64 / n_theta as f64;
@@ -162,9 +169,15 @@ fn cylinder(a: f64, shift_second: [f64; 2], shift_first: [f64; 2]) -> AnimatedSu
                 let t = (i - thetas[0]) as f64 / half as f64;
                 let s = j as f64 / n_z as f64;
                 uvs.push(if chart == 0 {
-                    [0.05 + 0.4 * t + shift_first[0], 0.05 + 0.9 * s + shift_first[1]]
+                    [
+                        0.05 + 0.4 * t + shift_first[0],
+                        0.05 + 0.9 * s + shift_first[1],
+                    ]
                 } else {
-                    [0.55 + 0.4 * s + shift_second[0], 0.05 + 0.9 * t + shift_second[1]]
+                    [
+                        0.55 + 0.4 * s + shift_second[0],
+                        0.05 + 0.9 * t + shift_second[1],
+                    ]
                 });
             }
         }
@@ -179,8 +192,15 @@ fn cylinder(a: f64, shift_second: [f64; 2], shift_first: [f64; 2]) -> AnimatedSu
     }
     let stretched: Vec<Vec3> = rest.iter().map(|p| Vec3::new(p.x, p.y, a * p.z)).collect();
     let turned = stretched.iter().map(|p| rotation * p).collect();
-    AnimatedSurface::from_vertices("cylinder", rest.clone(), uvs, triangles, vec![rest, stretched, turned], 24.0)
-        .unwrap()
+    AnimatedSurface::from_vertices(
+        "cylinder",
+        rest.clone(),
+        uvs,
+        triangles,
+        vec![rest, stretched, turned],
+        24.0,
+    )
+    .unwrap()
 }
 
 #[test]
@@ -195,14 +215,22 @@ fn cylinder_stretched_along_its_axis_is_exact_across_seams_and_mirrored_charts()
     for (f, x) in s.frames.iter().enumerate().skip(1) {
         let field = SurfaceField::new(&s.top, &s.positions, x);
         assert_eq!(field.degenerate_triangles, 0);
-        let axis = if f == 1 { Vec3::z() } else { rotation * Vec3::z() };
+        let axis = if f == 1 {
+            Vec3::z()
+        } else {
+            rotation * Vec3::z()
+        };
         for (k, v) in field.vertices.iter().enumerate() {
             let st = v.strain();
             worst = worst.max((st.rs() - a).abs()).max((st.rt() - 1.0).abs());
             // The s axis: v in the first chart, u in the swapped one.
             let first_chart = k < 11 * 7;
             let s_uv = st.s_uv();
-            let along = if first_chart { s_uv.y.abs() } else { s_uv.x.abs() };
+            let along = if first_chart {
+                s_uv.y.abs()
+            } else {
+                s_uv.x.abs()
+            };
             worst = worst.max((along - 1.0).abs());
             let deformed = v.deformed_axes()[0];
             worst = worst.max((deformed.dot(&axis).abs() - 1.0).abs());
@@ -223,7 +251,10 @@ fn cylinder_stretched_along_its_axis_is_exact_across_seams_and_mirrored_charts()
         let t2 = nalgebra::Matrix2::new(a, 0.0, 0.0, 1.0);
         Svd2::of(&((t1 + t2) * 0.5))
     };
-    assert!((mixed.rs - a).abs() > 0.05, "the test can tell mixed charts apart");
+    assert!(
+        (mixed.rs - a).abs() > 0.05,
+        "the test can tell mixed charts apart"
+    );
 }
 
 #[test]
@@ -232,10 +263,17 @@ fn sphere_cap_scaled_tangentially_with_a_mirrored_half() {
     let (mut rest, mut uvs, mut triangles) = (Vec::new(), Vec::new(), Vec::new());
     for half in 0..2 {
         let base = rest.len();
-        let cols: Vec<usize> = if half == 0 { (0..=n / 2).collect() } else { (n / 2..=n).collect() };
+        let cols: Vec<usize> = if half == 0 {
+            (0..=n / 2).collect()
+        } else {
+            (n / 2..=n).collect()
+        };
         for j in 0..=n {
             for &i in &cols {
-                let (u, v) = (0.1 + 0.8 * i as f64 / n as f64, 0.1 + 0.8 * j as f64 / n as f64);
+                let (u, v) = (
+                    0.1 + 0.8 * i as f64 / n as f64,
+                    0.1 + 0.8 * j as f64 / n as f64,
+                );
                 let (x, y) = ((u - 0.5) * 6.0, (v - 0.5) * 6.0);
                 rest.push(Vec3::new(x, y, (rho * rho - x * x - y * y).sqrt()));
                 // The second half mirrored in u.
@@ -252,7 +290,8 @@ fn sphere_cap_scaled_tangentially_with_a_mirrored_half() {
         }
     }
     let scaled = rest.iter().map(|p| p * k).collect();
-    let s = AnimatedSurface::from_vertices("cap", rest.clone(), uvs, triangles, vec![scaled], 30.0).unwrap();
+    let s = AnimatedSurface::from_vertices("cap", rest.clone(), uvs, triangles, vec![scaled], 30.0)
+        .unwrap();
     let field = SurfaceField::new(&s.top, &s.positions, &s.frames[0]);
     let mut worst: f64 = 0.0;
     for v in &field.vertices {
@@ -273,12 +312,20 @@ fn udim_tiles_and_wrapped_uvs_raster_each_chart() {
     let s = cylinder(a, [1.0, 0.0], [0.0, 0.0]);
     assert!(s.pieces(UvLayout::Unit).is_err());
     let pieces = s.pieces(UvLayout::Udim).unwrap();
-    assert_eq!(pieces.iter().map(|p| p.udim).collect::<Vec<_>>(), vec![Some(1001), Some(1002)]);
+    assert_eq!(
+        pieces.iter().map(|p| p.udim).collect::<Vec<_>>(),
+        vec![Some(1001), Some(1002)]
+    );
     let field = SurfaceField::new(&s.top, &s.positions, &s.frames[1]);
     for piece in &pieces {
         let view = field.view(&piece.triangles);
         let texels: Vec<(f64, f64)> = raster_stretch(&view, 64).into_iter().flatten().collect();
-        assert!(texels.len() > 64 * 64 / 4, "tile {:?}: {} texels", piece.udim, texels.len());
+        assert!(
+            texels.len() > 64 * 64 / 4,
+            "tile {:?}: {} texels",
+            piece.udim,
+            texels.len()
+        );
         for (rs, rt) in texels {
             assert!((rs - a).abs() < 1e-12 && (rt - 1.0).abs() < 1e-12);
         }
@@ -295,7 +342,10 @@ fn udim_tiles_and_wrapped_uvs_raster_each_chart() {
         let (rs, rt) = at(u, v).unwrap_or_else(|| panic!("({u}, {v}) is covered"));
         assert!((rs - a).abs() < 1e-12 && (rt - 1.0).abs() < 1e-12);
     }
-    assert!(at(0.3, 0.5).is_none(), "between the charts nothing is drawn");
+    assert!(
+        at(0.3, 0.5).is_none(),
+        "between the charts nothing is drawn"
+    );
 }
 
 /// The GPU chain on a surface with seams and a mirrored chart equals the
@@ -324,7 +374,10 @@ fn gpu_chain_on_seamed_mirrored_surface_matches_cpu() {
     let d = cpu.max_difference(&gpu.map);
     eprintln!("seamed cylinder: GPU − CPU ≤ {d:.2e} of the height range");
     assert!(d < 1e-4, "{d:e}");
-    assert!(neutral.max_difference(&cpu) > 0.02, "the surface is deformed");
+    assert!(
+        neutral.max_difference(&cpu) > 0.02,
+        "the surface is deformed"
+    );
 }
 
 fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
@@ -338,7 +391,9 @@ fn read_error(path: &Path, units: Option<f64>) -> String {
         mm_per_unit: units,
         ..Default::default()
     };
-    AnimatedSurface::read(path, &options).unwrap_err().to_string()
+    AnimatedSurface::read(path, &options)
+        .unwrap_err()
+        .to_string()
 }
 
 const QUAD: &str = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n";
@@ -347,35 +402,79 @@ const QUAD: &str = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\n
 fn bad_obj_input_names_file_and_element() {
     let dir = temp("badobj");
     // Missing UVs.
-    let path = write(&dir, "nouv.obj", "o Face\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    let path = write(
+        &dir,
+        "nouv.obj",
+        "o Face\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    );
     let e = read_error(&path, Some(1.0));
-    assert!(e.contains("nouv.obj") && e.contains("'Face'") && e.contains("texture"), "{e}");
+    assert!(
+        e.contains("nouv.obj") && e.contains("'Face'") && e.contains("texture"),
+        "{e}"
+    );
     // No unit for an OBJ.
     let e = read_error(&path, None);
     assert!(e.contains("surface.units"), "{e}");
     // NaN position.
-    let path = write(&dir, "nan.obj", &format!("{QUAD}v nan 0 0\nvt 0.5 0.5\nf 1/1 2/2 3/3\nf 1/1 3/3 5/5\n"));
+    let path = write(
+        &dir,
+        "nan.obj",
+        &format!("{QUAD}v nan 0 0\nvt 0.5 0.5\nf 1/1 2/2 3/3\nf 1/1 3/3 5/5\n"),
+    );
     let e = read_error(&path, Some(1.0));
-    assert!(e.contains("nan.obj") && e.contains("non-finite position"), "{e}");
+    assert!(
+        e.contains("nan.obj") && e.contains("non-finite position"),
+        "{e}"
+    );
     // Unparsable number: the line is named.
-    let path = write(&dir, "syntax.obj", "v 0 0 0\nv 1 x 0\nv 0 1 0\nvt 0 0\nf 1/1 2/1 3/1\n");
+    let path = write(
+        &dir,
+        "syntax.obj",
+        "v 0 0 0\nv 1 x 0\nv 0 1 0\nvt 0 0\nf 1/1 2/1 3/1\n",
+    );
     let e = read_error(&path, Some(1.0));
     assert!(e.contains("syntax.obj:2"), "{e}");
     // Topology change between frames.
     let seq = dir.join("seq");
     std::fs::create_dir_all(&seq).unwrap();
-    write(&seq, "f_0001.obj", &format!("{QUAD}f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"));
-    write(&seq, "f_0002.obj", &format!("{QUAD}f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"));
-    write(&seq, "f_0003.obj", &format!("{QUAD}f 1/1 2/2 4/4\nf 2/2 3/3 4/4\n"));
+    write(
+        &seq,
+        "f_0001.obj",
+        &format!("{QUAD}f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"),
+    );
+    write(
+        &seq,
+        "f_0002.obj",
+        &format!("{QUAD}f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"),
+    );
+    write(
+        &seq,
+        "f_0003.obj",
+        &format!("{QUAD}f 1/1 2/2 4/4\nf 2/2 3/3 4/4\n"),
+    );
     let e = read_error(&seq.join("f_%04d.obj"), Some(1.0));
-    assert!(e.contains("f_0003.obj") && e.contains("triangle 1") && e.contains("topology"), "{e}");
+    assert!(
+        e.contains("f_0003.obj") && e.contains("triangle 1") && e.contains("topology"),
+        "{e}"
+    );
     // A gap in the sequence.
     std::fs::remove_file(seq.join("f_0002.obj")).unwrap();
     let e = read_error(&seq.join("f_%04d.obj"), Some(1.0));
     assert!(e.contains("f_0002.obj"), "{e}");
     // A good sequence reads, with its frames in order.
-    write(&seq, "f_0002.obj", &format!("{QUAD}f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"));
-    write(&seq, "f_0003.obj", &format!("{}f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n", QUAD.replace("v 1 1 0", "v 1 1.5 0")));
+    write(
+        &seq,
+        "f_0002.obj",
+        &format!("{QUAD}f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"),
+    );
+    write(
+        &seq,
+        "f_0003.obj",
+        &format!(
+            "{}f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n",
+            QUAD.replace("v 1 1 0", "v 1 1.5 0")
+        ),
+    );
     let options = skinpatch::surface::ReadOptions {
         mm_per_unit: Some(10.0),
         frame_rate_hz: 12.0,
@@ -411,10 +510,15 @@ fn tiny_gltf(targets: usize, values: usize, uv: bool, x0: f32) -> String {
         "data:application/octet-stream;base64,{}",
         base64::engine::general_purpose::STANDARD.encode(&bin)
     );
-    let view = |(o, l): (usize, usize)| format!("{{\"buffer\":0,\"byteOffset\":{o},\"byteLength\":{l}}}");
+    let view =
+        |(o, l): (usize, usize)| format!("{{\"buffer\":0,\"byteOffset\":{o},\"byteLength\":{l}}}");
     let views = [pos, tex, delta, times, out].map(view).join(",");
     let targets_json = vec!["{\"POSITION\":2}"; targets].join(",");
-    let attributes = if uv { "\"POSITION\":0,\"TEXCOORD_0\":1" } else { "\"POSITION\":0" };
+    let attributes = if uv {
+        "\"POSITION\":0,\"TEXCOORD_0\":1"
+    } else {
+        "\"POSITION\":0"
+    };
     format!(
         r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0]}}],
 "nodes":[{{"name":"Face","mesh":0}}],
@@ -445,7 +549,10 @@ fn gltf_input_is_read_and_bad_gltf_is_named() {
     let s = AnimatedSurface::read(&path, &options).unwrap();
     assert_eq!(s.num_frames(), 5);
     for f in 0..5 {
-        assert!((s.frames[f][1].x - (1000.0 + 125.0 * f as f64)).abs() < 1e-9, "{f}");
+        assert!(
+            (s.frames[f][1].x - (1000.0 + 125.0 * f as f64)).abs() < 1e-9,
+            "{f}"
+        );
     }
     // glTF's v runs down: v = 1 − v_glTF.
     assert_eq!(s.top.uvs[0], [0.0, 0.0]);
@@ -453,19 +560,39 @@ fn gltf_input_is_read_and_bad_gltf_is_named() {
     let field = SurfaceField::new(&s.top, &s.positions, &s.frames[4]);
     assert!((field.triangles[0].t.determinant() - 1.5).abs() < 1e-12);
 
-    let e = read_error(&write(&dir, "nouv.gltf", &tiny_gltf(1, 2, false, 0.0)), None);
-    assert!(e.contains("nouv.gltf") && e.contains("FaceMesh") && e.contains("TEXCOORD_0"), "{e}");
-    let e = read_error(&write(&dir, "count.gltf", &tiny_gltf(1, 3, true, 0.0)), None);
-    assert!(e.contains("count.gltf") && e.contains("morph target count mismatch"), "{e}");
-    let e = read_error(&write(&dir, "nan.gltf", &tiny_gltf(1, 2, true, f32::NAN)), None);
-    assert!(e.contains("nan.gltf") && e.contains("primitive 0 vertex 0") && e.contains("non-finite"), "{e}");
+    let e = read_error(
+        &write(&dir, "nouv.gltf", &tiny_gltf(1, 2, false, 0.0)),
+        None,
+    );
+    assert!(
+        e.contains("nouv.gltf") && e.contains("FaceMesh") && e.contains("TEXCOORD_0"),
+        "{e}"
+    );
+    let e = read_error(
+        &write(&dir, "count.gltf", &tiny_gltf(1, 3, true, 0.0)),
+        None,
+    );
+    assert!(
+        e.contains("count.gltf") && e.contains("morph target count mismatch"),
+        "{e}"
+    );
+    let e = read_error(
+        &write(&dir, "nan.gltf", &tiny_gltf(1, 2, true, f32::NAN)),
+        None,
+    );
+    assert!(
+        e.contains("nan.gltf") && e.contains("primitive 0 vertex 0") && e.contains("non-finite"),
+        "{e}"
+    );
     let e = read_error(&write(&dir, "broken.gltf", "{\"asset\": "), None);
     assert!(e.contains("broken.gltf") && e.contains("glTF"), "{e}");
     let options = skinpatch::surface::ReadOptions {
         node: Some("Nose".into()),
         ..Default::default()
     };
-    let e = AnimatedSurface::read(&path, &options).unwrap_err().to_string();
+    let e = AnimatedSurface::read(&path, &options)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("'Nose'") && e.contains("'Face'"), "{e}");
     std::fs::remove_dir_all(&dir).ok();
 }
@@ -473,14 +600,20 @@ fn gltf_input_is_read_and_bad_gltf_is_named() {
 #[test]
 fn surface_scenarios_refuse_fem_sections_and_bad_keys() {
     let dir = temp("scenario");
-    let obj = write(&dir, "quad.obj", &format!("{QUAD}f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"));
+    let obj = write(
+        &dir,
+        "quad.obj",
+        &format!("{QUAD}f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"),
+    );
     let load = |extra: &str| {
         let path = write(
             &dir,
             "s.toml",
             &format!("[surface]\nfile = \"{}\"\n{extra}", obj.display()),
         );
-        SurfaceSetup::load(&path).map(|_| ()).map_err(|e| e.to_string())
+        SurfaceSetup::load(&path)
+            .map(|_| ())
+            .map_err(|e| e.to_string())
     };
     load("units = \"mm\"\n").unwrap();
     let e = load("").unwrap_err();
@@ -510,7 +643,10 @@ fn forehead() -> (AnimatedSurface, skinpatch::surface::gltf::MorphAnimation) {
     let (mut rest, mut uvs, mut triangles) = (Vec::new(), Vec::new(), Vec::new());
     for j in 0..=ny {
         for i in 0..=nx {
-            let (x, y) = (-6.0 + 12.0 * i as f64 / nx as f64, -5.0 + 10.0 * j as f64 / ny as f64);
+            let (x, y) = (
+                -6.0 + 12.0 * i as f64 / nx as f64,
+                -5.0 + 10.0 * j as f64 / ny as f64,
+            );
             rest.push(Vec3::new(x, y, -x * x / 120.0 - y * y / 180.0));
             uvs.push([(x + 6.0) / 12.0, (y + 6.0) / 12.0]);
         }
@@ -536,12 +672,20 @@ fn forehead() -> (AnimatedSurface, skinpatch::surface::gltf::MorphAnimation) {
             Vec3::new(-0.8 / 6.0 * p.x * (-(p.x * p.x) / 9.0).exp() * h, 0.0, 0.0)
         })
         .collect();
-    let surface = AnimatedSurface::from_vertices("forehead", rest.clone(), uvs, triangles, vec![rest], 12.0).unwrap();
+    let surface =
+        AnimatedSurface::from_vertices("forehead", rest.clone(), uvs, triangles, vec![rest], 12.0)
+            .unwrap();
     let animation = skinpatch::surface::gltf::MorphAnimation {
         names: vec!["brow_raise".into(), "frown".into()],
         targets: vec![brow, frown],
         times_s: vec![0.0, 0.5, 1.0, 1.5, 2.0],
-        weights: vec![vec![0.0, 0.0], vec![1.0, 0.0], vec![1.0, 0.8], vec![0.0, 0.8], vec![0.0, 0.0]],
+        weights: vec![
+            vec![0.0, 0.0],
+            vec![1.0, 0.0],
+            vec![1.0, 0.8],
+            vec![0.0, 0.8],
+            vec![0.0, 0.0],
+        ],
         linear: true,
     };
     (surface, animation)
@@ -574,7 +718,8 @@ fn shipped_forehead_example_is_the_generated_one() {
     // Frame 12 (t = 1 s) is brow_raise + 0.8 frown, within f32 storage.
     let worst = (0..s.positions.len())
         .map(|v| {
-            let want = surface.positions[v] + animation.targets[0][v] + animation.targets[1][v] * 0.8;
+            let want =
+                surface.positions[v] + animation.targets[0][v] + animation.targets[1][v] * 0.8;
             (s.frames[12][v] - want).norm()
         })
         .fold(0.0, f64::max);
@@ -583,5 +728,124 @@ fn shipped_forehead_example_is_the_generated_one() {
     let ((_, rs_max), (rt_min, _), folded) = field.extremes();
     eprintln!("forehead at 1 s: r_s up to {rs_max:.3}, r_t down to {rt_min:.3}");
     assert!(rt_min < 0.8 && rs_max > 1.02 && folded == 0);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A UDIM surface run: strain maps and deformed maps per tile, tagged with
+/// the tile number; the VTU frames carry the stretch per surface vertex;
+/// a rerun replaces the tagged files.
+#[test]
+fn udim_surface_run_writes_maps_per_tile() {
+    let dir = temp("udimrun");
+    let s = cylinder(1.2, [1.0, 0.0], [0.0, 0.0]);
+    let seq = dir.join("seq");
+    std::fs::create_dir_all(&seq).unwrap();
+    for f in 0..s.num_frames() {
+        skinpatch::surface::obj::write_obj(&seq.join(format!("cyl_{f:03}.obj")), &s, Some(f))
+            .unwrap();
+    }
+    let toml = format!(
+        "[surface]\nfile = \"seq/cyl_%03d.obj\"\nunits = \"mm\"\nuv_layout = \"udim\"\nframe_rate_hz = 24.0\n\
+         [output]\ndir = \"{}\"\nstrain_images = true\nstrain_image_px = 64\n\
+         [microstructure]\nformats = [\"exr\"]\n[microstructure.procedural]\nsize_px = 512\n",
+        dir.join("out").display()
+    );
+    let path = write(&dir, "udim.toml", &toml);
+    let setup = SurfaceSetup::load(&path).unwrap();
+    assert_eq!(setup.pieces.len(), 2);
+    for _ in 0..2 {
+        let summary = skinpatch::pipeline::surface::run(&setup, |_| {}).unwrap();
+        assert_eq!(summary.frames.len(), 3);
+        let m = &summary.frames[1];
+        assert!(
+            (m.rs_range[0] - 1.2).abs() < 1e-12 && (m.rt_range[1] - 1.0).abs() < 1e-12,
+            "{m:?}"
+        );
+    }
+    let out = dir.join("out");
+    for tile in [1001, 1002] {
+        for f in 0..3 {
+            for file in [
+                format!("strain/rs_{tile}_{f:04}.png"),
+                format!("micro/height_{tile}_{f:04}.exr"),
+            ] {
+                assert!(out.join(&file).exists(), "{file}");
+            }
+        }
+        // Stretched along the axis: the deformed tile differs from the neutral map.
+        let neutral = read_map(&out.join("micro/height_neutral.exr"));
+        let deformed = read_map(&out.join(format!("micro/height_{tile}_0001.exr")));
+        let d = neutral.max_difference(&deformed);
+        eprintln!("tile {tile}: deformed − neutral up to {d:.3} of the height range");
+        assert!(d > 0.01, "tile {tile}");
+    }
+    let grid = skinpatch::mesh::io::read_vtu(&out.join("frames/frame_0001.vtu")).unwrap();
+    assert_eq!(grid.triangles.len(), s.top.triangles.len());
+    assert_eq!(grid.points.len(), s.top.vertices.len());
+    let stretch = grid
+        .point_data
+        .iter()
+        .find(|f| f.name == "surface_stretch")
+        .unwrap();
+    let skinpatch::mesh::io::Values::F64(values) = &stretch.values else {
+        panic!()
+    };
+    assert!(values
+        .chunks(2)
+        .all(|r| (r[0] - 1.2).abs() < 1e-9 && (r[1] - 1.0).abs() < 1e-9));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The example surface renders through the skin renderer: the deformed
+/// microstructure changes the dynamic frames, not the static ones' geometry.
+#[test]
+fn animated_gltf_surface_renders_with_dynamic_microstructure() {
+    if common::context().is_none() {
+        return;
+    }
+    let dir = temp("render");
+    let glb = common::root().join("examples/surfaces/forehead.glb");
+    let toml = format!(
+        "[surface]\nfile = \"{}\"\nframe_rate_hz = 2.0\n[output]\ndir = \"{}\"\nframes_vtu = false\n\
+         [microstructure]\nformats = []\n[microstructure.procedural]\nsize_px = 512\n\
+         [render]\nwidth_px = 160\nheight_px = 100\nsupersample = 1\ntexture_px = 512\nmodes = [\"static\", \"dynamic\"]\ndifference = true\n\
+         [render.camera]\neye_mm = [0.0, -11.0, 6.0]\ntarget_mm = [0.0, -1.0, -0.5]\nfov_deg = 45.0\n",
+        glb.display(),
+        dir.join("out").display()
+    );
+    let path = write(&dir, "render.toml", &toml);
+    let setup = SurfaceSetup::load(&path).unwrap();
+    assert_eq!(setup.surface.num_frames(), 5);
+    skinpatch::pipeline::surface::run(&setup, |_| {}).unwrap();
+    let out = dir.join("out/render");
+    let pixels = |p: PathBuf| {
+        image::open(&p)
+            .unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+            .to_rgb8()
+    };
+    // Frame 2 (t = 1 s) is the most deformed: static and dynamic differ.
+    let (stat, dynamic) = (
+        pixels(out.join("static/frame_0002.png")),
+        pixels(out.join("dynamic/frame_0002.png")),
+    );
+    let lit = stat
+        .pixels()
+        .filter(|p| p.0.iter().map(|&c| c as u32).sum::<u32>() > 120)
+        .count();
+    assert!(
+        lit > 160 * 100 / 5,
+        "the surface fills the view: {lit} lit pixels"
+    );
+    let changed = stat
+        .pixels()
+        .zip(dynamic.pixels())
+        .filter(|(a, b)| a != b)
+        .count();
+    eprintln!("{changed} of {lit} lit pixels differ between static and dynamic");
+    assert!(
+        changed > lit / 20,
+        "{changed} pixels differ between static and dynamic"
+    );
+    assert!(out.join("difference/frame_0002.png").exists());
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -282,7 +282,11 @@ pub fn surface_grid(
             Field::i32(
                 "degenerate",
                 1,
-                field.triangles.iter().map(|t| i32::from(t.weight == 0.0)).collect(),
+                field
+                    .triangles
+                    .iter()
+                    .map(|t| i32::from(t.weight == 0.0))
+                    .collect(),
             ),
         ],
     }

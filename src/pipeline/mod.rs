@@ -362,7 +362,9 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<RunSum
                 .frames
                 .push(mesh.top.vertices.iter().map(|&v| sim.x[v]).collect());
             if setup.write_surface_obj {
-                let path = dir.join("surface").join(format!("frame_{:04}.obj", m.frame));
+                let path = dir
+                    .join("surface")
+                    .join(format!("frame_{:04}.obj", m.frame));
                 crate::surface::obj::write_obj(&path, surface, Some(surface.frames.len() - 1))?;
             }
         }
@@ -392,13 +394,8 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<RunSum
         if let (Some(r), Some(renderer)) = (&setup.render, renderer.as_mut()) {
             if m.frame % r.frame_stride == 0 {
                 let probe = setup.simulation.probe.as_ref().map(|p| p.pose(m.time_s));
-                let geometry = crate::render::scene::build(
-                    mesh,
-                    &sim.x,
-                    &field,
-                    probe.as_ref(),
-                    r.tessellate,
-                );
+                let geometry =
+                    crate::render::scene::build(mesh, &sim.x, &field, probe.as_ref(), r.tessellate);
                 renderer.frame(&geometry, &field, engine.as_mut(), m.frame, fresh_normals)?;
             }
         }

@@ -133,7 +133,8 @@ pub fn run(
     written.push(metrics_path.clone());
     let mut frames = Vec::new();
     let mut collection = Vec::new();
-    let whole = setup.pieces.len() == 1 && setup.pieces[0].udim.is_none()
+    let whole = setup.pieces.len() == 1
+        && setup.pieces[0].udim.is_none()
         && setup.pieces[0].triangles.len() == surface.top.triangles.len()
         && setup.pieces[0]
             .triangles

@@ -117,7 +117,11 @@ impl SurfaceSetup {
         }
         if is_obj && (section.node.is_some() || section.animation.is_some()) {
             return Err(Error::parameter(
-                if section.node.is_some() { "surface.node" } else { "surface.animation" },
+                if section.node.is_some() {
+                    "surface.node"
+                } else {
+                    "surface.animation"
+                },
                 "applies to glTF files only",
             ));
         }

@@ -499,7 +499,12 @@ pub fn write_glb(path: &Path, surface: &AnimatedSurface) -> Result<()> {
         targets: surface
             .frames
             .iter()
-            .map(|x| x.iter().zip(&surface.positions).map(|(a, b)| a - b).collect())
+            .map(|x| {
+                x.iter()
+                    .zip(&surface.positions)
+                    .map(|(a, b)| a - b)
+                    .collect()
+            })
             .collect(),
         times_s: (0..n).map(|k| surface.time(k)).collect(),
         weights: (0..n)

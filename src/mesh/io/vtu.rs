@@ -375,14 +375,20 @@ pub fn read_vtu(path: &Path) -> Result<Grid> {
         let nodes = match kind {
             CellType::Tetra => 4,
             CellType::Triangle => 3,
-            other => return Err(bad(format!("cell {k} is a {other:?}; only tetrahedra and triangles are supported"))),
+            other => {
+                return Err(bad(format!(
+                    "cell {k} is a {other:?}; only tetrahedra and triangles are supported"
+                )))
+            }
         };
         if end != start + nodes || end > connectivity.len() {
             return Err(bad(format!("cell {k} does not have {nodes} nodes")));
         }
         if nodes == 4 {
             if !triangles.is_empty() {
-                return Err(bad(format!("cell {k}: tetrahedra after triangles are not supported")));
+                return Err(bad(format!(
+                    "cell {k}: tetrahedra after triangles are not supported"
+                )));
             }
             tets.push(std::array::from_fn(|i| connectivity[start + i] as usize));
         } else {
