@@ -337,7 +337,7 @@ pub fn write_vtu_as(path: &Path, grid: &Grid, format: VtuFormat) -> Result<()> {
 }
 
 /// Reads a `.vtu` file written by [`write_vtu`] (or any single-piece
-/// unstructured grid of tetrahedra).
+/// unstructured grid of tetrahedra and triangles, tets first).
 pub fn read_vtu(path: &Path) -> Result<Grid> {
     let bad = |message: String| Error::malformed(path, message);
     if !path.exists() {
