@@ -98,7 +98,7 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<AnimatedSurface> {
             Some(i) => i.into_u32().collect(),
             None => (0..n as u32).collect(),
         };
-        if indices.len() % 3 != 0 {
+        if !indices.len().is_multiple_of(3) {
             return Err(bad(format!(
                 "{mesh_name} primitive {p} has {} indices, not a multiple of 3",
                 indices.len()
@@ -411,6 +411,9 @@ fn sample_animation<'a>(
         } else {
             1
         };
+    if let Some(k) = times.iter().position(|t| !t.is_finite()) {
+        return Err(format!("the weight animation's keyframe {k} has time {}", times[k]));
+    }
     if times.is_empty() || values.len() != times.len() * per_key {
         return Err(format!(
             "morph target count mismatch: the weight animation has {} values for {} keyframes, \
@@ -419,7 +422,9 @@ fn sample_animation<'a>(
             times.len()
         ));
     }
-    if let Some(k) = (1..times.len()).find(|&k| !(times[k] > times[k - 1])) {
+    if let Some(k) = (1..times.len())
+        .find(|&k| times[k].partial_cmp(&times[k - 1]) != Some(std::cmp::Ordering::Greater))
+    {
         return Err(format!(
             "the weight animation's keyframe times are not increasing at keyframe {k} ({} after {})",
             times[k],
@@ -654,10 +659,10 @@ pub fn write_glb_animation(
         "accessors": accessors
     });
     let mut text = serde_json::to_vec(&json).map_err(|e| Error::malformed(path, e.to_string()))?;
-    while text.len() % 4 != 0 {
+    while !text.len().is_multiple_of(4) {
         text.push(b' ');
     }
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let total = 12 + 8 + text.len() + 8 + bin.len();
