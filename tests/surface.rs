@@ -849,3 +849,157 @@ fn animated_gltf_surface_renders_with_dynamic_microstructure() {
     assert!(out.join("difference/frame_0002.png").exists());
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Buffer views and accessors of a hand-made glTF (one embedded buffer).
+#[derive(Default)]
+struct GltfBuffers {
+    bin: Vec<u8>,
+    views: Vec<String>,
+    accessors: Vec<String>,
+}
+
+impl GltfBuffers {
+    fn push(&mut self, bytes: Vec<u8>, component: u32, count: usize, kind: &str) -> usize {
+        while self.bin.len() % 4 != 0 {
+            self.bin.push(0);
+        }
+        self.views.push(format!(
+            "{{\"buffer\":0,\"byteOffset\":{},\"byteLength\":{}}}",
+            self.bin.len(),
+            bytes.len()
+        ));
+        self.bin.extend(bytes);
+        self.accessors.push(format!(
+            "{{\"bufferView\":{},\"componentType\":{component},\"count\":{count},\"type\":\"{kind}\"}}",
+            self.views.len() - 1
+        ));
+        self.accessors.len() - 1
+    }
+
+    fn f32s(&mut self, v: &[f32], per: usize, kind: &str) -> usize {
+        self.push(
+            v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+            5126,
+            v.len() / per,
+            kind,
+        )
+    }
+
+    fn json(&self) -> String {
+        use base64::Engine;
+        format!(
+            "\"buffers\":[{{\"byteLength\":{},\"uri\":\"data:application/octet-stream;base64,{}\"}}],\
+             \"bufferViews\":[{}],\"accessors\":[{}]",
+            self.bin.len(),
+            base64::engine::general_purpose::STANDARD.encode(&self.bin),
+            self.views.join(","),
+            self.accessors.join(",")
+        )
+    }
+}
+
+/// A strip skinned to two joints (the tip a child of the root) under an
+/// armature scaled by 0.5: over 1 s the tip slides 2 armature units (1 m)
+/// along the strip and the root turns 30° about z. The middle cell, 0.5 m
+/// wide and weighted half to each side, is stretched to 1.0 m at 0.5 s and
+/// 1.5 m at 1 s; the rest moves rigidly. The mesh node's own translation is
+/// ignored, as glTF says for skinned meshes.
+#[test]
+fn skinned_gltf_is_posed_by_its_joints() {
+    let mut b = GltfBuffers::default();
+    let xs = [0.0f32, 0.5, 1.0, 1.5];
+    let mut pos = Vec::new();
+    let mut uv = Vec::new();
+    let (mut joints, mut weights) = (Vec::new(), Vec::new());
+    for y in [0.0f32, 0.5] {
+        for &x in &xs {
+            pos.extend([x, y, 0.0]);
+            uv.extend([x / 1.5, 1.0 - y]);
+            joints.extend([if x <= 0.5 { 0u16 } else { 1 }, 0, 0, 0]);
+            weights.extend([1.0f32, 0.0, 0.0, 0.0]);
+        }
+    }
+    let indices: Vec<u32> = (0..3)
+        .flat_map(|i| [i, i + 1, i + 5, i, i + 5, i + 4])
+        .collect();
+    let position = b.f32s(&pos, 3, "VEC3");
+    b.accessors[position] = b.accessors[position].replace('}', ",\"min\":[0,0,0],\"max\":[1.5,0.5,0]}");
+    let texcoord = b.f32s(&uv, 2, "VEC2");
+    let index = b.push(
+        indices.iter().flat_map(|i| i.to_le_bytes()).collect(),
+        5125,
+        18,
+        "SCALAR",
+    );
+    let joint = b.push(
+        joints.iter().flat_map(|j| j.to_le_bytes()).collect(),
+        5123,
+        8,
+        "VEC4",
+    );
+    let weight = b.f32s(&weights, 4, "VEC4");
+    // Inverse bind matrices (column-major): S(2) and T(−2, 0, 0)·S(2).
+    let ibm = b.f32s(
+        &[
+            2.0, 0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 1.0, //
+            2.0, 0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 2.0, 0.0, -2.0, 0.0, 0.0, 1.0,
+        ],
+        16,
+        "MAT4",
+    );
+    let times = b.f32s(&[0.0, 1.0], 1, "SCALAR");
+    let slide = b.f32s(&[2.0, 0.0, 0.0, 4.0, 0.0, 0.0], 3, "VEC3");
+    let half = (15.0f32).to_radians();
+    let turn = b.f32s(
+        &[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, half.sin(), half.cos()],
+        4,
+        "VEC4",
+    );
+    let json = format!(
+        r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0,3]}}],
+"nodes":[{{"name":"Armature","scale":[0.5,0.5,0.5],"children":[1]}},{{"name":"root","children":[2]}},
+{{"name":"tip","translation":[2,0,0]}},{{"name":"Strip","mesh":0,"skin":0,"translation":[100,0,0]}}],
+"skins":[{{"joints":[1,2],"inverseBindMatrices":{ibm}}}],
+"meshes":[{{"name":"StripMesh","primitives":[{{"attributes":{{"POSITION":{position},"TEXCOORD_0":{texcoord},"JOINTS_0":{joint},"WEIGHTS_0":{weight}}},"indices":{index}}}]}}],
+"animations":[{{"name":"slide","samplers":[{{"input":{times},"output":{slide}}},{{"input":{times},"output":{turn}}}],
+"channels":[{{"sampler":0,"target":{{"node":2,"path":"translation"}}}},{{"sampler":1,"target":{{"node":1,"path":"rotation"}}}}]}}],
+{}}}"#,
+        b.json()
+    );
+    let dir = temp("skin");
+    let path = write(&dir, "strip.gltf", &json);
+    let options = skinpatch::surface::ReadOptions {
+        frame_rate_hz: 2.0,
+        ..Default::default()
+    };
+    let s = AnimatedSurface::read(&path, &options).unwrap();
+    assert_eq!(s.num_frames(), 3);
+    // Rest and frame 0 are the bind pose, without the node's translation.
+    assert!(
+        (s.positions[3] - Vec3::new(1500.0, 0.0, 0.0)).norm() < 1e-9,
+        "{:?}",
+        s.positions[3]
+    );
+    for (f, width) in [(0, 0.5), (1, 1.0), (2, 1.5)] {
+        let field = SurfaceField::new(&s.top, &s.positions, &s.frames[f]);
+        for (k, t) in field.triangles.iter().enumerate() {
+            let svd = Svd2::of(&t.t);
+            let cell = k / 2;
+            let want = if cell == 1 { width / 0.5 } else { 1.0 };
+            assert!(
+                (svd.rs - want).abs() < 1e-6 && (svd.rt - 1.0).abs() < 1e-6,
+                "frame {f} triangle {k}: {} {}",
+                svd.rs,
+                svd.rt
+            );
+        }
+    }
+    // The root turned 30° at 1 s: the first cell's edge along x points at 30°.
+    let e = s.frames[2][1] - s.frames[2][0];
+    assert!((e.y.atan2(e.x).to_degrees() - 30.0).abs() < 1e-4, "{e:?}");
+    // A skinned mesh without weights is named.
+    let broken = json.replace(",\"WEIGHTS_0\":", ",\"_W\":");
+    let e = read_error(&write(&dir, "noweights.gltf", &broken), None);
+    assert!(e.contains("StripMesh") && e.contains("WEIGHTS_0"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}

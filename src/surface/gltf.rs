@@ -2,14 +2,17 @@
 //! `.glb`): read and write.
 //!
 //! Read: the mesh of one node (named, or the only node with a mesh), all its
-//! triangle primitives, positions with the node's world transform, UVs from
-//! `TEXCOORD_0` (glTF's v runs down the image; skinpatch's up, so
-//! `v = 1 − v_glTF`), morph targets' position displacements, and one
-//! animation of the node's morph weights (step, linear or cubic-spline
-//! sampler) sampled at the scenario's frame rate from its first to its last
-//! keyframe. glTF stores metres unless told otherwise. Skins and node
-//! animations are not applied (a warning says so): rigid motion does not
-//! change the strain.
+//! triangle primitives, UVs from `TEXCOORD_0` (glTF's v runs down the image;
+//! skinpatch's up, so `v = 1 − v_glTF`), morph targets' position
+//! displacements, and one animation ([`super::clip`]): the node's morph
+//! weights and the translation, rotation and scale of the node, its skin's
+//! joints and their ancestors, sampled at the scenario's frame rate from
+//! the animation's first to its last keyframe. Positions are the morphed
+//! mesh placed by the node's world transform, or for a skinned mesh (with
+//! `JOINTS_0`/`WEIGHTS_0`) linear blend skinning by the joints' world
+//! matrices times their inverse bind matrices (the node's own transform is
+//! then ignored, as glTF says). The rest is the scene's own pose without
+//! animation or morph weights. glTF stores metres unless told otherwise.
 //!
 //! Write ([`write_glb`]): one primitive, one morph target per frame (the
 //! displacement from rest) and a step animation that shows frame `k` at
@@ -17,12 +20,11 @@
 
 use std::path::Path;
 
-use ::gltf::animation::{Interpolation, Property};
 use ::gltf::buffer::Source;
 use ::gltf::mesh::Mode;
 use nalgebra::{Matrix4, Vector4};
 
-use super::{AnimatedSurface, ReadOptions, SplitSurface};
+use super::{clip, AnimatedSurface, ReadOptions, SplitSurface};
 use crate::error::{Error, Result};
 use crate::mesh::Vec3;
 
@@ -40,28 +42,22 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<AnimatedSurface> {
         origin: path.display().to_string(),
         message,
     };
-    let (node, world) = pick_node(doc, options.node.as_deref()).map_err(&bad)?;
+    let roots: Vec<::gltf::Node<'_>> = match doc.default_scene().or_else(|| doc.scenes().next()) {
+        Some(scene) => scene.nodes().collect(),
+        None => Vec::new(),
+    };
+    let node = pick_node(doc, options.node.as_deref()).map_err(&bad)?;
     let mesh = node.mesh().expect("picked nodes have a mesh");
     let mesh_name = name_of(mesh.name(), "mesh", mesh.index());
-    if node.skin().is_some() {
-        log::warn!(
-            "{}: node {} has a skin; skinning is not applied (the mesh is read at its bind \
-             pose with its morph targets)",
-            path.display(),
-            name_of(node.name(), "node", node.index())
-        );
-    }
-    let linear = world.fixed_view::<3, 3>(0, 0).into_owned();
-    let place = |p: [f32; 3]| {
-        let q = world * Vector4::new(p[0] as f64, p[1] as f64, p[2] as f64, 1.0);
-        Vec3::new(q.x, q.y, q.z)
-    };
+    let skin = node.skin();
     let mut split = SplitSurface {
         origin: path.display().to_string(),
         ..SplitSurface::default()
     };
-    // Per target, per split vertex: the displacement (world, file units).
+    // Mesh-space positions, per target displacements, per vertex joints.
+    let mut raw: Vec<Vec3> = Vec::new();
     let mut targets: Vec<Vec<Vec3>> = Vec::new();
+    let mut influences: Vec<[(usize, f64); 4]> = Vec::new();
     let mut target_count = None;
     for prim in mesh.primitives() {
         let p = prim.index();
@@ -76,6 +72,7 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<AnimatedSurface> {
             .read_positions()
             .ok_or_else(|| bad(format!("{mesh_name} primitive {p} has no POSITION")))?
             .collect();
+        let n = positions.len();
         let uvs: Vec<[f32; 2]> = reader
             .read_tex_coords(0)
             .ok_or_else(|| {
@@ -86,14 +83,12 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<AnimatedSurface> {
             })?
             .into_f32()
             .collect();
-        if uvs.len() != positions.len() {
+        if uvs.len() != n {
             return Err(bad(format!(
-                "{mesh_name} primitive {p} has {} UVs for {} positions",
-                uvs.len(),
-                positions.len()
+                "{mesh_name} primitive {p} has {} UVs for {n} positions",
+                uvs.len()
             )));
         }
-        let n = positions.len();
         let indices: Vec<u32> = match reader.read_indices() {
             Some(i) => i.into_u32().collect(),
             None => (0..n as u32).collect(),
@@ -113,7 +108,7 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<AnimatedSurface> {
             .read_morph_targets()
             .map(|(pos, _, _)| match pos {
                 Some(d) => d
-                    .map(|d| linear * Vec3::new(d[0] as f64, d[1] as f64, d[2] as f64))
+                    .map(|d| Vec3::new(d[0] as f64, d[1] as f64, d[2] as f64))
                     .collect(),
                 None => vec![Vec3::zeros(); n],
             })
@@ -125,7 +120,8 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<AnimatedSurface> {
             }
             Some(count) if count != prim_targets.len() => {
                 return Err(bad(format!(
-                    "{mesh_name} primitive {p} has {} morph targets, primitive 0 has {count}",
+                    "morph target count mismatch: {mesh_name} primitive {p} has {} morph \
+                     targets, primitive 0 has {count}",
                     prim_targets.len()
                 )));
             }
@@ -133,17 +129,61 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<AnimatedSurface> {
         }
         if let Some((t, d)) = prim_targets.iter().enumerate().find(|(_, d)| d.len() != n) {
             return Err(bad(format!(
-                "{mesh_name} primitive {p} morph target {t} has {} displacements for {n} \
-                 vertices",
+                "{mesh_name} primitive {p} morph target {t} has {} displacements for {n} vertices",
                 d.len()
             )));
         }
-        let base = split.rest.len();
+        if let Some(skin) = &skin {
+            let joints: Vec<[u16; 4]> = reader
+                .read_joints(0)
+                .ok_or_else(|| {
+                    bad(format!(
+                        "{mesh_name} primitive {p} is skinned but has no JOINTS_0"
+                    ))
+                })?
+                .into_u16()
+                .collect();
+            let weights: Vec<[f32; 4]> = reader
+                .read_weights(0)
+                .ok_or_else(|| {
+                    bad(format!(
+                        "{mesh_name} primitive {p} is skinned but has no WEIGHTS_0"
+                    ))
+                })?
+                .into_f32()
+                .collect();
+            let count = skin.joints().count();
+            if joints.len() != n || weights.len() != n {
+                return Err(bad(format!(
+                    "{mesh_name} primitive {p} has {} JOINTS_0 and {} WEIGHTS_0 for {n} vertices",
+                    joints.len(),
+                    weights.len()
+                )));
+            }
+            for (i, (j, w)) in joints.iter().zip(&weights).enumerate() {
+                let total: f64 = w.iter().map(|&x| x as f64).sum();
+                let used = j.iter().zip(w).filter(|(_, &w)| w != 0.0);
+                if let Some((&j, _)) = used.clone().find(|(&j, _)| j as usize >= count) {
+                    return Err(bad(format!(
+                        "{mesh_name} primitive {p} vertex {i} uses joint {j}, but the skin has {count}"
+                    )));
+                }
+                if !(total > 0.0 && total.is_finite() && w.iter().all(|&x| x >= 0.0)) {
+                    return Err(bad(format!(
+                        "{mesh_name} primitive {p} vertex {i} has skin weights {w:?}"
+                    )));
+                }
+                influences.push(std::array::from_fn(|k| {
+                    (j[k] as usize, w[k] as f64 / total)
+                }));
+            }
+        }
+        let base = raw.len();
         for (t, d) in prim_targets.into_iter().enumerate() {
             targets[t].extend(d);
         }
         for (i, (pos, uv)) in positions.iter().zip(&uvs).enumerate() {
-            split.rest.push(place(*pos));
+            raw.push(Vec3::new(pos[0] as f64, pos[1] as f64, pos[2] as f64));
             split.uvs.push([uv[0] as f64, 1.0 - uv[1] as f64]);
             split
                 .labels
@@ -163,36 +203,115 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<AnimatedSurface> {
         .unwrap_or_else(|| vec![0.0; n_targets]);
     if defaults.len() != n_targets {
         return Err(bad(format!(
-            "{mesh_name} has {} default morph weights for {n_targets} morph targets",
+            "morph target count mismatch: {mesh_name} has {} default morph weights for \
+             {n_targets} morph targets",
             defaults.len()
         )));
     }
-    let weights = sample_animation(doc, &buffers, &node, options, n_targets)
-        .map_err(&bad)?
-        .unwrap_or_else(|| {
+    // Skinning: joint j's matrix is world(joint) · inverse bind matrix.
+    let (joints, inverse_bind): (Vec<usize>, Vec<Matrix4<f64>>) = match &skin {
+        Some(skin) => {
+            let joints: Vec<usize> = skin.joints().map(|j| j.index()).collect();
+            let ibm: Vec<Matrix4<f64>> = match skin
+                .reader(|b| buffers.get(b.index()).map(|d| d.as_slice()))
+                .read_inverse_bind_matrices()
+            {
+                Some(m) => m.map(|m| Matrix4::from_fn(|r, c| m[c][r] as f64)).collect(),
+                None => vec![Matrix4::identity(); joints.len()],
+            };
+            if ibm.len() != joints.len() {
+                return Err(bad(format!(
+                    "the skin has {} inverse bind matrices for {} joints",
+                    ibm.len(),
+                    joints.len()
+                )));
+            }
+            (joints, ibm)
+        }
+        None => (Vec::new(), Vec::new()),
+    };
+    let mut movers = joints.clone();
+    movers.push(node.index());
+    let moving = clip::with_ancestors(doc, &movers);
+    let clip = choose_clip(doc, &buffers, &node, n_targets, &moving, options).map_err(&bad)?;
+    let rate = options.frame_rate_hz;
+    // Keyframe times are f32: a sample within this of a key takes the key.
+    let tol = 1e-4 / rate;
+    let pose = |t: Option<f64>, weights: &[f64]| -> Vec<Vec3> {
+        let local = |n: &::gltf::Node<'_>| match &clip {
+            Some(c) => c.local(n, t, tol),
+            None => clip::Clip::default().local(n, None, tol),
+        };
+        let world = clip::world_matrices(doc, &roots, &local);
+        let morphed = |v: usize| {
+            let mut p = raw[v];
+            for (k, &w) in weights.iter().enumerate() {
+                if w != 0.0 {
+                    p += targets[k][v] * w;
+                }
+            }
+            p.push(1.0)
+        };
+        if skin.is_some() {
+            let matrices: Vec<Matrix4<f64>> = joints
+                .iter()
+                .zip(&inverse_bind)
+                .map(|(&j, ibm)| world[j] * ibm)
+                .collect();
+            (0..raw.len())
+                .map(|v| {
+                    let p = morphed(v);
+                    let q: Vector4<f64> = influences[v]
+                        .iter()
+                        .filter(|(_, w)| *w != 0.0)
+                        .map(|&(j, w)| matrices[j] * p * w)
+                        .sum();
+                    Vec3::new(q.x, q.y, q.z)
+                })
+                .collect()
+        } else {
+            let m = world[node.index()];
+            (0..raw.len())
+                .map(|v| {
+                    let q = m * morphed(v);
+                    Vec3::new(q.x, q.y, q.z)
+                })
+                .collect()
+        }
+    };
+    // Rest: the scene's own pose without morph targets.
+    split.rest = pose(None, &vec![0.0; n_targets]);
+    split.frames = match &clip {
+        Some(c) => {
+            let frames = ((c.end - c.start) * rate + 1e-4).floor() as usize + 1;
+            log::info!(
+                "{}: {} sampled from {} s to {} s at {rate} Hz: {frames} frames",
+                path.display(),
+                c.name,
+                c.start,
+                c.end
+            );
+            (0..frames)
+                .map(|f| {
+                    let t = c.start + f as f64 / rate;
+                    let w = c
+                        .weights
+                        .as_ref()
+                        .map(|w| w.at(t, tol))
+                        .unwrap_or_else(|| defaults.clone());
+                    pose(Some(t), &w)
+                })
+                .collect()
+        }
+        None => {
             log::warn!(
-                "{}: no animation of {}'s morph weights; the surface has one frame",
+                "{}: no animation moves {}; the surface has one frame",
                 path.display(),
                 name_of(node.name(), "node", node.index())
             );
-            vec![defaults]
-        });
-    split.frames = weights
-        .iter()
-        .map(|w| {
-            (0..split.rest.len())
-                .map(|v| {
-                    let mut p = split.rest[v];
-                    for (t, &wt) in w.iter().enumerate() {
-                        if wt != 0.0 {
-                            p += targets[t][v] * wt;
-                        }
-                    }
-                    p
-                })
-                .collect()
-        })
-        .collect();
+            vec![pose(None, &defaults)]
+        }
+    };
     let mm = options.mm_per_unit.unwrap_or(1000.0);
     AnimatedSurface::from_split(split, mm, options.frame_rate_hz)
 }
@@ -269,55 +388,23 @@ fn load_buffers(path: &Path, doc: &::gltf::Document, blob: Option<&[u8]>) -> Res
     Ok(out)
 }
 
-/// The node whose mesh is read, with its world matrix.
+/// The node whose mesh is read.
 fn pick_node<'a>(
     doc: &'a ::gltf::Document,
     wanted: Option<&str>,
-) -> std::result::Result<(::gltf::Node<'a>, Matrix4<f64>), String> {
-    fn walk<'a>(
-        node: ::gltf::Node<'a>,
-        parent: Matrix4<f64>,
-        out: &mut Vec<(::gltf::Node<'a>, Matrix4<f64>)>,
-    ) {
-        let m = node.transform().matrix();
-        let local = Matrix4::from_fn(|r, c| m[c][r] as f64);
-        let world = parent * local;
-        for child in node.children() {
-            walk(child, world, out);
-        }
-        out.push((node, world));
-    }
-    let mut nodes = Vec::new();
-    match doc.default_scene().or_else(|| doc.scenes().next()) {
-        Some(scene) => {
-            for root in scene.nodes() {
-                walk(root, Matrix4::identity(), &mut nodes);
-            }
-        }
-        // No scene: every node with its own transform.
-        None => {
-            for node in doc.nodes() {
-                let m = node.transform().matrix();
-                nodes.push((node, Matrix4::from_fn(|r, c| m[c][r] as f64)));
-            }
-        }
-    }
-    nodes.sort_by_key(|(n, _)| n.index());
-    let with_mesh: Vec<_> = nodes
-        .into_iter()
-        .filter(|(n, _)| n.mesh().is_some())
-        .collect();
+) -> std::result::Result<::gltf::Node<'a>, String> {
+    let with_mesh: Vec<_> = doc.nodes().filter(|n| n.mesh().is_some()).collect();
     let names = || {
         with_mesh
             .iter()
-            .map(|(n, _)| name_of(n.name(), "node", n.index()))
+            .map(|n| name_of(n.name(), "node", n.index()))
             .collect::<Vec<_>>()
             .join(", ")
     };
     match wanted {
         Some(name) => with_mesh
             .iter()
-            .find(|(n, _)| n.name() == Some(name))
+            .find(|n| n.name() == Some(name))
             .cloned()
             .ok_or_else(|| {
                 format!(
@@ -326,7 +413,7 @@ fn pick_node<'a>(
                 )
             }),
         None => match with_mesh.len() {
-            0 => Err("has no node with a mesh in its scene".into()),
+            0 => Err("has no node with a mesh".into()),
             1 => Ok(with_mesh[0].clone()),
             _ => Err(format!(
                 "has several nodes with meshes ({}); choose one with surface.node",
@@ -336,27 +423,19 @@ fn pick_node<'a>(
     }
 }
 
-/// The morph weights of every frame from the node's weight animation;
-/// `None` when no animation moves them.
-fn sample_animation<'a>(
-    doc: &'a ::gltf::Document,
+/// The animation that moves the surface: `surface.animation` by name, or
+/// the first that animates the node's morph weights or the transform of a
+/// node in `moving` (the node, its skin's joints and their ancestors).
+fn choose_clip(
+    doc: &::gltf::Document,
     buffers: &[Vec<u8>],
     node: &::gltf::Node<'_>,
-    options: &ReadOptions,
     n_targets: usize,
-) -> std::result::Result<Option<Vec<Vec<f64>>>, String> {
-    fn weights_channel<'a>(
-        a: &::gltf::Animation<'a>,
-        node: usize,
-    ) -> Option<::gltf::animation::Channel<'a>> {
-        a.channels().find(|c| {
-            c.target().node().index() == node
-                && c.target().property() == Property::MorphTargetWeights
-        })
-    }
-    let moves_weights = |a: &::gltf::Animation<'a>| weights_channel(a, node.index());
+    moving: &[bool],
+    options: &ReadOptions,
+) -> std::result::Result<Option<clip::Clip>, String> {
     let animations: Vec<_> = doc.animations().collect();
-    let chosen = match &options.animation {
+    match &options.animation {
         Some(name) => {
             let a = animations
                 .iter()
@@ -375,121 +454,23 @@ fn sample_animation<'a>(
                         }
                     )
                 })?;
-            Some(moves_weights(a).ok_or_else(|| {
-                format!("animation '{name}' does not animate the morph weights of the mesh's node")
-            })?)
+            let clip = clip::Clip::read(a, buffers, node.index(), n_targets, moving)?;
+            if clip.is_empty() {
+                return Err(format!(
+                    "animation '{name}' moves neither the morph weights of the mesh's node nor \
+                     its transform or joints"
+                ));
+            }
+            Ok(Some(clip))
         }
-        None => animations.iter().find_map(moves_weights),
-    };
-    let Some(channel) = chosen else {
-        return Ok(None);
-    };
-    if animations.iter().any(|a| {
-        a.channels().any(|c| {
-            c.target().node().index() == node.index()
-                && c.target().property() != Property::MorphTargetWeights
-        })
-    }) {
-        log::warn!("the node's translation/rotation/scale animation is not applied (rigid motion does not change the strain)");
-    }
-    let reader = channel.reader(|b| buffers.get(b.index()).map(|d| d.as_slice()));
-    let times: Vec<f64> = reader
-        .read_inputs()
-        .ok_or("the weight animation has no keyframe times")?
-        .map(|t| t as f64)
-        .collect();
-    let values: Vec<f64> = match reader.read_outputs() {
-        Some(::gltf::animation::util::ReadOutputs::MorphTargetWeights(w)) => {
-            w.into_f32().map(|x| x as f64).collect()
-        }
-        _ => return Err("the weight animation has no weights".into()),
-    };
-    let interpolation = channel.sampler().interpolation();
-    let per_key = n_targets
-        * if interpolation == Interpolation::CubicSpline {
-            3
-        } else {
-            1
-        };
-    if let Some(k) = times.iter().position(|t| !t.is_finite()) {
-        return Err(format!("the weight animation's keyframe {k} has time {}", times[k]));
-    }
-    if times.is_empty() || values.len() != times.len() * per_key {
-        return Err(format!(
-            "morph target count mismatch: the weight animation has {} values for {} keyframes, \
-             but the mesh has {n_targets} morph targets ({per_key} values per keyframe expected)",
-            values.len(),
-            times.len()
-        ));
-    }
-    if let Some(k) = (1..times.len())
-        .find(|&k| times[k].partial_cmp(&times[k - 1]) != Some(std::cmp::Ordering::Greater))
-    {
-        return Err(format!(
-            "the weight animation's keyframe times are not increasing at keyframe {k} ({} after {})",
-            times[k],
-            times[k - 1]
-        ));
-    }
-    let rate = options.frame_rate_hz;
-    let (t0, t1) = (times[0], times[times.len() - 1]);
-    let frames = ((t1 - t0) * rate + 1e-4).floor() as usize + 1;
-    // Keyframe times are f32: a sample within this of a key takes the key.
-    let tol = 1e-4 / rate;
-    Ok(Some(
-        (0..frames)
-            .map(|f| {
-                let t = t0 + f as f64 / rate;
-                sample(&times, &values, interpolation, n_targets, t, tol)
-            })
-            .collect(),
-    ))
-}
-
-/// The weights at time `t` (glTF's sampler rules; clamped outside the keys).
-fn sample(
-    times: &[f64],
-    values: &[f64],
-    interpolation: Interpolation,
-    n: usize,
-    t: f64,
-    tol: f64,
-) -> Vec<f64> {
-    let cubic = interpolation == Interpolation::CubicSpline;
-    let value = |k: usize| -> &[f64] {
-        if cubic {
-            &values[(3 * k + 1) * n..(3 * k + 2) * n]
-        } else {
-            &values[k * n..(k + 1) * n]
-        }
-    };
-    // The last key at or before t (within tol).
-    let k = times.partition_point(|&x| x <= t + tol).saturating_sub(1);
-    if (times[k] - t).abs() <= tol || k + 1 == times.len() || t < times[0] {
-        return value(k).to_vec();
-    }
-    let (ta, tb) = (times[k], times[k + 1]);
-    let dt = tb - ta;
-    let s = (t - ta) / dt;
-    match interpolation {
-        Interpolation::Step => value(k).to_vec(),
-        Interpolation::Linear => value(k)
-            .iter()
-            .zip(value(k + 1))
-            .map(|(a, b)| a + (b - a) * s)
-            .collect(),
-        Interpolation::CubicSpline => {
-            let out_tangent = &values[(3 * k + 2) * n..(3 * k + 3) * n];
-            let in_tangent = &values[3 * (k + 1) * n..(3 * (k + 1) + 1) * n];
-            let (s2, s3) = (s * s, s * s * s);
-            (0..n)
-                .map(|i| {
-                    (2.0 * s3 - 3.0 * s2 + 1.0) * value(k)[i]
-                        + (s3 - 2.0 * s2 + s) * dt * out_tangent[i]
-                        + (-2.0 * s3 + 3.0 * s2) * value(k + 1)[i]
-                        + (s3 - s2) * dt * in_tangent[i]
-                })
-                .collect()
+        None => {
+            for a in &animations {
+                let clip = clip::Clip::read(a, buffers, node.index(), n_targets, moving)?;
+                if !clip.is_empty() {
+                    return Ok(Some(clip));
+                }
+            }
+            Ok(None)
         }
     }
 }
@@ -677,41 +658,4 @@ pub fn write_glb_animation(
     out.extend(b"BIN\0");
     out.extend(bin);
     crate::mesh::io::write_atomically(path, &out)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn samplers_follow_the_spec() {
-        let times = [0.0, 1.0, 3.0];
-        let values = [0.0, 1.0, 1.0, 0.0, 0.5, 0.5];
-        let at = |i, t| sample(&times, &values, i, 2, t, 1e-9);
-        assert_eq!(at(Interpolation::Step, 0.5), vec![0.0, 1.0]);
-        assert_eq!(at(Interpolation::Linear, 0.25), vec![0.25, 0.75]);
-        assert_eq!(at(Interpolation::Linear, 2.0), vec![0.75, 0.25]);
-        assert_eq!(at(Interpolation::Linear, 5.0), vec![0.5, 0.5]);
-        assert_eq!(at(Interpolation::Linear, -1.0), vec![0.0, 1.0]);
-        // Cubic spline with zero tangents: smoothstep between the keys.
-        let cubic = [0.0, 0.0, 0.0, 0.0, 1.0, 0.0];
-        let w = sample(
-            &[0.0, 2.0],
-            &cubic,
-            Interpolation::CubicSpline,
-            1,
-            1.0,
-            1e-9,
-        );
-        assert!((w[0] - 0.5).abs() < 1e-12);
-        let w = sample(
-            &[0.0, 2.0],
-            &cubic,
-            Interpolation::CubicSpline,
-            1,
-            0.5,
-            1e-9,
-        );
-        assert!((w[0] - 0.15625).abs() < 1e-12);
-    }
 }

@@ -23,6 +23,7 @@ use std::path::Path;
 use crate::error::{shown, Error, Result};
 use crate::mesh::{TopSurface, Vec3};
 
+mod clip;
 pub mod gltf;
 pub mod obj;
 
