@@ -492,29 +492,15 @@ fn run(
             p.frame(frame.metrics, frame.total_frames)
         }
     });
-    if let Some(p) = &progress {
-        p.finish();
-    }
-    let summary = result.with_context(|| {
-        format!(
-            "running scenario {} (output folder {})",
-            path.display(),
-            setup.output_dir.display()
-        )
-    })?;
-    // The machine-readable record of the run, next to its outputs.
-    let record = serde_json::json!({
-        "skinpatch_version": env!("CARGO_PKG_VERSION"),
-        "scenario_file": path,
-        "overrides": overrides,
-        "scenario": scenario,
-        "output_dir": setup.output_dir,
-        "fem_wall_s": summary.frames.iter().map(|m| m.step_wall_s).sum::<f64>(),
-        "run": summary,
-    });
-    let summary_path = setup.output_dir.join("summary.json");
-    let text = serde_json::to_string_pretty(&record)?;
-    skinpatch::mesh::io::write_atomically(&summary_path, format!("{text}\n").as_bytes())?;
+    let summary = finished(result, progress, path, &setup.output_dir)?;
+    let mut record = run_record(path, overrides, &scenario, &setup.output_dir, &summary)?;
+    record["fem_wall_s"] = summary
+        .frames
+        .iter()
+        .map(|m| m.step_wall_s)
+        .sum::<f64>()
+        .into();
+    let summary_path = write_record(&setup.output_dir, &record)?;
     let mut report = format!("scenario {}: mesh\n{}", setup.name, summary.quality);
     if let Some(device) = &summary.micro_device {
         report += &format!("microstructure stages: {device}\n");
@@ -527,6 +513,51 @@ fn run(
         return Ok(());
     }
     print_stdout(&report)
+}
+
+/// Ends the progress bar and names the scenario and folder of a failed run.
+fn finished<T>(
+    result: skinpatch::Result<T>,
+    progress: Option<Progress>,
+    path: &Path,
+    output_dir: &Path,
+) -> anyhow::Result<T> {
+    if let Some(p) = &progress {
+        p.finish();
+    }
+    result.with_context(|| {
+        format!(
+            "running scenario {} (output folder {})",
+            path.display(),
+            output_dir.display()
+        )
+    })
+}
+
+/// The machine-readable record of a run (`summary.json`).
+fn run_record(
+    path: &Path,
+    overrides: &[String],
+    scenario: &Scenario,
+    output_dir: &Path,
+    summary: &impl serde::Serialize,
+) -> anyhow::Result<serde_json::Value> {
+    Ok(serde_json::json!({
+        "skinpatch_version": env!("CARGO_PKG_VERSION"),
+        "scenario_file": path,
+        "overrides": overrides,
+        "scenario": scenario,
+        "output_dir": output_dir,
+        "run": serde_json::to_value(summary)?,
+    }))
+}
+
+/// Writes the record next to the run's outputs.
+fn write_record(output_dir: &Path, record: &serde_json::Value) -> anyhow::Result<PathBuf> {
+    let path = output_dir.join("summary.json");
+    let text = serde_json::to_string_pretty(record)?;
+    skinpatch::mesh::io::write_atomically(&path, format!("{text}\n").as_bytes())?;
+    Ok(path)
 }
 
 /// `skinpatch run` of a scenario with `[surface]`.
@@ -544,27 +575,9 @@ fn run_surface(
             p.surface_frame(frame.metrics, frame.total_frames)
         }
     });
-    if let Some(p) = &progress {
-        p.finish();
-    }
-    let summary = result.with_context(|| {
-        format!(
-            "running scenario {} (output folder {})",
-            path.display(),
-            setup.output_dir.display()
-        )
-    })?;
-    let record = serde_json::json!({
-        "skinpatch_version": env!("CARGO_PKG_VERSION"),
-        "scenario_file": path,
-        "overrides": overrides,
-        "scenario": scenario,
-        "output_dir": setup.output_dir,
-        "run": summary,
-    });
-    let summary_path = setup.output_dir.join("summary.json");
-    let text = serde_json::to_string_pretty(&record)?;
-    skinpatch::mesh::io::write_atomically(&summary_path, format!("{text}\n").as_bytes())?;
+    let summary = finished(result, progress, path, &setup.output_dir)?;
+    let record = run_record(path, overrides, scenario, &setup.output_dir, &summary)?;
+    let summary_path = write_record(&setup.output_dir, &record)?;
     let s = &setup.surface;
     let mut report = format!(
         "scenario {}: surface {}\n  {} positions, {} surface vertices, {} triangles, {} frames at {} Hz, {:.1} mm² at rest\n",

@@ -1310,3 +1310,78 @@ fn a_synthesized_neutral_map_is_cached_between_runs() {
         text(&o.stderr)
     );
 }
+
+/// `skinpatch run` of a `[surface]` scenario: the patch's top surface
+/// exported as an OBJ sequence by one run and animated by the next, with
+/// `--set`, the report and `summary.json`; a missing surface file is an
+/// error naming it, before the output folder is touched.
+#[test]
+fn surface_scenarios_run_from_the_command_line() {
+    let dir = std::env::temp_dir().join(format!("skinpatch-cli-surface-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let (fem, out) = run_press_small_with(
+        &dir,
+        "\n[output]\nsurface_obj = true\nframes_vtu = false\nmesh_vtu = false\n",
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(fem.join("surface/frame_0006.obj").exists());
+    let scenario = dir.join("surface.toml");
+    std::fs::write(
+        &scenario,
+        "[surface]\nfile = \"out/surface/frame_%04d.obj\"\nunits = \"mm\"\n\
+         [output]\nstrain_images = true\nstrain_image_px = 64\n",
+    )
+    .unwrap();
+    let animated = dir.join("animated");
+    let args = [
+        "run",
+        scenario.to_str().unwrap(),
+        "--output",
+        animated.to_str().unwrap(),
+        "--set",
+        "surface.frame_rate_hz=6.0",
+    ];
+    let out = skinpatch(&args);
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(stdout.contains("7 frames at 6 Hz"), "{stdout}");
+    assert!(animated.join("strain/rs_0006.png").exists());
+    assert!(animated.join("frames/frame_0006.vtu").exists());
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(animated.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["run"]["frames"].as_array().unwrap().len(), 7);
+    assert_eq!(summary["overrides"][0], "surface.frame_rate_hz=6.0");
+    // The strain of the last frame is the FEM run's (same surface, exact OBJ).
+    let metrics = std::fs::read_to_string(fem.join("metrics.csv")).unwrap();
+    let header: Vec<&str> = metrics.lines().next().unwrap().split(',').collect();
+    let last: Vec<&str> = metrics.lines().last().unwrap().split(',').collect();
+    let col = |name: &str| {
+        last[header.iter().position(|h| *h == name).unwrap()]
+            .parse::<f64>()
+            .unwrap()
+    };
+    let rs_max = summary["run"]["frames"][6]["rs_range"][1].as_f64().unwrap();
+    assert!(
+        (rs_max - col("rs_max")).abs() < 1e-12,
+        "{rs_max} vs {}",
+        col("rs_max")
+    );
+    // A missing file: an error naming it, nothing written.
+    std::fs::write(&scenario, "[surface]\nfile = \"gone.glb\"\n").unwrap();
+    let fresh = dir.join("fresh");
+    let out = skinpatch(&[
+        "run",
+        scenario.to_str().unwrap(),
+        "--output",
+        fresh.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        text(&out.stderr).contains("gone.glb"),
+        "{}",
+        text(&out.stderr)
+    );
+    assert!(!fresh.exists());
+    std::fs::remove_dir_all(&dir).ok();
+}

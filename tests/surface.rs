@@ -43,20 +43,16 @@ fn raster_stretch(field: &SurfaceField, px: usize) -> Vec<Option<(f64, f64)>> {
         .collect()
 }
 
-const PRESS: &str = r#"
-[boundary]
-bottom = "fixed"
-sides = "rollers"
-[probe]
-shape = "sphere"
-radius_mm = 1.5
-path_mm = [[0.0, 0.0, 0.0, 1.5], [0.5, 0.0, 0.0, 1.0], [1.0, 0.5, 0.0, 1.0]]
-contact = "coulomb"
-friction = 0.8
-[time]
-duration_s = 1.0
-frame_rate_hz = 6.0
-"#;
+/// The small press-and-drag fixture with its mesh path made absolute.
+fn press_scenario() -> String {
+    let root = common::root();
+    std::fs::read_to_string(root.join("tests/fixtures/press_small.toml"))
+        .unwrap()
+        .replace(
+            "\"../../meshes/patch_3k.node\"",
+            &format!("\"{}\"", root.join("meshes/patch_3k.node").display()),
+        )
+}
 
 const MICRO: &str = r#"
 [microstructure]
@@ -71,10 +67,9 @@ size_px = 192
 #[test]
 fn fem_top_surface_round_trips_through_gltf_and_obj() {
     let dir = temp("roundtrip");
-    let mesh = common::root().join("meshes/patch_3k.node");
     let fem_toml = format!(
-        "[mesh]\nfile = \"{}\"\n{PRESS}[output]\ndir = \"{}\"\nsurface_glb = true\nsurface_obj = true\nframes_vtu = false\nmesh_vtu = false\n{MICRO}",
-        mesh.display(),
+        "{}\n[output]\ndir = \"{}\"\nsurface_glb = true\nsurface_obj = true\nframes_vtu = false\nmesh_vtu = false\n{MICRO}",
+        press_scenario(),
         dir.join("fem").display()
     );
     std::fs::write(dir.join("fem.toml"), fem_toml).unwrap();
@@ -437,21 +432,11 @@ fn bad_obj_input_names_file_and_element() {
     // Topology change between frames.
     let seq = dir.join("seq");
     std::fs::create_dir_all(&seq).unwrap();
-    write(
-        &seq,
-        "f_0001.obj",
-        &format!("{QUAD}f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"),
-    );
-    write(
-        &seq,
-        "f_0002.obj",
-        &format!("{QUAD}f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"),
-    );
-    write(
-        &seq,
-        "f_0003.obj",
-        &format!("{QUAD}f 1/1 2/2 4/4\nf 2/2 3/3 4/4\n"),
-    );
+    let square = format!("{QUAD}f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n");
+    let flipped = format!("{QUAD}f 1/1 2/2 4/4\nf 2/2 3/3 4/4\n");
+    for (k, text) in [(1, &square), (2, &square), (3, &flipped)] {
+        write(&seq, &format!("f_{k:04}.obj"), text);
+    }
     let e = read_error(&seq.join("f_%04d.obj"), Some(1.0));
     assert!(
         e.contains("f_0003.obj") && e.contains("triangle 1") && e.contains("topology"),
@@ -462,19 +447,10 @@ fn bad_obj_input_names_file_and_element() {
     let e = read_error(&seq.join("f_%04d.obj"), Some(1.0));
     assert!(e.contains("f_0002.obj"), "{e}");
     // A good sequence reads, with its frames in order.
-    write(
-        &seq,
-        "f_0002.obj",
-        &format!("{QUAD}f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"),
-    );
-    write(
-        &seq,
-        "f_0003.obj",
-        &format!(
-            "{}f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n",
-            QUAD.replace("v 1 1 0", "v 1 1.5 0")
-        ),
-    );
+    let moved = square.replace("v 1 1 0", "v 1 1.5 0");
+    for (k, text) in [(2, &square), (3, &moved)] {
+        write(&seq, &format!("f_{k:04}.obj"), text);
+    }
     let options = skinpatch::surface::ReadOptions {
         mm_per_unit: Some(10.0),
         frame_rate_hz: 12.0,
@@ -860,7 +836,7 @@ struct GltfBuffers {
 
 impl GltfBuffers {
     fn push(&mut self, bytes: Vec<u8>, component: u32, count: usize, kind: &str) -> usize {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         self.views.push(format!(
@@ -923,7 +899,8 @@ fn skinned_gltf_is_posed_by_its_joints() {
         .flat_map(|i| [i, i + 1, i + 5, i, i + 5, i + 4])
         .collect();
     let position = b.f32s(&pos, 3, "VEC3");
-    b.accessors[position] = b.accessors[position].replace('}', ",\"min\":[0,0,0],\"max\":[1.5,0.5,0]}");
+    b.accessors[position] =
+        b.accessors[position].replace('}', ",\"min\":[0,0,0],\"max\":[1.5,0.5,0]}");
     let texcoord = b.f32s(&uv, 2, "VEC2");
     let index = b.push(
         indices.iter().flat_map(|i| i.to_le_bytes()).collect(),

@@ -183,6 +183,18 @@ impl MicroEngine {
     }
 }
 
+/// Removes an earlier run's files from the output folder (and says so).
+fn clear_previous_run(dir: &std::path::Path) -> Result<()> {
+    let cleared = export::outputs::clear_previous_run(dir)?;
+    if cleared > 0 {
+        log::info!(
+            "removed {cleared} files of an earlier run from {}",
+            dir.display()
+        );
+    }
+    Ok(())
+}
+
 /// `dst` as a hard link to `src` (no space taken), or a copy where the
 /// file system has no links. An existing `dst` is removed first: copying
 /// onto a link to `src` would truncate `src` itself.
@@ -281,13 +293,7 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<RunSum
         None => None,
     };
     // Then the previous run's files go, so the folder holds one run.
-    let cleared = export::outputs::clear_previous_run(dir)?;
-    if cleared > 0 {
-        log::info!(
-            "removed {cleared} files of an earlier run from {}",
-            dir.display()
-        );
-    }
+    clear_previous_run(dir)?;
     std::fs::create_dir_all(dir.join("frames")).map_err(|e| Error::io(dir, e))?;
     let mut written = Vec::new();
     if setup.write_mesh_vtu {

@@ -14,7 +14,7 @@ use std::io::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use super::{render, write_micro_frame, write_neutral, MicroEngine};
+use super::{clear_previous_run, render, write_micro_frame, write_neutral, MicroEngine};
 use crate::error::{Error, Result};
 use crate::export;
 use crate::mesh::{io, Vec3};
@@ -96,13 +96,8 @@ pub fn run(
         )?),
         None => None,
     };
-    let cleared = export::outputs::clear_previous_run(dir)?;
-    if cleared > 0 {
-        log::info!(
-            "removed {cleared} files of an earlier run from {}",
-            dir.display()
-        );
-    }
+    // Checks and adapters first; then the previous run's files go.
+    clear_previous_run(dir)?;
     let mut written = Vec::new();
     for (folder, wanted) in [
         ("frames", setup.write_frames),

@@ -519,8 +519,9 @@ impl Setup {
         if scenario.surface.is_some() {
             return Err(Error::parameter(
                 "surface",
-                "makes this an animated-surface scenario, which SurfaceSetup validates and \
-                 pipeline::surface::run runs (`skinpatch run` chooses by itself)",
+                "makes this an animated-surface scenario: `skinpatch run` runs it (from Rust: \
+                 SurfaceSetup and pipeline::surface::run); the viewer, `bench` and Setup \
+                 simulate the FEM patch",
             ));
         }
         let name = path
