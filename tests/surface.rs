@@ -980,3 +980,83 @@ fn skinned_gltf_is_posed_by_its_joints() {
     assert!(e.contains("StripMesh") && e.contains("WEIGHTS_0"), "{e}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Two charts side by side in UV with a 0.1 gutter: the dilated raster
+/// fills the gutter from the nearer chart only (the charts' T differ:
+/// diag(1, a) in the first chart's frame, diag(a, 1) in the swapped one),
+/// keeps every inside texel, and a triangle collapsed in UV is left out of
+/// the averages without changing them.
+#[test]
+fn charts_dilate_into_the_gutter_without_bleeding_and_uv_slivers_get_no_weight() {
+    let a = 1.2;
+    let s = cylinder(a, [0.0, 0.0], [0.0, 0.0]);
+    // A sliver: three positions of the first chart's bottom row (an arc in
+    // space) given UVs on one line.
+    let mut rest: Vec<Vec3> = s.top.vertices.iter().map(|&v| s.positions[v]).collect();
+    let mut uvs = s.top.uvs.clone();
+    let mut triangles = s.top.triangles.clone();
+    let frames: Vec<Vec<Vec3>> = s
+        .frames
+        .iter()
+        .map(|x| s.top.vertices.iter().map(|&v| x[v]).collect())
+        .collect();
+    let base = rest.len();
+    for k in 0..3 {
+        rest.push(rest[k]);
+        uvs.push([0.05 + 0.01 * k as f64, 0.05]);
+    }
+    triangles.push([base, base + 1, base + 2]);
+    let mut frames_sliver = frames.clone();
+    for (f, x) in frames_sliver.iter_mut().enumerate() {
+        for k in 0..3 {
+            x.push(frames[f][k]);
+        }
+    }
+    let sliver =
+        AnimatedSurface::from_vertices("sliver", rest, uvs, triangles, frames_sliver, 24.0)
+            .unwrap();
+    let field = SurfaceField::new(&sliver.top, &sliver.positions, &sliver.frames[1]);
+    assert_eq!(field.degenerate_triangles, 1);
+    for v in &field.vertices[..base] {
+        assert!((v.strain().rs() - a).abs() < 1e-12 && (v.strain().rt() - 1.0).abs() < 1e-12);
+    }
+
+    let field = SurfaceField::new(&s.top, &s.positions, &s.frames[1]);
+    let px = 100;
+    let raster = StrainRaster::new(&field, px, px);
+    let dilated = raster
+        .clone()
+        .dilated(skinpatch::strain::raster::DILATE_TEXELS);
+    let (first, second) = (
+        nalgebra::Matrix2::new(1.0, 0.0, 0.0, a),
+        nalgebra::Matrix2::new(a, 0.0, 0.0, 1.0),
+    );
+    let mut gutter = 0;
+    for j in 0..px {
+        for i in 0..px {
+            let k = j * px + i;
+            if raster.inside[k] {
+                assert_eq!(dilated.t[k], raster.t[k], "inside texels stay");
+                continue;
+            }
+            if !dilated.inside[k] {
+                continue;
+            }
+            gutter += 1;
+            // Texel centres: u = (i + 0.5) / px; the charts end at 0.45 and start at 0.55.
+            let u = (i as f64 + 0.5) / px as f64;
+            let want = if (0.45..0.5).contains(&u) {
+                first
+            } else if (0.5..0.55).contains(&u) {
+                second
+            } else {
+                continue;
+            };
+            assert!(
+                (dilated.t[k] - want).norm() < 1e-12,
+                "texel ({i}, {j}) at u = {u}"
+            );
+        }
+    }
+    assert!(gutter > 4 * 90, "{gutter} gutter texels filled");
+}
