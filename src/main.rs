@@ -481,7 +481,7 @@ fn run(
         scenario.output.dir = Some(dir);
     }
     if scenario.surface.is_some() {
-        return run_surface(path, &scenario, overrides, quiet);
+        return run_surface(path, &scenario, overrides, force, quiet);
     }
     let mut setup = Setup::from_scenario(&scenario, path)
         .with_context(|| format!("scenario {}", path.display()))?;
@@ -565,10 +565,12 @@ fn run_surface(
     path: &Path,
     scenario: &Scenario,
     overrides: &[String],
+    force: bool,
     quiet: bool,
 ) -> anyhow::Result<()> {
-    let setup = skinpatch::scenario::SurfaceSetup::from_scenario(scenario, path)
+    let mut setup = skinpatch::scenario::SurfaceSetup::from_scenario(scenario, path)
         .with_context(|| format!("scenario {}", path.display()))?;
+    setup.force_large_output = force;
     let progress = (!quiet).then(Progress::new);
     let result = skinpatch::pipeline::surface::run(&setup, |frame| {
         if let Some(p) = &progress {

@@ -1060,3 +1060,55 @@ fn charts_dilate_into_the_gutter_without_bleeding_and_uv_slivers_get_no_weight()
     }
     assert!(gutter > 4 * 90, "{gutter} gutter texels filled");
 }
+
+/// The planned output of a surface run bounds what it writes, and a run
+/// planned over 50 GB is refused before its folder exists, naming the
+/// frame rate key.
+#[test]
+fn surface_runs_are_planned_before_they_write() {
+    let dir = temp("plan");
+    let glb = common::root().join("examples/surfaces/forehead.glb");
+    let scenario = |rate: f64, px: usize, out: &str| {
+        format!(
+            "[surface]\nfile = \"{}\"\nframe_rate_hz = {rate:?}\n[output]\ndir = \"{}\"\n\
+             strain_images = true\nstrain_image_px = {px}\nvtu_compression = \"none\"\n",
+            glb.display(),
+            dir.join(out).display()
+        )
+    };
+    let setup =
+        SurfaceSetup::load(&write(&dir, "small.toml", &scenario(4.0, 128, "small"))).unwrap();
+    skinpatch::pipeline::surface::run(&setup, |_| {}).unwrap();
+    let written: u64 = walk(&dir.join("small"));
+    let planned = skinpatch::pipeline::plan::planned_surface_bytes(&setup);
+    eprintln!("planned {planned} bytes, wrote {written}");
+    assert!(
+        planned >= written && planned < 4 * written,
+        "planned {planned}, wrote {written}"
+    );
+    let big = SurfaceSetup::load(&write(&dir, "big.toml", &scenario(60.0, 8192, "big"))).unwrap();
+    let e = skinpatch::pipeline::surface::run(&big, |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("surface.frame_rate_hz") && e.contains("--force"),
+        "{e}"
+    );
+    assert!(!dir.join("big").exists());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Bytes of the files under `dir`.
+fn walk(dir: &Path) -> u64 {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| {
+            let path = e.unwrap().path();
+            if path.is_dir() {
+                walk(&path)
+            } else {
+                std::fs::metadata(&path).unwrap().len()
+            }
+        })
+        .sum()
+}

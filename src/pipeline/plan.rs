@@ -19,56 +19,107 @@ pub const MAX_PLANNED_BYTES: u64 = 50_000_000_000;
 const VTU_BYTES_PER_TET: u64 = 380;
 const VTU_BYTES_PER_POINT: u64 = 100;
 
+/// Bytes of one uncompressed Float64 frame VTU of an animated surface per
+/// point (surface vertex) and per triangle (measured: 615,930 bytes for the
+/// forehead example's 2,009 points and 3,840 triangles).
+const SURFACE_VTU_BYTES_PER_POINT: u64 = 175;
+const SURFACE_VTU_BYTES_PER_TRIANGLE: u64 = 70;
+
+/// What a run writes, stage by stage, for the estimate.
+struct Outputs<'a> {
+    /// Frames in the run.
+    frames: u64,
+    /// One frame VTU (bytes), written `vtu_copies` times a frame (VTU and
+    /// VTKHDF) plus `rest_vtu` once.
+    vtu: u64,
+    vtu_copies: u64,
+    rest_vtu: bool,
+    strain_images: Option<crate::scenario::StrainImageSettings>,
+    micro: Option<&'a crate::scenario::MicroSetup>,
+    /// Maps per frame (UDIM tiles; 1 otherwise).
+    maps: u64,
+    render: Option<&'a crate::render::RenderSetup>,
+}
+
+impl Outputs<'_> {
+    fn bytes(&self) -> u64 {
+        let frames = self.frames;
+        let mut total = 0u64;
+        let mut add =
+            |count: u64, bytes: u64| total = total.saturating_add(count.saturating_mul(bytes));
+        add(u64::from(self.rest_vtu), self.vtu);
+        add(frames * self.vtu_copies, self.vtu);
+        if let Some(images) = self.strain_images {
+            // Three RGB maps a frame and map.
+            add(frames * self.maps, 3 * 3 * (images.px as u64).pow(2));
+        }
+        let every = |stride: usize| frames.div_ceil(stride.max(1) as u64);
+        if let Some(m) = self.micro {
+            let (width, height) = m.neutral.size();
+            let texels = (width * height) as u64;
+            let per_map = u64::from(m.png16) * 2 + u64::from(m.exr) * 4;
+            let per_normals = u64::from(m.normal_maps) * (6 + u64::from(m.exr) * 12);
+            // The neutral map and every stride-th frame of every map.
+            add(
+                every(m.frame_stride) * self.maps + 1,
+                texels * (per_map + per_normals),
+            );
+        }
+        if let Some(r) = self.render {
+            let bytes_per_pixel = match r.format {
+                crate::render::FrameFormat::Png8 => 3,
+                crate::render::FrameFormat::Png16 => 6,
+                crate::render::FrameFormat::Exr => 12,
+            };
+            let pixels = (r.width * r.height) as u64;
+            add(
+                every(r.frame_stride) * r.modes.len() as u64,
+                pixels * bytes_per_pixel,
+            );
+            if r.difference {
+                add(every(r.frame_stride), pixels * 3);
+            }
+        }
+        total
+    }
+}
+
 /// The estimated bytes a run of `setup` writes.
 pub fn planned_bytes(setup: &Setup) -> u64 {
-    let frames = setup.simulation.frames as u64 + 1;
     let mesh = &setup.mesh;
-    let vtu = (VTU_BYTES_PER_TET * mesh.num_tets() as u64
-        + VTU_BYTES_PER_POINT * mesh.num_vertices() as u64)
-        / if setup.vtu_format.f32 { 2 } else { 1 };
-    let mut total = 0u64;
-    let mut add =
-        |count: u64, bytes: u64| total = total.saturating_add(count.saturating_mul(bytes));
-    if setup.write_mesh_vtu {
-        add(1, vtu);
+    Outputs {
+        frames: setup.simulation.frames as u64 + 1,
+        vtu: (VTU_BYTES_PER_TET * mesh.num_tets() as u64
+            + VTU_BYTES_PER_POINT * mesh.num_vertices() as u64)
+            / if setup.vtu_format.f32 { 2 } else { 1 },
+        // The VTKHDF steps hold the same arrays uncompressed, less the
+        // connectivity of every frame after the first: a bound like the VTU's.
+        vtu_copies: u64::from(setup.write_frames) + u64::from(setup.write_vtkhdf),
+        rest_vtu: setup.write_mesh_vtu,
+        strain_images: setup.strain_images,
+        micro: setup.micro.as_ref(),
+        maps: 1,
+        render: setup.render.as_ref(),
     }
-    if setup.write_frames {
-        add(frames, vtu);
+    .bytes()
+}
+
+/// The estimated bytes a run of an animated surface writes.
+pub fn planned_surface_bytes(setup: &crate::scenario::SurfaceSetup) -> u64 {
+    let top = &setup.surface.top;
+    Outputs {
+        frames: setup.surface.num_frames() as u64,
+        vtu: (SURFACE_VTU_BYTES_PER_POINT * top.vertices.len() as u64
+            + SURFACE_VTU_BYTES_PER_TRIANGLE * top.triangles.len() as u64)
+            / if setup.vtu_format.f32 { 2 } else { 1 },
+        vtu_copies: u64::from(setup.write_frames),
+        rest_vtu: setup.write_surface_vtu,
+        strain_images: setup.strain_images,
+        micro: setup.micro.as_ref(),
+        maps: setup.pieces.len() as u64,
+        render: setup.render.as_ref(),
     }
-    if setup.write_vtkhdf {
-        // The same arrays uncompressed, less the connectivity of every
-        // frame after the first: a bound like the VTU's.
-        add(frames, vtu);
-    }
-    if let Some(images) = setup.strain_images {
-        // Three RGB maps a frame.
-        add(frames, 3 * 3 * (images.px as u64).pow(2));
-    }
-    let every = |stride: usize| frames.div_ceil(stride.max(1) as u64);
-    if let Some(m) = &setup.micro {
-        let (width, height) = m.neutral.size();
-        let texels = (width * height) as u64;
-        let per_map = u64::from(m.png16) * 2 + u64::from(m.exr) * 4;
-        let per_normals = u64::from(m.normal_maps) * (6 + u64::from(m.exr) * 12);
-        // The neutral map and every stride-th frame.
-        add(every(m.frame_stride) + 1, texels * (per_map + per_normals));
-    }
-    if let Some(r) = &setup.render {
-        let bytes_per_pixel = match r.format {
-            crate::render::FrameFormat::Png8 => 3,
-            crate::render::FrameFormat::Png16 => 6,
-            crate::render::FrameFormat::Exr => 12,
-        };
-        let pixels = (r.width * r.height) as u64;
-        add(
-            every(r.frame_stride) * r.modes.len() as u64,
-            pixels * bytes_per_pixel,
-        );
-        if r.difference {
-            add(every(r.frame_stride), pixels * 3);
-        }
-    }
-    total
+    .bytes()
 }
 
 /// Free bytes on the file system that holds `dir` (or its nearest
@@ -100,25 +151,51 @@ fn free_bytes_at(_: &std::path::Path) -> Option<u64> {
 /// Refuses a run whose planned output exceeds [`MAX_PLANNED_BYTES`]
 /// (unless `force`) or the free space where it goes.
 pub fn check(setup: &Setup, force: bool) -> Result<()> {
-    let planned = planned_bytes(setup);
-    let gb = |b: u64| b as f64 / 1e9;
     let frames = setup.simulation.frames + 1;
+    refuse(
+        planned_bytes(setup),
+        frames,
+        &setup.output_dir,
+        force,
+        "time.frame_rate_hz",
+    )
+}
+
+/// [`check`] for an animated surface's run.
+pub fn check_surface(setup: &crate::scenario::SurfaceSetup, force: bool) -> Result<()> {
+    refuse(
+        planned_surface_bytes(setup),
+        setup.surface.num_frames(),
+        &setup.output_dir,
+        force,
+        "surface.frame_rate_hz",
+    )
+}
+
+fn refuse(
+    planned: u64,
+    frames: usize,
+    output_dir: &std::path::Path,
+    force: bool,
+    rate_key: &str,
+) -> Result<()> {
+    let gb = |b: u64| b as f64 / 1e9;
     if planned > MAX_PLANNED_BYTES && !force {
         return Err(Error::parameter(
             "output",
             format!(
                 "the run would write about {:.1} GB ({frames} frames), over the {:.0} GB a run \
-                 may write without --force; lower time.frame_rate_hz or the image sizes, raise \
+                 may write without --force; lower {rate_key} or the image sizes, raise \
                  the frame strides, turn off outputs, or pass --force",
                 gb(planned),
                 gb(MAX_PLANNED_BYTES)
             ),
         ));
     }
-    if let Some(free) = free_bytes(&setup.output_dir) {
+    if let Some(free) = free_bytes(output_dir) {
         if planned > free {
             return Err(Error::io(
-                &setup.output_dir,
+                output_dir,
                 std::io::Error::new(
                     std::io::ErrorKind::StorageFull,
                     format!(

@@ -77,6 +77,9 @@ pub fn run(
 ) -> Result<SurfaceRunSummary> {
     let dir = &setup.output_dir;
     let surface = &setup.surface;
+    // Everything that can fail before the first frame is checked before
+    // the folder is touched: the planned output size and the adapters.
+    super::plan::check_surface(setup, setup.force_large_output)?;
     // One chain per map (the unit square, or each UDIM tile).
     let mut engines = Vec::new();
     if let Some(micro) = &setup.micro {

@@ -62,6 +62,9 @@ pub struct SurfaceSetup {
     pub micro: Option<super::MicroSetup>,
     /// The renderer, if the scenario has one.
     pub render: Option<crate::render::RenderSetup>,
+    /// Run even when the planned output exceeds
+    /// [`crate::pipeline::plan::MAX_PLANNED_BYTES`] (`skinpatch run --force`).
+    pub force_large_output: bool,
 }
 
 impl SurfaceSetup {
@@ -168,6 +171,7 @@ impl SurfaceSetup {
             strain_images: scenario.output.strain_image_settings()?,
             micro,
             render,
+            force_large_output: false,
         })
     }
 
