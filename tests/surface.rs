@@ -1007,10 +1007,8 @@ fn charts_dilate_into_the_gutter_without_bleeding_and_uv_slivers_get_no_weight()
     }
     triangles.push([base, base + 1, base + 2]);
     let mut frames_sliver = frames.clone();
-    for (f, x) in frames_sliver.iter_mut().enumerate() {
-        for k in 0..3 {
-            x.push(frames[f][k]);
-        }
+    for (x, original) in frames_sliver.iter_mut().zip(&frames) {
+        x.extend_from_slice(&original[..3]);
     }
     let sliver =
         AnimatedSurface::from_vertices("sliver", rest, uvs, triangles, frames_sliver, 24.0)
