@@ -1,7 +1,7 @@
 //! Animated surfaces made by other tools (seed 000 §5, "novel surface
 //! animation"): a rest triangle mesh with UVs and its positions per frame,
-//! read from glTF 2.0 (morph targets with weight animation, [`gltf`]) or an
-//! OBJ sequence ([`obj`]), in millimetres.
+//! read from glTF 2.0 (morph targets and skins with their animation,
+//! [`gltf`]) or an OBJ sequence ([`obj`]), in millimetres.
 //!
 //! The strain of such a surface is the FEM top surface's (eq. 10–13 per
 //! triangle, area-weighted per vertex, interpolated per texel): an
