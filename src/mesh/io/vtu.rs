@@ -368,6 +368,13 @@ pub fn read_vtu(path: &Path) -> Result<Grid> {
         } => (connectivity, offsets),
         VertexNumbers::Legacy { .. } => return Err(bad("unexpected legacy cell layout".into())),
     };
+    if piece.cells.types.len() != offsets.len() {
+        return Err(bad(format!(
+            "{} cell types for {} cells",
+            piece.cells.types.len(),
+            offsets.len()
+        )));
+    }
     let (mut tets, mut triangles) = (Vec::with_capacity(offsets.len()), Vec::new());
     let mut start = 0usize;
     for (k, (&end, kind)) in offsets.iter().zip(&piece.cells.types).enumerate() {
