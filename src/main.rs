@@ -501,14 +501,31 @@ fn run(
         .sum::<f64>()
         .into();
     let summary_path = write_record(&setup.output_dir, &record)?;
-    let mut report = format!("scenario {}: mesh\n{}", setup.name, summary.quality);
-    if let Some(device) = &summary.micro_device {
+    let report = format!("scenario {}: mesh\n{}", setup.name, summary.quality);
+    report_run(
+        report,
+        summary.micro_device.as_deref(),
+        &summary.written,
+        &summary_path,
+        quiet,
+    )
+}
+
+/// Prints a finished run's report: where the microstructure ran and the
+/// files written (nothing with `--quiet`).
+fn report_run(
+    mut report: String,
+    micro_device: Option<&str>,
+    written: &[PathBuf],
+    summary_path: &Path,
+    quiet: bool,
+) -> anyhow::Result<()> {
+    if let Some(device) = micro_device {
         report += &format!("microstructure stages: {device}\n");
     }
-    for file in &summary.written {
+    for file in written.iter().map(|p| p.as_path()).chain([summary_path]) {
         report += &format!("wrote {}\n", file.display());
     }
-    report += &format!("wrote {}\n", summary_path.display());
     if quiet {
         return Ok(());
     }
@@ -601,17 +618,13 @@ fn run_surface(
             .collect();
         report += &format!("  UDIM tiles {}\n", tiles.join(", "));
     }
-    if let Some(device) = &summary.micro_device {
-        report += &format!("microstructure stages: {device}\n");
-    }
-    for file in &summary.written {
-        report += &format!("wrote {}\n", file.display());
-    }
-    report += &format!("wrote {}\n", summary_path.display());
-    if quiet {
-        return Ok(());
-    }
-    print_stdout(&report)
+    report_run(
+        report,
+        summary.micro_device.as_deref(),
+        &summary.written,
+        &summary_path,
+        quiet,
+    )
 }
 
 fn bench(stage: &str, path: &Path, frames: usize) -> anyhow::Result<()> {
