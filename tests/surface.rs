@@ -467,48 +467,28 @@ fn bad_obj_input_names_file_and_element() {
 /// animation with `values` outputs over two keyframes, buffers embedded as
 /// a data URI; `uv` says whether it has TEXCOORD_0.
 fn tiny_gltf(targets: usize, values: usize, uv: bool, x0: f32) -> String {
-    use base64::Engine;
-    let mut bin: Vec<u8> = Vec::new();
-    let mut f32s = |v: &[f32]| {
-        let offset = bin.len();
-        for x in v {
-            bin.extend(x.to_le_bytes());
-        }
-        (offset, v.len() * 4)
-    };
-    let pos = f32s(&[x0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
-    let tex = f32s(&[0.0, 1.0, 1.0, 1.0, 0.0, 0.0]);
-    let delta = f32s(&[0.0, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0]);
-    let times = f32s(&[0.0, 1.0]);
+    let mut b = GltfBuffers::default();
+    let pos = b.f32s(&[x0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0], 3, "VEC3");
+    b.bounds(pos, "[0,0,0]", "[1,1,0]");
+    let tex = b.f32s(&[0.0, 1.0, 1.0, 1.0, 0.0, 0.0], 2, "VEC2");
+    let delta = b.f32s(&[0.0, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0], 3, "VEC3");
+    b.bounds(delta, "[0,0,0]", "[0.5,0,0]");
+    let times = b.f32s(&[0.0, 1.0], 1, "SCALAR");
     let weights: Vec<f32> = (0..values).map(|i| (i % 2) as f32).collect();
-    let out = f32s(&weights);
-    let uri = format!(
-        "data:application/octet-stream;base64,{}",
-        base64::engine::general_purpose::STANDARD.encode(&bin)
-    );
-    let view =
-        |(o, l): (usize, usize)| format!("{{\"buffer\":0,\"byteOffset\":{o},\"byteLength\":{l}}}");
-    let views = [pos, tex, delta, times, out].map(view).join(",");
-    let targets_json = vec!["{\"POSITION\":2}"; targets].join(",");
+    let out = b.f32s(&weights, 1, "SCALAR");
+    let targets_json = vec![format!("{{\"POSITION\":{delta}}}"); targets].join(",");
     let attributes = if uv {
-        "\"POSITION\":0,\"TEXCOORD_0\":1"
+        format!("\"POSITION\":{pos},\"TEXCOORD_0\":{tex}")
     } else {
-        "\"POSITION\":0"
+        format!("\"POSITION\":{pos}")
     };
     format!(
         r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0]}}],
 "nodes":[{{"name":"Face","mesh":0}}],
 "meshes":[{{"name":"FaceMesh","primitives":[{{"attributes":{{{attributes}}},"targets":[{targets_json}]}}]}}],
-"animations":[{{"name":"smile","samplers":[{{"input":3,"output":4,"interpolation":"LINEAR"}}],"channels":[{{"sampler":0,"target":{{"node":0,"path":"weights"}}}}]}}],
-"buffers":[{{"byteLength":{len},"uri":"{uri}"}}],
-"bufferViews":[{views}],
-"accessors":[
-{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}},
-{{"bufferView":1,"componentType":5126,"count":3,"type":"VEC2"}},
-{{"bufferView":2,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[0.5,0,0]}},
-{{"bufferView":3,"componentType":5126,"count":2,"type":"SCALAR","min":[0],"max":[1]}},
-{{"bufferView":4,"componentType":5126,"count":{values},"type":"SCALAR"}}]}}"#,
-        len = bin.len()
+"animations":[{{"name":"smile","samplers":[{{"input":{times},"output":{out},"interpolation":"LINEAR"}}],"channels":[{{"sampler":0,"target":{{"node":0,"path":"weights"}}}}]}}],
+{}}}"#,
+        b.json()
     )
 }
 
@@ -852,6 +832,14 @@ impl GltfBuffers {
         self.accessors.len() - 1
     }
 
+    /// Adds `min` and `max` (JSON arrays) to accessor `index` (POSITION
+    /// accessors need them).
+    fn bounds(&mut self, index: usize, min: &str, max: &str) {
+        let acc = &mut self.accessors[index];
+        acc.pop();
+        acc.push_str(&format!(",\"min\":{min},\"max\":{max}}}"));
+    }
+
     fn f32s(&mut self, v: &[f32], per: usize, kind: &str) -> usize {
         self.push(
             v.iter().flat_map(|x| x.to_le_bytes()).collect(),
@@ -899,8 +887,7 @@ fn skinned_gltf_is_posed_by_its_joints() {
         .flat_map(|i| [i, i + 1, i + 5, i, i + 5, i + 4])
         .collect();
     let position = b.f32s(&pos, 3, "VEC3");
-    b.accessors[position] =
-        b.accessors[position].replace('}', ",\"min\":[0,0,0],\"max\":[1.5,0.5,0]}");
+    b.bounds(position, "[0,0,0]", "[1.5,0.5,0]");
     let texcoord = b.f32s(&uv, 2, "VEC2");
     let index = b.push(
         indices.iter().flat_map(|i| i.to_le_bytes()).collect(),

@@ -20,7 +20,7 @@ use crate::export;
 use crate::mesh::{io, Vec3};
 use crate::scenario::SurfaceSetup;
 use crate::strain::{StrainRaster, SurfaceField};
-use crate::surface::AnimatedSurface;
+use crate::surface::{AnimatedSurface, UvLayout};
 
 /// One frame's row of `metrics.csv`.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
@@ -111,8 +111,8 @@ pub fn run(
             std::fs::create_dir_all(&path).map_err(|e| Error::io(&path, e))?;
         }
     }
-    let rest_field = SurfaceField::new(&surface.top, &surface.positions, &surface.positions);
     if setup.write_surface_vtu {
+        let rest_field = SurfaceField::new(&surface.top, &surface.positions, &surface.positions);
         let path = dir.join("surface.vtu");
         let grid = export::surface_grid(surface, &surface.positions, &rest_field);
         io::write_vtu_as(&path, &grid, setup.vtu_format)?;
@@ -131,14 +131,8 @@ pub fn run(
     written.push(metrics_path.clone());
     let mut frames = Vec::new();
     let mut collection = Vec::new();
-    let whole = setup.pieces.len() == 1
-        && setup.pieces[0].udim.is_none()
-        && setup.pieces[0].triangles.len() == surface.top.triangles.len()
-        && setup.pieces[0]
-            .triangles
-            .iter()
-            .enumerate()
-            .all(|(k, &(t, o))| k == t && o == [0.0, 0.0]);
+    // The unit square's one piece is every triangle in place: no view.
+    let whole = setup.layout == UvLayout::Unit;
     let total_frames = surface.num_frames();
     let result = (|| -> Result<()> {
         for (f, x) in surface.frames.iter().enumerate() {

@@ -237,11 +237,10 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<AnimatedSurface> {
     let rate = options.frame_rate_hz;
     // Keyframe times are f32: a sample within this of a key takes the key.
     let tol = 1e-4 / rate;
+    // Without an animation every node keeps its own transform.
+    let still = clip::Clip::default();
     let pose = |t: Option<f64>, weights: &[f64]| -> Vec<Vec3> {
-        let local = |n: &::gltf::Node<'_>| match &clip {
-            Some(c) => c.local(n, t, tol),
-            None => clip::Clip::default().local(n, None, tol),
-        };
+        let local = |n: &::gltf::Node<'_>| clip.as_ref().unwrap_or(&still).local(n, t, tol);
         let world = clip::world_matrices(doc, &roots, &local);
         let morphed = |v: usize| {
             let mut p = raw[v];

@@ -76,13 +76,12 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<AnimatedSurface> {
     };
     split.rest = positions(&rest);
     for file in &files {
-        let frame = if *file == rest_file {
-            rest.clone()
-        } else {
-            let frame = load(file)?;
-            same_topology(&rest_file, &rest, file, &frame)?;
-            frame
-        };
+        if *file == rest_file {
+            split.frames.push(split.rest.clone());
+            continue;
+        }
+        let frame = load(file)?;
+        same_topology(&rest_file, &rest, file, &frame)?;
         split.frames.push(positions(&frame));
     }
     AnimatedSurface::from_split(split, mm, options.frame_rate_hz)
