@@ -98,6 +98,9 @@ pub struct MicroRow {
 pub struct MicroBench {
     /// The GPU adapter, if any.
     pub adapter: Option<String>,
+    /// The adapter's peak memory bandwidth (GB/s) where
+    /// [`peak_bandwidth_gbs`] knows it.
+    pub peak_bandwidth_gbs: Option<f64>,
     /// One row per size.
     pub rows: Vec<MicroRow>,
 }
@@ -154,6 +157,7 @@ pub fn bench_micro(
     let patch_mm = hi.x - lo.x;
     let mut ctx = crate::gpu::acquire()?;
     let adapter = ctx.as_ref().map(|c| c.describe());
+    let peak_bandwidth_gbs = ctx.as_ref().and_then(|c| peak_bandwidth_gbs(&c.info.name));
     let mut rows = Vec::new();
     for &size in sizes {
         let (extent_mm, run_cpu) = match layout {
@@ -235,7 +239,46 @@ pub fn bench_micro(
         on_row(&row);
         rows.push(row);
     }
-    Ok(MicroBench { adapter, rows })
+    Ok(MicroBench {
+        adapter,
+        peak_bandwidth_gbs,
+        rows,
+    })
+}
+
+/// Published peak memory bandwidth (GB/s) of the GPUs the targets are set
+/// on and a few common ones, by the adapter name the Vulkan driver reports
+/// (e.g. `NVIDIA H100 80GB HBM3`); `None` for others (software adapters
+/// included), where `bench micro --bandwidth-gbs` gives it.
+pub fn peak_bandwidth_gbs(adapter_name: &str) -> Option<f64> {
+    let name = adapter_name.to_ascii_uppercase();
+    let has = |part: &str| name.contains(part);
+    let gbs = if has("H200") {
+        4800.0
+    } else if has("H100") && has("PCIE") {
+        2000.0
+    } else if has("H100") && has("NVL") {
+        3900.0
+    } else if has("H100") {
+        3350.0
+    } else if has("A100") && has("80GB") && has("PCIE") {
+        1935.0
+    } else if has("A100") && has("80GB") {
+        2039.0
+    } else if has("A100") {
+        1555.0
+    } else if has("L40") {
+        864.0
+    } else if has("RTX 4090") {
+        1008.0
+    } else if has("RTX 3090") {
+        936.0
+    } else if has("V100") {
+        900.0
+    } else {
+        return None;
+    };
+    Some(gbs)
 }
 
 /// The tiled chain over `neutral` held as tiles of `tile` texels (in a
@@ -321,6 +364,16 @@ fn centred_field(mesh: &TetMesh, deformed: &[Vec3], scale: f64) -> Result<Surfac
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn peak_bandwidths_by_adapter_name() {
+        assert_eq!(peak_bandwidth_gbs("NVIDIA H100 80GB HBM3"), Some(3350.0));
+        assert_eq!(peak_bandwidth_gbs("NVIDIA H100 PCIe"), Some(2000.0));
+        assert_eq!(peak_bandwidth_gbs("NVIDIA H200"), Some(4800.0));
+        assert_eq!(peak_bandwidth_gbs("NVIDIA A100-SXM4-80GB"), Some(2039.0));
+        assert_eq!(peak_bandwidth_gbs("NVIDIA A100-PCIE-40GB"), Some(1555.0));
+        assert_eq!(peak_bandwidth_gbs("llvmpipe (LLVM 19.1.7, 256 bits)"), None);
+    }
 
     #[test]
     fn a_centred_field_has_the_same_strain_and_leaves_the_rest_of_the_map_at_rest() {

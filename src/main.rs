@@ -163,6 +163,11 @@ enum Command {
         /// this way).
         #[arg(long, value_name = "TEXELS")]
         tile: Option<usize>,
+        /// `micro`: the GPU's peak memory bandwidth (GB/s) the per-stage
+        /// traffic is compared with, for adapters the bench does not know
+        /// by name.
+        #[arg(long, value_name = "GBS")]
+        bandwidth_gbs: Option<f64>,
         /// Image width for `render` (px).
         #[arg(long, default_value_t = 1920)]
         width: usize,
@@ -450,10 +455,17 @@ fn main() -> ExitCode {
             texel_um,
             cpu_up_to,
             tile,
+            bandwidth_gbs,
             width,
             height,
         } => match stage.as_str() {
-            "micro" => bench_micro(&scenario, frames, &sizes, texel_um, cpu_up_to, tile),
+            "micro" => bench_micro(
+                &scenario,
+                frames,
+                &sizes,
+                (texel_um, cpu_up_to, tile),
+                bandwidth_gbs,
+            ),
             "render" => bench_render(&scenario, frames, width, height),
             _ => bench(&stage, &scenario, frames),
         },
@@ -748,16 +760,19 @@ fn tiles(
     Ok(())
 }
 
+/// `bench micro`; `fixed_texel` is (--texel-um, --cpu-up-to, --tile).
 fn bench_micro(
     path: &Path,
     frames: usize,
     sizes: &[usize],
-    texel_um: Option<f64>,
-    cpu_up_to: usize,
-    tile: Option<usize>,
+    (texel_um, cpu_up_to, tile): (Option<f64>, usize, Option<usize>),
+    bandwidth_gbs: Option<f64>,
 ) -> anyhow::Result<()> {
     if sizes.is_empty() || sizes.contains(&0) {
         bail!("--sizes needs positive map sides, e.g. 1024,2048,4096");
+    }
+    if let Some(b) = bandwidth_gbs.filter(|b| !(b.is_finite() && *b > 0.0)) {
+        bail!("--bandwidth-gbs must be a positive number of GB/s, got {b}");
     }
     let layout = match (texel_um, tile) {
         (None, Some(_)) => bail!("--tile needs --texel-um (tiles hold a map of fixed texels)"),
@@ -867,6 +882,56 @@ fn bench_micro(
             );
         } else {
             println!("(the adapter has no timestamp queries: wall times only)");
+        }
+        let timestamps = profiled
+            .iter()
+            .all(|(_, s)| s.gpu_ms.iter().any(Option::is_some));
+        stage_table(
+            "Bytes each stage must move at least (MB; taps and neighbours counted once, as if \
+             a cache served them):",
+            &|s, k| format!("{:.1}", s.bytes[k] as f64 * 1e-6),
+        );
+        stage_table("Achieved GB/s over the wall times:", &|s, k| {
+            format!("{:.2}", s.bytes[k] as f64 / (s.wall_ms[k] * 1e6))
+        });
+        if timestamps {
+            stage_table(
+                "Achieved GB/s over the GPU times (transfers over wall time):",
+                &|s, k| format!("{:.2}", s.gb_per_s(k)),
+            );
+        }
+        let peak = bandwidth_gbs.or(bench.peak_bandwidth_gbs);
+        match peak {
+            Some(b) => {
+                println!(
+                    "resident frame (raster, passes, normals) against {b:.0} GB/s peak{}:",
+                    if bandwidth_gbs.is_some() {
+                        " (--bandwidth-gbs)"
+                    } else {
+                        " (published figure for this GPU)"
+                    }
+                );
+                for (size, s) in &profiled {
+                    let bytes = s.resident_bytes();
+                    let floor_ms = bytes as f64 / (b * 1e6);
+                    let shader_ms: f64 = skinpatch::gpu::micro::MicroStage::ALL
+                        .iter()
+                        .enumerate()
+                        .filter(|(_, st)| st.runs_shaders())
+                        .map(|(k, _)| s.ms(k))
+                        .sum();
+                    println!(
+                        "{size:>6} {:>10.3} MB  floor {floor_ms:>9.3} ms  stages {shader_ms:>9.3} ms  \
+                         = {:.1}× the floor, {:.1}% of peak",
+                        bytes as f64 * 1e-6,
+                        shader_ms / floor_ms,
+                        100.0 * floor_ms / shader_ms
+                    );
+                }
+            }
+            None => println!(
+                "(peak bandwidth of this adapter unknown: --bandwidth-gbs compares the traffic with it)"
+            ),
         }
     }
     Ok(())

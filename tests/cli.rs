@@ -362,6 +362,47 @@ fn solver_failure_stops_cleanly_and_keeps_outputs() {
         .contains("frame_0000.vtu"));
 }
 
+/// `bench micro` prints each stage's traffic and, given the peak
+/// bandwidth, how far a resident frame is from it; a bad bandwidth is
+/// refused before any work.
+#[test]
+fn bench_micro_reports_traffic_against_a_given_bandwidth() {
+    let args = [
+        "bench",
+        "micro",
+        "--scenario",
+        "tests/fixtures/press_small.toml",
+        "--sizes",
+        "64",
+        "--frames",
+        "1",
+        "--bandwidth-gbs",
+    ];
+    let o = skinpatch(&[&args[..], &["50"]].concat());
+    assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    let out = text(&o.stdout);
+    if !out.contains("no GPU adapter") {
+        assert!(out.contains("Bytes each stage must move"), "{out}");
+        assert!(out.contains("Achieved GB/s over the wall times"), "{out}");
+        let floor = out
+            .lines()
+            .find(|l| l.contains("× the floor"))
+            .unwrap_or_else(|| panic!("no floor line: {out}"));
+        // 64² texels: raster 32 B, passes 40 B each, normals 20 B a texel.
+        let mb: f64 = floor.split_whitespace().nth(1).unwrap().parse().unwrap();
+        let expected = (32.0 + 40.0 + 40.0 + 20.0) * 64.0 * 64.0 * 1e-6;
+        assert!(
+            (mb - expected).abs() < 0.03 * expected,
+            "{floor} vs {expected} MB"
+        );
+        assert!(out.contains("50 GB/s peak (--bandwidth-gbs)"), "{out}");
+    }
+    let o = skinpatch(&[&args[..], &["0"]].concat());
+    assert_eq!(o.status.code(), Some(1));
+    let err = text(&o.stderr);
+    assert!(err.contains("--bandwidth-gbs must be a positive"), "{err}");
+}
+
 #[test]
 fn bench_fem_compares_solvers() {
     let o = skinpatch(&[

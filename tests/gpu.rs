@@ -675,6 +675,29 @@ fn bench_micro_profiles_every_stage() {
         assert!(times.gpu_ms.iter().all(Option::is_none));
     }
     assert!(row.max_difference.unwrap() <= 1e-4, "{row:?}");
+    // The traffic model: the patch's UVs fill the map, so the passes run on
+    // every texel, the raster covers the whole map (its UV area), and the
+    // read-back is D′ and its normals.
+    use skinpatch::gpu::micro::{
+        NORMALS_BYTES_PER_TEXEL, PASS_BYTES_PER_TEXEL, RASTER_BYTES_PER_TEXEL,
+    };
+    let texels = 128 * 128;
+    assert_eq!(row.pass_tile_share, Some(1.0));
+    let b = times.bytes;
+    assert_eq!(b[2], PASS_BYTES_PER_TEXEL * texels, "{b:?}");
+    assert_eq!(b[3], PASS_BYTES_PER_TEXEL * texels, "{b:?}");
+    assert_eq!(b[4], NORMALS_BYTES_PER_TEXEL * texels, "{b:?}");
+    assert_eq!(b[5], 20 * texels, "{b:?}");
+    let raster = b[1] as f64 / (RASTER_BYTES_PER_TEXEL * texels) as f64;
+    assert!(
+        (0.98..=1.0).contains(&raster),
+        "{raster} of the map covered"
+    );
+    // 40 bytes a vertex and three tile lists of 65 entries.
+    assert!(b[0] > 40 * mesh.top.vertices.len() as u64, "{b:?}");
+    assert_eq!(times.resident_bytes(), b[1] + b[2] + b[3] + b[4]);
+    let gbs = times.gb_per_s(2);
+    assert!(gbs > 0.0 && gbs.is_finite(), "{gbs}");
 }
 
 #[test]
@@ -711,6 +734,17 @@ fn bench_micro_fixed_texel_puts_the_patch_on_a_larger_map() {
     // a part of its tiles, and its tiled form convolves a part of its tiles
     // and agrees with the untiled chain.
     assert!(large.pass_tile_share.unwrap() < 0.5, "{large:?}");
+    // Its traffic follows: the passes move bytes for under half the map,
+    // the raster for a sixteenth of it (the patch's UV area: a quarter of
+    // the side).
+    let b = large.stages.unwrap().bytes;
+    let per_pass = skinpatch::gpu::micro::PASS_BYTES_PER_TEXEL * 512 * 512;
+    assert!(b[2] > 0 && b[2] < per_pass / 2, "{b:?}");
+    let raster = b[1] as f64 / (skinpatch::gpu::micro::RASTER_BYTES_PER_TEXEL * 512 * 512) as f64;
+    assert!(
+        (raster - 1.0 / 16.0).abs() < 1e-3,
+        "{raster} of the map covered"
+    );
     let tiled = large.tiled.as_ref().unwrap();
     assert_eq!(tiled.total, 16, "{tiled:?}");
     assert!(tiled.active > 0 && tiled.active < tiled.total, "{tiled:?}");

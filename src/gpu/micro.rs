@@ -63,7 +63,44 @@ pub struct StageTimes {
     /// GPU time of each shader stage from timestamp queries (ms); `None`
     /// for the transfers and where the adapter has no timestamp queries.
     pub gpu_ms: [Option<f64>; MicroStage::COUNT],
+    /// Bytes each stage must move at least ([`GpuMicro::frame_bytes`]).
+    pub bytes: [u64; MicroStage::COUNT],
 }
+
+impl StageTimes {
+    /// A stage's time: GPU time where the adapter has timestamp queries,
+    /// wall time otherwise (ms).
+    pub fn ms(&self, k: usize) -> f64 {
+        self.gpu_ms[k].unwrap_or(self.wall_ms[k])
+    }
+
+    /// Bytes a stage moved per second over [`StageTimes::ms`] (GB/s).
+    pub fn gb_per_s(&self, k: usize) -> f64 {
+        self.bytes[k] as f64 / (self.ms(k) * 1e6)
+    }
+
+    /// Bytes the shader stages of a resident frame (raster, both passes,
+    /// normals; no transfers) must move at least.
+    pub fn resident_bytes(&self) -> u64 {
+        MicroStage::ALL
+            .iter()
+            .zip(&self.bytes)
+            .filter(|(s, _)| s.runs_shaders())
+            .map(|(_, b)| b)
+            .sum()
+    }
+}
+
+/// Bytes per texel the raster writes: `T − I` and `Q Rᵀ`, two `rgba32float`
+/// texels.
+pub const RASTER_BYTES_PER_TEXEL: u64 = 32;
+/// Bytes per texel a convolution pass moves at least: the two raster
+/// texels it takes its SVD from, the centre height read and the height
+/// written. The other taps are neighbours' heights, which a cache serves.
+pub const PASS_BYTES_PER_TEXEL: u64 = 32 + 4 + 4;
+/// Bytes per texel of the normals: the height read (its neighbours come from
+/// a cache) and an `rgba32float` normal written.
+pub const NORMALS_BYTES_PER_TEXEL: u64 = 4 + 16;
 
 impl MicroStage {
     /// Whether the stage runs shaders (the others are transfers).
@@ -108,6 +145,27 @@ pub struct FrameTiles {
     pub normals: usize,
     /// Tiles in the map.
     pub total: usize,
+    /// Texels in the tiles of the pass along s, the pass along t and the
+    /// normals.
+    pub texels: [usize; 3],
+    /// Bytes uploaded: the raster vertices and the tile lists.
+    pub upload_bytes: u64,
+}
+
+/// Texels a raster of `width × height` covers: the UV area of the
+/// triangles (UVs in the map's unit square) in texels, at most the map's
+/// texel count (copies beyond the edges and overlaps are counted, so this
+/// is an estimate, exact for one chart inside the map).
+fn covered_texels(triangles: &[[usize; 3]], uvs: &[[f32; 2]], width: usize, height: usize) -> u64 {
+    let area: f64 = triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|k| uvs[k].map(f64::from));
+            0.5 * ((b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1])).abs()
+        })
+        .sum();
+    let texels = (width * height) as f64;
+    (area * texels).min(texels).round() as u64
 }
 
 /// Triangles and raster UVs of a surface as the raster draws them.
@@ -159,6 +217,9 @@ pub struct GpuMicro {
     tiles: FrameTiles,
     /// Tiles the passes ran on, and tiles in the map, over all frames so far.
     pass_tiles: (u64, u64),
+    /// Texels the raster covers (the UV area of the layout's triangles in
+    /// texels, at most the map's).
+    raster_texels: u64,
 }
 
 impl GpuMicro {
@@ -226,6 +287,7 @@ impl GpuMicro {
             normals_due: TileMask::empty(w, h),
             tiles: FrameTiles::default(),
             pass_tiles: (0, 0),
+            raster_texels: 0,
         })
     }
 
@@ -349,6 +411,9 @@ impl GpuMicro {
             self.ctx.finish()?;
             times.wall_ms[k] = start.elapsed().as_secs_f64() * 1e3;
         }
+        let read_normals_too =
+            (self.width * self.height * 16) as u64 <= self.ctx.limits.max_buffer_size;
+        times.bytes = self.frame_bytes(read_normals_too);
         if let Some(t) = &timer {
             let gpu = t.read(&self.ctx)?;
             for (k, stage) in MicroStage::ALL.into_iter().enumerate() {
@@ -358,6 +423,25 @@ impl GpuMicro {
             }
         }
         Ok(times)
+    }
+
+    /// The bytes each stage of the last frame had to move at least, in
+    /// [`MicroStage::ALL`] order: what was uploaded, the raster's covered
+    /// texels, each pass's and the normals' texels (the `*_BYTES_PER_TEXEL`
+    /// constants) and the read-back of D′ (with its normals when
+    /// `normals_read`). A lower bound on memory traffic: a stage at the
+    /// device's bandwidth takes its bytes over that bandwidth.
+    pub fn frame_bytes(&self, normals_read: bool) -> [u64; MicroStage::COUNT] {
+        let t = &self.tiles;
+        let texels = (self.width * self.height) as u64;
+        MicroStage::ALL.map(|stage| match stage {
+            MicroStage::Upload => t.upload_bytes,
+            MicroStage::Raster => RASTER_BYTES_PER_TEXEL * self.raster_texels,
+            MicroStage::PassS => PASS_BYTES_PER_TEXEL * t.texels[0] as u64,
+            MicroStage::PassT => PASS_BYTES_PER_TEXEL * t.texels[1] as u64,
+            MicroStage::Normals => NORMALS_BYTES_PER_TEXEL * t.texels[2] as u64,
+            MicroStage::ReadBack => texels * if normals_read { 4 + 16 } else { 4 },
+        })
     }
 
     /// The triangles and raster vertices of `field` in this chain's map:
@@ -420,6 +504,7 @@ impl GpuMicro {
             _ => {
                 // A new UV layout: the maps and raster start over.
                 self.surface = Some(SurfaceBuffers::from_parts(&self.ctx, &tri, &verts));
+                self.raster_texels = covered_texels(&tri, &uvs, self.width, self.height);
                 self.layout = Some((tri.clone(), uvs.clone()));
                 self.planner = None;
                 self.reset();
@@ -438,24 +523,42 @@ impl GpuMicro {
         });
         let plan = planner.plan(&verts);
         self.normals_due.add(&plan.normals);
-        let write = |k: usize, mask: &TileMask| {
+        let (w, h) = (self.width, self.height);
+        let mut upload_bytes = std::mem::size_of_val(verts.as_slice()) as u64;
+        let mut write = |k: usize, mask: &TileMask| {
             let list = mask.list();
             self.ctx
                 .queue
                 .write_buffer(&self.tile_lists[k], 0, bytemuck::cast_slice(&list));
+            upload_bytes += 4 * list.len() as u64;
             list.len() - 1
         };
+        let pass_s = write(0, &plan.pass_s);
+        let pass_t = write(1, &plan.pass_t);
+        let mut normals_list = None;
+        if normals {
+            normals_list = Some(write(2, &self.normals_due));
+        }
         self.tiles = FrameTiles {
-            pass_s: write(0, &plan.pass_s),
-            pass_t: write(1, &plan.pass_t),
-            normals: 0,
+            pass_s,
+            pass_t,
+            normals: normals_list.unwrap_or(0),
             total: plan.pass_s.total(),
+            texels: [
+                plan.pass_s.texels(w, h),
+                plan.pass_t.texels(w, h),
+                if normals {
+                    self.normals_due.texels(w, h)
+                } else {
+                    0
+                },
+            ],
+            upload_bytes,
         };
         self.pass_tiles.0 += (self.tiles.pass_s + self.tiles.pass_t) as u64;
         self.pass_tiles.1 += 2 * self.tiles.total as u64;
         if normals {
-            self.tiles.normals = write(2, &self.normals_due);
-            self.normals_due = TileMask::empty(self.width, self.height);
+            self.normals_due = TileMask::empty(w, h);
         }
     }
 

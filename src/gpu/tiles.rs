@@ -117,6 +117,17 @@ impl TileMask {
         self.set.iter().filter(|&&b| b).count()
     }
 
+    /// Texels of a `width × height` map inside the set's tiles (tiles on
+    /// the map's far edges hold fewer than [`TILE`]² of them).
+    pub fn texels(&self, width: usize, height: usize) -> usize {
+        let side = |k: usize, n: usize| n.min((k + 1) * TILE) - k * TILE;
+        (0..self.rows)
+            .flat_map(|y| (0..self.cols).map(move |x| (x, y)))
+            .filter(|&(x, y)| self.contains(x, y))
+            .map(|(x, y)| side(x, width) * side(y, height))
+            .sum()
+    }
+
     /// Tiles in the grid.
     pub fn total(&self) -> usize {
         self.set.len()
@@ -356,6 +367,18 @@ mod tests {
             t: [t, 0.0, 0.0, 0.0],
             frame: [frame, 0.0, 0.0, frame],
         }
+    }
+
+    #[test]
+    fn texels_of_a_mask_stop_at_the_map_edges() {
+        // 40 × 20 texels: tiles of 16, 16 and 8 columns, 16 and 4 rows.
+        let mut m = TileMask::empty(40, 20);
+        assert_eq!(m.texels(40, 20), 0);
+        m.add_range((2, 1, 2, 1));
+        assert_eq!(m.texels(40, 20), 8 * 4);
+        m.add_range((0, 0, 1, 0));
+        assert_eq!(m.texels(40, 20), 8 * 4 + 2 * 256);
+        assert_eq!(TileMask::full(40, 20).texels(40, 20), 800);
     }
 
     /// Two triangles: one in the top-left corner, one far from it.
