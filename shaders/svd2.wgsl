@@ -8,10 +8,18 @@
 // per-texel parameter buffer (32 bytes a texel) is needed per frame. The
 // entry point `svd2_main` writes them out, for tests and inspection.
 //
-// Reads the raster textures of raster.wgsl. A texel off the surface (zero
-// Q R^T) first takes the values of its nearest surface texel within
-// `dilate` texels (square window, Euclidean distance, ties to the first in
-// row-major window order); one with none stays the identity pass.
+// Reads the raster textures of raster.wgsl. A raster texel off the surface
+// (zero Q R^T) first takes the values of its nearest surface texel within
+// `dilate` raster texels (square window, Euclidean distance, ties to the
+// first in row-major window order); one with none stays the identity pass.
+//
+// With `step` = 1 the raster has the map's texels and each map texel reads
+// its own. With `step` > 1 the raster has one texel per step x step map
+// texels (CPU reference: src/strain/raster.rs, CoarseRaster): map texel i
+// reads raster coordinate x = (i + 1/2) / step - 1/2, clamped to the
+// raster, as the bilinear mix of its four neighbours (each dilated as
+// above); neighbours off the surface drop out and the others' weights are
+// renormalised.
 //
 // SVD of T from the raster's T - I = [a' b'; c' d'] (so that F and G, which
 // fix the axes, keep full f32 precision when T is near a rotation):
@@ -24,16 +32,30 @@
 // Mirrors `FieldInfo` in src/gpu/svd2.rs. Tables are (r, value) pairs in
 // `table`: alpha(r), sigma(r < 1) and sigma(r >= 1) in micrometres.
 struct FieldInfo {
+    // The map's texels.
     width: u32,
     height: u32,
     dilate: u32,
-    _pad0: u32,
+    // Map texels per raster texel along each side.
+    step: u32,
     alpha_start: u32,
     alpha_len: u32,
     compression_start: u32,
     compression_len: u32,
     stretch_start: u32,
     stretch_len: u32,
+    // The raster's texels.
+    raster_width: u32,
+    raster_height: u32,
+    // For a window of a larger map (src/gpu/tiled.rs): the window's first
+    // texel in the larger map's raster texels, the larger map's raster
+    // texels, and whether it wraps (then a texel beyond its edge reads as
+    // its wrapped twin does); else 0, the raster's size and 0. Bilinear
+    // reads clamp at the larger map's edges, as its own chain's do.
+    raster_origin: vec2<i32>,
+    map_raster: vec2<i32>,
+    wrap: u32,
+    _pad0: u32,
     _pad1: u32,
     _pad2: u32,
 };
@@ -121,34 +143,110 @@ struct TexelPasses {
     stretch: vec2<f32>,
 };
 
-fn texel_passes(id: vec2<u32>) -> TexelPasses {
-    var coord = vec2<i32>(id);
-    var frame = textureLoad(frame_tex, coord, 0);
-    if (!on_surface(frame)) {
-        let r = i32(info.dilate);
-        var best = -1;
-        var best_coord = coord;
-        for (var dj = -r; dj <= r; dj++) {
-            for (var di = -r; di <= r; di++) {
-                let c = coord + vec2<i32>(di, dj);
-                if (c.x < 0 || c.y < 0 || c.x >= i32(info.width) || c.y >= i32(info.height)) {
-                    continue;
-                }
-                let d2 = di * di + dj * dj;
-                if ((best < 0 || d2 < best) && on_surface(textureLoad(frame_tex, c, 0))) {
-                    best = d2;
-                    best_coord = c;
+// The raster texel holding the values of raster texel `coord`: itself on
+// the surface, else its nearest surface texel within `info.dilate`, else
+// itself (off the surface).
+fn dilated_coord(coord: vec2<i32>) -> vec2<i32> {
+    if (on_surface(textureLoad(frame_tex, coord, 0))) {
+        return coord;
+    }
+    let r = i32(info.dilate);
+    var best = -1;
+    var best_coord = coord;
+    for (var dj = -r; dj <= r; dj++) {
+        for (var di = -r; di <= r; di++) {
+            let c = coord + vec2<i32>(di, dj);
+            if (c.x < 0 || c.y < 0 || c.x >= i32(info.raster_width) || c.y >= i32(info.raster_height)) {
+                continue;
+            }
+            let d2 = di * di + dj * dj;
+            if ((best < 0 || d2 < best) && on_surface(textureLoad(frame_tex, c, 0))) {
+                best = d2;
+                best_coord = c;
+            }
+        }
+    }
+    return best_coord;
+}
+
+// Bilinear read along one side: the lower raster texel, the upper one's
+// weight, and the last raster texel the read may use.
+struct Axis {
+    lower: i32,
+    weight: f32,
+    last: i32,
+};
+
+// The read for texel `i` of this chain's map along a side whose window
+// starts at raster texel `origin` of a larger map `n` raster texels long
+// (CPU: coarse_neighbours, where origin = 0 and there are no copies).
+fn coarse_axis(i: u32, origin: i32, n: i32) -> Axis {
+    let step = i32(info.step);
+    var copy = 0;
+    if (info.wrap != 0u) {
+        let g = i32(i) + origin * step;
+        let m = n * step;
+        copy = g / m;
+        if (g % m != 0 && g < 0) {
+            copy -= 1;
+        }
+    }
+    let lo = copy * n - origin;
+    let hi = lo + n - 1;
+    let x = clamp((f32(i) + 0.5) / f32(step) - 0.5, f32(lo), f32(hi));
+    let lower = min(floor(x), f32(max(hi - 1, lo)));
+    return Axis(i32(lower), x - lower, hi);
+}
+
+// T - I and Q R^T at map texel `id`: its own raster texel (step 1) or the
+// renormalised bilinear mix of the surface values among its four raster
+// neighbours; a zero frame where there is none.
+struct RasterSample {
+    t: vec4<f32>,
+    frame: vec4<f32>,
+};
+
+fn raster_sample(id: vec2<u32>) -> RasterSample {
+    if (info.step == 1u) {
+        let coord = dilated_coord(vec2<i32>(id));
+        return RasterSample(textureLoad(t_tex, coord, 0), textureLoad(frame_tex, coord, 0));
+    }
+    let ax = coarse_axis(id.x, info.raster_origin.x, info.map_raster.x);
+    let ay = coarse_axis(id.y, info.raster_origin.y, info.map_raster.y);
+    let last = vec2<i32>(ax.last, ay.last);
+    var weight = 0.0;
+    var t = vec4<f32>(0.0);
+    var frame = vec4<f32>(0.0);
+    for (var dy = 0; dy < 2; dy++) {
+        for (var dx = 0; dx < 2; dx++) {
+            let wx = select(1.0 - ax.weight, ax.weight, dx == 1);
+            let wy = select(1.0 - ay.weight, ay.weight, dy == 1);
+            let w = wx * wy;
+            if (w > 0.0) {
+                let c = min(vec2<i32>(ax.lower + dx, ay.lower + dy), last);
+                let d = dilated_coord(c);
+                let f = textureLoad(frame_tex, d, 0);
+                if (on_surface(f)) {
+                    weight += w;
+                    t += w * textureLoad(t_tex, d, 0);
+                    frame += w * f;
                 }
             }
         }
-        coord = best_coord;
-        frame = textureLoad(frame_tex, coord, 0);
     }
+    if (weight > 0.0) {
+        return RasterSample(t / weight, frame / weight);
+    }
+    return RasterSample(vec4<f32>(0.0), vec4<f32>(0.0));
+}
+
+fn texel_passes(id: vec2<u32>) -> TexelPasses {
+    let sample = raster_sample(id);
+    let frame = sample.frame;
     if (!on_surface(frame)) {
-        // Off the surface T is taken as zero, as on the CPU.
         return TexelPasses(IDENTITY, IDENTITY, vec2<f32>(0.0));
     }
-    let svd = svd2(textureLoad(t_tex, coord, 0));
+    let svd = svd2(sample.t);
     let c = cos(svd.w);
     let s = sin(svd.w);
     let size = vec2<f32>(f32(info.width), f32(info.height));

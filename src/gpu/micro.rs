@@ -196,6 +196,10 @@ pub struct GpuMicro {
     normals: wgpu::Texture,
     raster: RasterStage,
     targets: RasterTargets,
+    svd2: Svd2Stage,
+    field_info: wgpu::Buffer,
+    /// Map texels per raster texel along each side.
+    step: usize,
     surface: Option<SurfaceBuffers>,
     /// The triangles and raster UVs `surface` and the planner were made for.
     layout: Option<RasterLayout>,
@@ -240,9 +244,9 @@ impl GpuMicro {
         let normals = normal_texture(&ctx, w, h);
         let targets = RasterTargets::new(&ctx, w, h);
         let svd2 = Svd2Stage::new(&ctx, model);
-        let info = buffers::uniform(&ctx, "field info", &svd2.info(w, h, dilate));
+        let field_info = buffers::uniform(&ctx, "field info", &svd2.info(w, h, dilate));
         let convolve = ConvolveStage::new(&ctx);
-        let strain_inputs = convolve.strain_inputs(&ctx, &svd2, &info, &targets);
+        let strain_inputs = convolve.strain_inputs(&ctx, &svd2, &field_info, &targets);
         let all_tiles = TileMask::full(w, h).total() as u64;
         let tile_lists =
             [0, 1, 2].map(|_| buffers::storage_zeroed(&ctx, "tile list", 4 * (1 + all_tiles)));
@@ -271,6 +275,9 @@ impl GpuMicro {
             out,
             normals,
             targets,
+            svd2,
+            field_info,
+            step: 1,
             surface: None,
             layout: None,
             window: None,
@@ -302,6 +309,7 @@ impl GpuMicro {
             crate::strain::raster::DILATE_TEXELS,
         )?;
         chain.set_incremental(micro.incremental_tolerance);
+        chain.set_raster_step(micro.raster_step);
         Ok(chain)
     }
 
@@ -329,6 +337,49 @@ impl GpuMicro {
     pub fn set_incremental(&mut self, tolerance: Option<f64>) {
         self.tolerance = tolerance;
         self.planner = None;
+    }
+
+    /// Rasterises the strain at one texel per `step × step` map texels and
+    /// reads it bilinearly in the passes (the CPU reference is
+    /// [`crate::micro::convolve::deform_stepped`]); 1 (the default) gives a
+    /// raster texel per map texel. The raster's dilation becomes
+    /// [`crate::strain::raster::coarse_dilation`] raster texels. The next
+    /// frame starts over (maps and raster reset).
+    pub fn set_raster_step(&mut self, step: usize) {
+        let step = step.max(1);
+        let (w, h) = (self.width, self.height);
+        let mut info = if step == 1 {
+            self.svd2.info(w, h, self.dilate)
+        } else {
+            let dilate = crate::strain::raster::coarse_dilation_of(self.dilate, step);
+            self.svd2.info_stepped(w, h, dilate, step)
+        };
+        if let Some(win) = self.window {
+            // Reads clamp at the larger map's edges, as its own chain's do
+            // (the window starts on its raster grid: the origin is a
+            // multiple of the step, see `TiledMicro::set_raster_step`).
+            for k in 0..2 {
+                info.raster_origin[k] = (win.origin[k] / step as isize) as i32;
+                info.map_raster[k] = win.map_size[k].div_ceil(step) as i32;
+            }
+            info.wrap = win.wrap as u32;
+        }
+        self.ctx
+            .queue
+            .write_buffer(&self.field_info, 0, bytemuck::bytes_of(&info));
+        self.targets = RasterTargets::new(&self.ctx, w.div_ceil(step), h.div_ceil(step));
+        self.strain_inputs =
+            self.convolve
+                .strain_inputs(&self.ctx, &self.svd2, &self.field_info, &self.targets);
+        self.step = step;
+        self.layout = None;
+        self.surface = None;
+        self.planner = None;
+    }
+
+    /// Map texels per raster texel ([`GpuMicro::set_raster_step`]).
+    pub fn raster_step(&self) -> usize {
+        self.step
     }
 
     /// The tiles each stage of the last frame ran on.
@@ -437,11 +488,21 @@ impl GpuMicro {
         MicroStage::ALL.map(|stage| match stage {
             MicroStage::Upload => t.upload_bytes,
             MicroStage::Raster => RASTER_BYTES_PER_TEXEL * self.raster_texels,
-            MicroStage::PassS => PASS_BYTES_PER_TEXEL * t.texels[0] as u64,
-            MicroStage::PassT => PASS_BYTES_PER_TEXEL * t.texels[1] as u64,
+            MicroStage::PassS => self.pass_bytes(t.texels[0]),
+            MicroStage::PassT => self.pass_bytes(t.texels[1]),
             MicroStage::Normals => NORMALS_BYTES_PER_TEXEL * t.texels[2] as u64,
             MicroStage::ReadBack => texels * if normals_read { 4 + 16 } else { 4 },
         })
+    }
+
+    /// Bytes a pass over `texels` map texels moves at least: their heights
+    /// read and written, and the raster texels they read (one per map texel
+    /// with a step of 1, one per `step²` with a coarse raster).
+    fn pass_bytes(&self, texels: usize) -> u64 {
+        let raster = RASTER_BYTES_PER_TEXEL as f64 / (self.step * self.step) as f64;
+        ((PASS_BYTES_PER_TEXEL - RASTER_BYTES_PER_TEXEL) as f64 * texels as f64
+            + raster * texels as f64)
+            .round() as u64
     }
 
     /// The triangles and raster vertices of `field` in this chain's map:
@@ -497,14 +558,32 @@ impl GpuMicro {
     fn prepare(&mut self, field: &SurfaceField, normals: bool) {
         let (tri, verts) = self.raster_layout(field);
         let uvs: Vec<[f32; 2]> = verts.iter().map(|v| v.uv).collect();
+        let (w, h) = (self.width, self.height);
+        let step = self.step;
+        let (rw, rh) = (w.div_ceil(step), h.div_ceil(step));
+        // A coarse raster spans rw·step ≥ w map texels: UVs in its square.
+        let drawn = if step == 1 {
+            verts.clone()
+        } else {
+            let scale = [
+                (w as f64 / (rw * step) as f64) as f32,
+                (h as f64 / (rh * step) as f64) as f32,
+            ];
+            let mut v = verts.clone();
+            for x in &mut v {
+                x.uv = [x.uv[0] * scale[0], x.uv[1] * scale[1]];
+            }
+            v
+        };
         match (&self.surface, &self.layout) {
             (Some(s), Some(layout)) if layout.0 == tri && layout.1 == uvs => {
-                s.write(&self.ctx, &verts)
+                s.write(&self.ctx, &drawn)
             }
             _ => {
                 // A new UV layout: the maps and raster start over.
-                self.surface = Some(SurfaceBuffers::from_parts(&self.ctx, &tri, &verts));
-                self.raster_texels = covered_texels(&tri, &uvs, self.width, self.height);
+                self.surface = Some(SurfaceBuffers::from_parts(&self.ctx, &tri, &drawn));
+                let drawn_uvs: Vec<[f32; 2]> = drawn.iter().map(|v| v.uv).collect();
+                self.raster_texels = covered_texels(&tri, &drawn_uvs, rw, rh);
                 self.layout = Some((tri.clone(), uvs.clone()));
                 self.planner = None;
                 self.reset();
@@ -516,14 +595,13 @@ impl GpuMicro {
                 (self.width, self.height),
                 &tri,
                 &uvs,
-                self.dilate,
+                crate::strain::raster::stepped_reach_of(self.dilate, self.step),
                 self.sigma_max_um,
                 self.tolerance.map(|t| t as f32),
             )
         });
         let plan = planner.plan(&verts);
         self.normals_due.add(&plan.normals);
-        let (w, h) = (self.width, self.height);
         let mut upload_bytes = std::mem::size_of_val(verts.as_slice()) as u64;
         let mut write = |k: usize, mask: &TileMask| {
             let list = mask.list();

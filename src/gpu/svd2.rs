@@ -26,13 +26,14 @@ pub const SHADER: &str = include_str!("../../shaders/svd2.wgsl");
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct FieldInfo {
-    /// Texels along u.
+    /// The map's texels along u.
     pub width: u32,
-    /// Texels along v.
+    /// The map's texels along v.
     pub height: u32,
-    /// Dilation radius (texels).
+    /// Dilation radius (raster texels).
     pub dilate: u32,
-    _pad0: u32,
+    /// Map texels per raster texel along each side.
+    pub step: u32,
     /// First α point in the table.
     pub alpha_start: u32,
     /// α points.
@@ -45,7 +46,18 @@ pub struct FieldInfo {
     pub stretch_start: u32,
     /// σ(r ≥ 1) points.
     pub stretch_len: u32,
-    _pad1: [u32; 2],
+    /// The raster's texels along u.
+    pub raster_width: u32,
+    /// The raster's texels along v.
+    pub raster_height: u32,
+    /// For a window of a larger map: its first texel in the larger map's
+    /// raster texels (else 0).
+    pub raster_origin: [i32; 2],
+    /// Raster texels of the larger map (else the raster's size).
+    pub map_raster: [i32; 2],
+    /// Whether the larger map wraps (1) or not (0).
+    pub wrap: u32,
+    _pad: [u32; 3],
 }
 
 /// The kernel model's tables, concatenated, and where each starts.
@@ -102,18 +114,39 @@ impl Svd2Stage {
 
     /// The uniform for a raster of `width × height` dilated by `dilate`.
     pub fn info(&self, width: usize, height: usize, dilate: usize) -> FieldInfo {
+        self.info_stepped(width, height, dilate, 1)
+    }
+
+    /// The uniform for a `width × height` map whose raster has one texel
+    /// per `step × step` map texels, dilated by `dilate` raster texels
+    /// (see [`crate::strain::raster::CoarseRaster`]).
+    pub fn info_stepped(
+        &self,
+        width: usize,
+        height: usize,
+        dilate: usize,
+        step: usize,
+    ) -> FieldInfo {
         let [a, c, s] = self.spans;
+        let step = step.max(1);
+        let (rw, rh) = (width.div_ceil(step) as i32, height.div_ceil(step) as i32);
         FieldInfo {
             width: width as u32,
             height: height as u32,
             dilate: dilate as u32,
+            step: step as u32,
+            raster_width: width.div_ceil(step) as u32,
+            raster_height: height.div_ceil(step) as u32,
             alpha_start: a.0,
             alpha_len: a.1,
             compression_start: c.0,
             compression_len: c.1,
             stretch_start: s.0,
             stretch_len: s.1,
-            ..FieldInfo::default()
+            raster_origin: [0, 0],
+            map_raster: [rw, rh],
+            wrap: 0,
+            _pad: [0; 3],
         }
     }
 

@@ -52,6 +52,8 @@ pub struct TiledMicro {
     model: KernelModel,
     dilate: usize,
     tolerance: Option<f64>,
+    /// Map texels per raster texel ([`GpuMicro::set_raster_step`]).
+    step: usize,
     halo: usize,
     chains: Vec<TileChain>,
 }
@@ -66,6 +68,7 @@ impl TiledMicro {
             model: model.clone(),
             dilate,
             tolerance: None,
+            step: 1,
             halo: 0,
             chains: Vec::new(),
         }
@@ -77,6 +80,39 @@ impl TiledMicro {
         for c in &mut self.chains {
             c.chain.set_incremental(tolerance);
         }
+    }
+
+    /// A coarse strain raster in every chain ([`GpuMicro::set_raster_step`]).
+    /// The tile side (and, for a wrapping map, its size) must be a multiple
+    /// of `step`, so every chain's raster lies on the whole map's grid and
+    /// the tiles equal the untiled chain.
+    pub fn set_raster_step(&mut self, step: usize) -> Result<()> {
+        let step = step.max(1);
+        let src = &self.source;
+        if !src.tile.is_multiple_of(step) {
+            return Err(Error::parameter(
+                "microstructure.strain_raster_step",
+                format!(
+                    "the tiled map's tile side ({}) must be a multiple of the step ({step})",
+                    src.tile
+                ),
+            ));
+        }
+        if src.edge == Edge::Wrap
+            && !(src.width.is_multiple_of(step) && src.height.is_multiple_of(step))
+        {
+            return Err(Error::parameter(
+                "microstructure.strain_raster_step",
+                format!(
+                    "a wrapping tiled map's size ({} × {}) must be a multiple of the step ({step})",
+                    src.width, src.height
+                ),
+            ));
+        }
+        self.step = step;
+        self.chains.clear();
+        self.halo = 0;
+        Ok(())
     }
 
     /// The tiled map the chains convolve.
@@ -116,7 +152,8 @@ impl TiledMicro {
             pass_reach(&vertices(field), size, self.model.max_sigma_um()).ok_or_else(|| {
                 Error::parameter("microstructure", "the surface's UV frames are not finite")
             })?;
-        let halo = 2 * reach + self.dilate + 2;
+        // A multiple of the step, so each window starts on the raster grid.
+        let halo = (2 * reach + self.reach_past_surface() + 2).next_multiple_of(self.step);
         if halo > self.halo {
             self.build(field, reach, halo)?;
         }
@@ -156,11 +193,16 @@ impl TiledMicro {
         Ok(())
     }
 
+    /// How far (texels) the raster's values reach past the surface.
+    fn reach_past_surface(&self) -> usize {
+        crate::strain::raster::stepped_reach_of(self.dilate, self.step)
+    }
+
     /// Chains for the tiles within `reach + dilate + 2` texels of the
     /// surface's UV bounding boxes, each over its tile and `halo`.
     fn build(&mut self, field: &SurfaceField, reach: usize, halo: usize) -> Result<()> {
+        let margin = (reach + self.reach_past_surface() + 2) as f64 + 1.0;
         let src = &self.source;
-        let margin = (reach + self.dilate + 2) as f64 + 1.0;
         let (tri, uvs) = field.layout();
         let shifts: &[f64] = if src.edge == Edge::Wrap {
             &[-1.0, 0.0, 1.0]
@@ -202,6 +244,7 @@ impl TiledMicro {
             let mut chain =
                 GpuMicro::for_window(self.ctx.clone(), &neutral, &self.model, self.dilate, win)?;
             chain.set_incremental(self.tolerance);
+            chain.set_raster_step(self.step);
             self.chains.push(TileChain { col, row, chain });
         }
         log::info!(

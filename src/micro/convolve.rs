@@ -281,8 +281,20 @@ pub fn deform(
     model: &KernelModel,
     field: &crate::strain::SurfaceField,
 ) -> DisplacementMap {
-    let raster = StrainRaster::new(field, map.width, map.height)
-        .dilated(crate::strain::raster::DILATE_TEXELS);
+    deform_stepped(map, model, field, 1)
+}
+
+/// [`deform`] with the strain rasterised at one texel per `step × step` map
+/// texels and read bilinearly ([`crate::strain::raster::CoarseRaster`];
+/// `step = 1` is [`deform`]). The reference of the GPU chain with
+/// [`crate::gpu::micro::GpuMicro::set_raster_step`].
+pub fn deform_stepped(
+    map: &DisplacementMap,
+    model: &KernelModel,
+    field: &crate::strain::SurfaceField,
+    step: usize,
+) -> DisplacementMap {
+    let raster = StrainRaster::stepped(field, map.width, map.height, step);
     convolve(map, &KernelField::from_strain(&raster, model, map))
 }
 

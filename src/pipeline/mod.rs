@@ -74,6 +74,7 @@ impl MicroEngine {
                 crate::strain::raster::DILATE_TEXELS,
             );
             chains.set_incremental(micro.incremental_tolerance);
+            chains.set_raster_step(micro.raster_step)?;
             return Ok(MicroEngine::Tiled(Box::new(chains)));
         }
         let Some(ctx) = crate::gpu::acquire()? else {
@@ -131,10 +132,11 @@ impl MicroEngine {
                 Ok((frame.map, frame.normals))
             }
             MicroEngine::Cpu => Ok((
-                crate::micro::convolve::deform(
+                crate::micro::convolve::deform_stepped(
                     micro.neutral.whole("the CPU microstructure stages")?,
                     &micro.model,
                     field,
+                    micro.raster_step,
                 ),
                 None,
             )),

@@ -50,10 +50,23 @@ impl StrainRaster {
 
     /// Rasterises `field` at `width × height` (both ≥ 1).
     pub fn new(field: &SurfaceField, width: usize, height: usize) -> StrainRaster {
+        let size = Vector2::new(width.max(1) as f64, height.max(1) as f64);
+        StrainRaster::sampled(field, width, height, size)
+    }
+
+    /// Rasterises `field` at `width × height` texels whose centres lie at
+    /// `u = (i + 0.5) / size.x`, `v = (j + 0.5) / size.y` (a raster of a
+    /// `size`-texel map when `size` is the texel count; a coarser grid over
+    /// the same UV square when it is smaller).
+    fn sampled(
+        field: &SurfaceField,
+        width: usize,
+        height: usize,
+        size: Vector2<f64>,
+    ) -> StrainRaster {
         let (width, height) = (width.max(1), height.max(1));
         let mut raster = StrainRaster::outside(width, height);
         let (tri, uvs) = field.layout();
-        let size = Vector2::new(width as f64, height as f64);
         for (k, t) in tri.iter().enumerate() {
             let w = t.map(|s| uvs[s]);
             // Texel centres (i + 0.5)/width inside the triangle's UV box.
@@ -126,6 +139,17 @@ impl StrainRaster {
         self
     }
 
+    /// The raster of a `width × height` map sampled from a coarse raster
+    /// with one texel per `step × step` map texels ([`CoarseRaster`]);
+    /// `step = 1` is [`StrainRaster::new`] dilated by [`DILATE_TEXELS`], the
+    /// exact raster.
+    pub fn stepped(field: &SurfaceField, width: usize, height: usize, step: usize) -> StrainRaster {
+        if step <= 1 {
+            return StrainRaster::new(field, width, height).dilated(DILATE_TEXELS);
+        }
+        CoarseRaster::new(field, width, height, step).sample()
+    }
+
     /// Texel index of `(i, j)`.
     pub fn index(&self, i: usize, j: usize) -> usize {
         j * self.width + i
@@ -137,5 +161,137 @@ impl StrainRaster {
             (i as f64 + 0.5) / self.width as f64,
             (j as f64 + 0.5) / self.height as f64,
         )
+    }
+}
+
+/// Dilation of a coarse raster (its texels): far enough that every map
+/// texel within [`DILATE_TEXELS`] of the surface has an inside texel
+/// among its four bilinear neighbours.
+pub fn coarse_dilation(step: usize) -> usize {
+    coarse_dilation_of(DILATE_TEXELS, step)
+}
+
+/// [`coarse_dilation`] for a dilation of `dilate` map texels.
+pub fn coarse_dilation_of(dilate: usize, step: usize) -> usize {
+    dilate.div_ceil(step.max(1)) + 1
+}
+
+/// How far (map texels) values of a raster with one texel per `step` map
+/// texels reach past the surface's UV bounding boxes: the coarse
+/// dilation and the bilinear footprint; [`DILATE_TEXELS`] for the exact
+/// raster.
+pub fn stepped_reach(step: usize) -> usize {
+    stepped_reach_of(DILATE_TEXELS, step)
+}
+
+/// [`stepped_reach`] for a dilation of `dilate` map texels.
+pub fn stepped_reach_of(dilate: usize, step: usize) -> usize {
+    if step <= 1 {
+        dilate
+    } else {
+        step * (coarse_dilation_of(dilate, step) + 2)
+    }
+}
+
+/// The surface field rasterised at one texel per `step × step` texels of a
+/// `map_width × map_height` map and read bilinearly at each map texel.
+///
+/// Coarse texel `(I, J)` sits at map coordinates `((I + ½) step, (J + ½)
+/// step)` (map texel `i` spans `[i, i + 1)`), so the coarse grid starts at
+/// the map's corner whatever its size, and a window of the map starting
+/// at a multiple of `step` sees the same grid. The raster is dilated by
+/// [`coarse_dilation`]. Map texel `i` reads coarse coordinate
+/// `x = (i + ½)/step − ½` (clamped to the raster), the four neighbours with
+/// bilinear weights; outside neighbours drop out and the weights of the
+/// inside ones are renormalised, and a texel with no inside neighbour of
+/// non-zero weight is outside. Inside a triangle the field is linear, so
+/// wherever a map texel's four neighbours lie in one triangle it reads the
+/// exact value; near edges between triangles (where the field's gradient
+/// jumps) the bilinear read differs from it by a fraction of the jump over
+/// one coarse texel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CoarseRaster {
+    /// The coarse raster, dilated.
+    pub raster: StrainRaster,
+    /// Map texels per coarse texel along each side.
+    pub step: usize,
+    /// The map's texels along u.
+    pub map_width: usize,
+    /// The map's texels along v.
+    pub map_height: usize,
+}
+
+/// Bilinear neighbours of map texel `i` in a coarse raster of `n` texels:
+/// the lower coarse index and the weight of the upper one.
+pub fn coarse_neighbours(i: usize, step: usize, n: usize) -> (usize, f64) {
+    let x = ((i as f64 + 0.5) / step as f64 - 0.5).clamp(0.0, (n - 1) as f64);
+    let lower = (x.floor() as usize).min(n.saturating_sub(2));
+    (lower, x - lower as f64)
+}
+
+impl CoarseRaster {
+    /// Rasterises `field` for a `map_width × map_height` map at one texel
+    /// per `step` (≥ 1) map texels along each side.
+    pub fn new(
+        field: &SurfaceField,
+        map_width: usize,
+        map_height: usize,
+        step: usize,
+    ) -> CoarseRaster {
+        let step = step.max(1);
+        let (w, h) = (map_width.div_ceil(step), map_height.div_ceil(step));
+        let size = Vector2::new(
+            map_width as f64 / step as f64,
+            map_height as f64 / step as f64,
+        );
+        CoarseRaster {
+            raster: StrainRaster::sampled(field, w, h, size).dilated(coarse_dilation(step)),
+            step,
+            map_width,
+            map_height,
+        }
+    }
+
+    /// `T` and `Q Rᵀ` at map texel `(i, j)` (see the type's docs), or
+    /// `None` where it is outside.
+    pub fn at(&self, i: usize, j: usize) -> Option<(Matrix2<f64>, Matrix2<f64>)> {
+        let r = &self.raster;
+        let (x0, fx) = coarse_neighbours(i, self.step, r.width);
+        let (y0, fy) = coarse_neighbours(j, self.step, r.height);
+        let mut weight = 0.0;
+        let mut t = Matrix2::zeros();
+        let mut frame = Matrix2::zeros();
+        for (dy, wy) in [(0, 1.0 - fy), (1, fy)] {
+            for (dx, wx) in [(0, 1.0 - fx), (1, fx)] {
+                let (x, y) = ((x0 + dx).min(r.width - 1), (y0 + dy).min(r.height - 1));
+                let k = r.index(x, y);
+                let w = wx * wy;
+                if r.inside[k] && w > 0.0 {
+                    weight += w;
+                    t += (r.t[k] - Matrix2::identity()) * w;
+                    frame += r.uv_frame[k] * w;
+                }
+            }
+        }
+        (weight > 0.0).then(|| (Matrix2::identity() + t / weight, frame / weight))
+    }
+
+    /// The map-size raster of [`CoarseRaster::at`] at every map texel.
+    pub fn sample(&self) -> StrainRaster {
+        use rayon::prelude::*;
+        let w = self.map_width;
+        let values: Vec<_> = (0..w * self.map_height)
+            .into_par_iter()
+            .map(|k| self.at(k % w, k / w))
+            .collect();
+        let mut out = StrainRaster::outside(w, self.map_height);
+        for (k, v) in values.into_iter().enumerate() {
+            if let Some((t, frame)) = v {
+                out.t[k] = t;
+                out.uv_frame[k] = frame;
+                out.inside[k] = true;
+            }
+        }
+        out
     }
 }
