@@ -142,14 +142,16 @@ pub fn bench_map(size: usize, extent_mm: f64) -> Result<DisplacementMap> {
     Ok(map)
 }
 
-/// Runs the bench over `sizes` with `repetitions` timed GPU frames each;
+/// Runs the bench over `sizes` with `repetitions` timed GPU frames each,
+/// the strain rasterised at one texel per `raster_step²` map texels (1: the
+/// exact raster; see [`GpuMicro::set_raster_step`]), GPU and CPU alike;
 /// `on_row` sees each row as it is done.
 pub fn bench_micro(
     mesh: &TetMesh,
     model: &KernelModel,
     sizes: &[usize],
     repetitions: usize,
-    layout: MapLayout,
+    (layout, raster_step): (MapLayout, usize),
     mut on_row: impl FnMut(&MicroRow),
 ) -> Result<MicroBench> {
     let deformed = bench_deformation(mesh);
@@ -178,7 +180,8 @@ pub fn bench_micro(
         let mut cpu_ms = None;
         if run_cpu {
             let start = Instant::now();
-            let map = crate::micro::convolve::deform(&neutral, model, &field);
+            let map =
+                crate::micro::convolve::deform_stepped(&neutral, model, &field, raster_step);
             let normals = crate::micro::normals::normal_map(&map);
             cpu_ms = Some(start.elapsed().as_secs_f64() * 1e3);
             drop(normals);
@@ -205,6 +208,7 @@ pub fn bench_micro(
             row.untiled_skipped = Some(e.to_string());
         } else if let Some(c) = ctx.take() {
             let mut chain = GpuMicro::new(c, &neutral, model, DILATE_TEXELS)?;
+            chain.set_raster_step(raster_step);
             chain.run(&field)?; // warm-up: first use of the pipelines
             let start = Instant::now();
             for _ in 0..repetitions.max(1) {
@@ -231,7 +235,7 @@ pub fn bench_micro(
                 &neutral,
                 model,
                 &field,
-                tile,
+                (tile, raster_step),
                 repetitions,
                 untiled.as_ref(),
             )?);
@@ -289,7 +293,7 @@ fn bench_tiled(
     neutral: &DisplacementMap,
     model: &KernelModel,
     field: &SurfaceField,
-    tile: usize,
+    (tile, raster_step): (usize, usize),
     repetitions: usize,
     untiled: Option<&DisplacementMap>,
 ) -> Result<TiledRow> {
@@ -300,6 +304,7 @@ fn bench_tiled(
         let tiled = TiledMap::write(&dir, neutral, tile)?;
         let (cols, rows) = tiled.grid();
         let mut chains = TiledMicro::new(ctx.clone(), tiled.clone(), model, DILATE_TEXELS);
+        chains.set_raster_step(raster_step)?;
         chains.run(field)?; // builds the chains; first use of the pipelines
         let start = Instant::now();
         for _ in 0..repetitions.max(1) {

@@ -168,6 +168,10 @@ enum Command {
         /// by name.
         #[arg(long, value_name = "GBS")]
         bandwidth_gbs: Option<f64>,
+        /// `micro`: map texels per strain-raster texel along each side (as
+        /// `[microstructure] strain_raster_step`; 1 is the exact raster).
+        #[arg(long, default_value_t = 1, value_name = "N")]
+        raster_step: usize,
         /// Image width for `render` (px).
         #[arg(long, default_value_t = 1920)]
         width: usize,
@@ -456,6 +460,7 @@ fn main() -> ExitCode {
             cpu_up_to,
             tile,
             bandwidth_gbs,
+            raster_step,
             width,
             height,
         } => match stage.as_str() {
@@ -464,7 +469,7 @@ fn main() -> ExitCode {
                 frames,
                 &sizes,
                 (texel_um, cpu_up_to, tile),
-                bandwidth_gbs,
+                (bandwidth_gbs, raster_step),
             ),
             "render" => bench_render(&scenario, frames, width, height),
             _ => bench(&stage, &scenario, frames),
@@ -766,8 +771,11 @@ fn bench_micro(
     frames: usize,
     sizes: &[usize],
     (texel_um, cpu_up_to, tile): (Option<f64>, usize, Option<usize>),
-    bandwidth_gbs: Option<f64>,
+    (bandwidth_gbs, raster_step): (Option<f64>, usize),
 ) -> anyhow::Result<()> {
+    if !(1..=64).contains(&raster_step) {
+        bail!("--raster-step must be in 1 … 64 map texels per raster texel, got {raster_step}");
+    }
     if sizes.is_empty() || sizes.contains(&0) {
         bail!("--sizes needs positive map sides, e.g. 1024,2048,4096");
     }
@@ -808,7 +816,13 @@ fn bench_micro(
         "size", "texel µm", "CPU ms", "GPU ms", "GPU+readback ms", "CPU/GPU", "max |Δ|", "tiles %"
     );
     let fmt = |x: Option<f64>, p: usize| x.map_or("-".to_string(), |v| format!("{v:.p$}"));
-    let bench = skinpatch::bench::bench_micro(&setup.mesh, &model, sizes, frames, layout, |r| {
+    if raster_step > 1 {
+        println!(
+            "strain raster: one texel per {raster_step} × {raster_step} map texels, read bilinearly"
+        );
+    }
+    let stepped = (layout, raster_step);
+    let bench = skinpatch::bench::bench_micro(&setup.mesh, &model, sizes, frames, stepped, |r| {
         println!(
             "{:>6} {:>9.3} {:>12} {:>12} {:>16} {:>10} {:>12} {:>8}",
             r.size,

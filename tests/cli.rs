@@ -701,6 +701,56 @@ fn incremental_microstructure_frames_with_tolerance_zero_change_nothing() {
     }
 }
 
+/// `strain_raster_step = 4`: the GPU and CPU runs write the same maps (the
+/// CPU reference reads the same coarse raster), close to the exact raster's,
+/// and the report says which raster ran.
+#[test]
+fn a_coarse_strain_raster_runs_alike_on_gpu_and_cpu() {
+    use skinpatch::micro::io::{read_exr, MapDefaults, TexelSize};
+    let section = "\n[microstructure]\nframe_stride = 6\nformats = [\"exr\"]\nnormal_maps = false\nstrain_raster_step = 4\n[microstructure.procedural]\nsize_px = 240\n";
+    let dirs = [(); 3].map(|_| tempfile::tempdir().unwrap());
+    let run = |dir: &Path, section: &str, adapter: Option<&str>| {
+        run_press_small_configured(dir, section, |cmd| {
+            cmd.env_remove("SKINPATCH_ADAPTER")
+                .env_remove("SKINPATCH_REQUIRE_GPU");
+            if let Some(a) = adapter {
+                cmd.env("SKINPATCH_ADAPTER", a);
+            }
+        })
+    };
+    let gpu = run(dirs[0].path(), section, None);
+    let cpu = run(dirs[1].path(), section, Some("no-such-adapter"));
+    let exact = run(
+        dirs[2].path(),
+        &section.replace("strain_raster_step = 4", "strain_raster_step = 1"),
+        Some("no-such-adapter"),
+    );
+    for (_, o) in [&gpu, &cpu, &exact] {
+        assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    }
+    for (_, o) in [&gpu, &cpu] {
+        let out = text(&o.stdout);
+        assert!(
+            out.contains("strain raster: one texel per 4 × 4 map texels"),
+            "{out}"
+        );
+    }
+    assert!(!text(&exact.1.stdout).contains("strain raster: one texel"));
+    let defaults = MapDefaults {
+        texel: TexelSize::Um(1.0),
+        height_unit_um: 1.0,
+        edge: skinpatch::micro::Edge::Wrap,
+    };
+    let map = |dir: &Path| read_exr(&dir.join("micro/height_0006.exr"), &defaults).unwrap();
+    let (g, c, e) = (map(&gpu.0), map(&cpu.0), map(&exact.0));
+    let (lo, hi) = e.range();
+    let gpu_cpu = c.max_difference(&g);
+    let from_exact = c.max_difference(&e);
+    eprintln!("strain raster step 4: GPU − CPU {gpu_cpu:.1e}, step 4 − exact {from_exact:.1e}");
+    assert!(gpu_cpu < 1e-4, "{gpu_cpu:e} of [{lo}, {hi}]");
+    assert!(from_exact > 0.0 && from_exact < 1e-2, "{from_exact:e}");
+}
+
 /// `skinpatch fit`: fits a deformed map, adds given points, prints the
 /// table and model, and writes a kernel file a scenario can use.
 #[test]

@@ -689,7 +689,7 @@ fn bench_micro_profiles_every_stage() {
     let mesh = patch_3k();
     let model = skinpatch::micro::KernelModel::forehead();
     let layout = skinpatch::bench::MapLayout::FixedPatch;
-    let bench = skinpatch::bench::bench_micro(&mesh, &model, &[128], 1, layout, |_| {}).unwrap();
+    let bench = skinpatch::bench::bench_micro(&mesh, &model, &[128], 1, (layout, 1), |_| {}).unwrap();
     let row = &bench.rows[0];
     let times = row.stages.expect("a GPU row has its stages");
     let stages = times.wall_ms;
@@ -775,7 +775,7 @@ fn bench_micro_fixed_texel_puts_the_patch_on_a_larger_map() {
         cpu_up_to: 256,
         tile: Some(128),
     };
-    let bench = bench_micro(&mesh, &model, &[256, 512], 1, layout, |_| {}).unwrap();
+    let bench = bench_micro(&mesh, &model, &[256, 512], 1, (layout, 1), |_| {}).unwrap();
     let (small, large) = (&bench.rows[0], &bench.rows[1]);
     assert!(
         (small.texel_um - texel_um).abs() < 1e-9 * texel_um,
@@ -809,6 +809,6 @@ fn bench_micro_fixed_texel_puts_the_patch_on_a_larger_map() {
     assert!(tiled.active > 0 && tiled.active < tiled.total, "{tiled:?}");
     assert!(tiled.max_difference.unwrap() <= 1e-5, "{tiled:?}");
     // A map smaller than the patch at that texel size is refused.
-    let err = bench_micro(&mesh, &model, &[64], 1, layout, |_| {}).unwrap_err();
+    let err = bench_micro(&mesh, &model, &[64], 1, (layout, 1), |_| {}).unwrap_err();
     assert!(err.to_string().contains("--texel-um"), "{err}");
 }

@@ -407,12 +407,22 @@ fn microstructure_section_is_validated() {
         (32, 10_000.0 / 32.0)
     );
     assert!(micro.png16 && !micro.exr && micro.normal_maps);
+    assert_eq!(micro.raster_step, 1);
+    let stepped = setup_with(
+        "\n[microstructure]\nstrain_raster_step = 8\n[microstructure.procedural]\nsize_px = 32\n",
+    )
+    .unwrap();
+    assert_eq!(stepped.micro.unwrap().raster_step, 8);
     for (extra, expected) in [
         ("edge = \"mirror\"\n", "microstructure.edge"),
         ("formats = [\"png16\", \"tiff\"]\n", "microstructure.formats[1]"),
         ("frame_stride = 0\n", "microstructure.frame_stride"),
         ("incremental_tolerance = -1e-3\n", "microstructure.incremental_tolerance"),
         ("incremental_tolerance = nan\n", "microstructure.incremental_tolerance"),
+        ("strain_raster_step = 0\n", "microstructure.strain_raster_step"),
+        ("strain_raster_step = 65\n", "microstructure.strain_raster_step"),
+        ("strain_raster_step = -2\n", "strain_raster_step"),
+        ("strain_raster_step = 2.5\n", "strain_raster_step"),
         ("height_unit_um = -1.0\n", "microstructure.height_unit_um"),
         ("map = \"nowhere.png\"\n", "nowhere.png"),
         ("map = \"x.png\"\n[microstructure.procedural]\nseed = 3\n", "microstructure.procedural.seed"),

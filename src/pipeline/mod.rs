@@ -91,6 +91,19 @@ impl MicroEngine {
         })
     }
 
+    /// Where the stages ran and, for a coarse strain raster, its step (the
+    /// run's report).
+    fn summary(&self, micro: &MicroSetup) -> String {
+        let mut text = self.describe();
+        if micro.raster_step > 1 {
+            text += &format!(
+                "; strain raster: one texel per {0} × {0} map texels",
+                micro.raster_step
+            );
+        }
+        text
+    }
+
     fn describe(&self) -> String {
         match self {
             MicroEngine::Gpu(chain) => {
@@ -441,7 +454,10 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<RunSum
         written,
         quality: QualityReport::of(&setup.mesh),
         frames,
-        micro_device: engine.as_ref().map(MicroEngine::describe),
+        micro_device: engine
+            .as_ref()
+            .zip(setup.micro.as_ref())
+            .map(|(e, m)| e.summary(m)),
     })
 }
 

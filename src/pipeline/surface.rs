@@ -239,6 +239,9 @@ pub fn run(
     Ok(SurfaceRunSummary {
         written,
         frames,
-        micro_device: engines.first().map(MicroEngine::describe),
+        micro_device: engines
+            .first()
+            .zip(setup.micro.as_ref())
+            .map(|(e, m)| e.summary(m)),
     })
 }

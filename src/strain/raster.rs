@@ -295,3 +295,105 @@ impl CoarseRaster {
         out
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A coarse raster of `w × h` texels for a map `step` times finer,
+    /// every texel inside, holding `T = I + f(centre)` and a frame of
+    /// `g(centre)`, both linear in the texel centre's map coordinates.
+    fn linear(w: usize, h: usize, step: usize, map: (usize, usize)) -> CoarseRaster {
+        let mut raster = StrainRaster::outside(w, h);
+        for j in 0..h {
+            for i in 0..w {
+                let (x, y) = ((i as f64 + 0.5) * step as f64, (j as f64 + 0.5) * step as f64);
+                let k = raster.index(i, j);
+                raster.t[k] = Matrix2::new(1.0 + 0.01 * x, 0.002 * y, -0.003 * x, 1.0 - 0.004 * y);
+                raster.uv_frame[k] = Matrix2::new(0.5 + 1e-3 * x, 0.1, -0.1, 0.5 + 2e-3 * y);
+                raster.inside[k] = true;
+            }
+        }
+        CoarseRaster {
+            raster,
+            step,
+            map_width: map.0,
+            map_height: map.1,
+        }
+    }
+
+    #[test]
+    fn a_linear_field_reads_exactly_between_coarse_texel_centres() {
+        // 10 × 7 coarse texels of 4: a 38 × 27 map (the last coarse texels
+        // are partly beyond the map).
+        let c = linear(10, 7, 4, (38, 27));
+        let mut checked = 0;
+        for j in 0..27 {
+            for i in 0..38 {
+                let (x, y) = (i as f64 + 0.5, j as f64 + 0.5);
+                let (t, frame) = c.at(i, j).unwrap();
+                // Between the first and last coarse centres (2 … 38) the
+                // read is the linear field; beyond them it is clamped.
+                let (cx, cy) = (x.clamp(2.0, 38.0), y.clamp(2.0, 26.0));
+                let want_t =
+                    Matrix2::new(1.0 + 0.01 * cx, 0.002 * cy, -0.003 * cx, 1.0 - 0.004 * cy);
+                let want_f = Matrix2::new(0.5 + 1e-3 * cx, 0.1, -0.1, 0.5 + 2e-3 * cy);
+                assert!((t - want_t).abs().max() < 1e-13, "({i}, {j}): {t} vs {want_t}");
+                assert!((frame - want_f).abs().max() < 1e-13, "({i}, {j})");
+                checked += 1;
+            }
+        }
+        assert_eq!(checked, 38 * 27);
+        // Step 1 is the raster itself.
+        let one = linear(5, 4, 1, (5, 4));
+        assert_eq!(one.sample(), one.raster);
+    }
+
+    #[test]
+    fn outside_neighbours_drop_out_and_the_rest_are_renormalised() {
+        let mut c = linear(4, 4, 4, (16, 16));
+        let r = &mut c.raster;
+        for (i, j) in [(1, 1), (2, 1)] {
+            let k = r.index(i, j);
+            r.inside[k] = false;
+            r.t[k] = Matrix2::zeros();
+            r.uv_frame[k] = Matrix2::zeros();
+        }
+        let r = c.raster.clone();
+        // Map texel (6, 6): coarse coordinate (1.125, 1.125), neighbours
+        // (1, 1) and (2, 1) outside, (1, 2) and (2, 2) inside with weights
+        // 0.875 · 0.125 and 0.125 · 0.125.
+        let (t, _) = c.at(6, 6).unwrap();
+        let (a, b) = (r.t[r.index(1, 2)], r.t[r.index(2, 2)]);
+        let want = (a * 0.875 + b * 0.125) / (0.875 + 0.125);
+        assert!((t - want).abs().max() < 1e-14, "{t} vs {want}");
+        // Map texel (6, 2) sits on the centre row of coarse row 0 (y = 0.125
+        // → rows 0 and 1 with weights 0.875, 0.125): its row-1 neighbours
+        // are out, so only row 0 is read.
+        let (t, _) = c.at(6, 2).unwrap();
+        let (a, b) = (r.t[r.index(1, 0)], r.t[r.index(2, 0)]);
+        let want = a * 0.875 + b * 0.125;
+        assert!((t - want).abs().max() < 1e-14, "{t} vs {want}");
+        // With every neighbour of non-zero weight outside, the texel is out.
+        let mut lone = linear(1, 1, 4, (4, 4));
+        lone.raster.inside[0] = false;
+        assert!(lone.at(2, 2).is_none());
+        assert!(!lone.sample().inside.iter().any(|&i| i));
+    }
+
+    #[test]
+    fn coarse_reach_covers_the_dilation_and_the_bilinear_footprint() {
+        assert_eq!(stepped_reach(1), DILATE_TEXELS);
+        for step in 2..=16 {
+            let d = coarse_dilation(step);
+            // Every map texel within DILATE_TEXELS of the surface has an
+            // inside (dilated) neighbour.
+            assert!(d * step >= DILATE_TEXELS + step, "step {step}");
+            assert!(stepped_reach(step) >= (d + 1) * step, "step {step}");
+        }
+        assert_eq!(coarse_neighbours(0, 4, 10), (0, 0.0));
+        assert_eq!(coarse_neighbours(6, 4, 10), (1, 0.125));
+        assert_eq!(coarse_neighbours(39, 4, 10), (8, 1.0));
+        assert_eq!(coarse_neighbours(3, 4, 1), (0, 0.0));
+    }
+}
