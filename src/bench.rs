@@ -180,8 +180,7 @@ pub fn bench_micro(
         let mut cpu_ms = None;
         if run_cpu {
             let start = Instant::now();
-            let map =
-                crate::micro::convolve::deform_stepped(&neutral, model, &field, raster_step);
+            let map = crate::micro::convolve::deform_stepped(&neutral, model, &field, raster_step);
             let normals = crate::micro::normals::normal_map(&map);
             cpu_ms = Some(start.elapsed().as_secs_f64() * 1e3);
             drop(normals);

@@ -689,7 +689,8 @@ fn bench_micro_profiles_every_stage() {
     let mesh = patch_3k();
     let model = skinpatch::micro::KernelModel::forehead();
     let layout = skinpatch::bench::MapLayout::FixedPatch;
-    let bench = skinpatch::bench::bench_micro(&mesh, &model, &[128], 1, (layout, 1), |_| {}).unwrap();
+    let bench =
+        skinpatch::bench::bench_micro(&mesh, &model, &[128], 1, (layout, 1), |_| {}).unwrap();
     let row = &bench.rows[0];
     let times = row.stages.expect("a GPU row has its stages");
     let stages = times.wall_ms;

@@ -309,7 +309,7 @@ mod tests {
 
     #[test]
     fn field_info_matches_wgsl_layout() {
-        assert_eq!(std::mem::size_of::<FieldInfo>(), 48);
+        assert_eq!(std::mem::size_of::<FieldInfo>(), 80);
     }
 
     #[test]

@@ -307,7 +307,10 @@ mod tests {
         let mut raster = StrainRaster::outside(w, h);
         for j in 0..h {
             for i in 0..w {
-                let (x, y) = ((i as f64 + 0.5) * step as f64, (j as f64 + 0.5) * step as f64);
+                let (x, y) = (
+                    (i as f64 + 0.5) * step as f64,
+                    (j as f64 + 0.5) * step as f64,
+                );
                 let k = raster.index(i, j);
                 raster.t[k] = Matrix2::new(1.0 + 0.01 * x, 0.002 * y, -0.003 * x, 1.0 - 0.004 * y);
                 raster.uv_frame[k] = Matrix2::new(0.5 + 1e-3 * x, 0.1, -0.1, 0.5 + 2e-3 * y);
@@ -338,7 +341,10 @@ mod tests {
                 let want_t =
                     Matrix2::new(1.0 + 0.01 * cx, 0.002 * cy, -0.003 * cx, 1.0 - 0.004 * cy);
                 let want_f = Matrix2::new(0.5 + 1e-3 * cx, 0.1, -0.1, 0.5 + 2e-3 * cy);
-                assert!((t - want_t).abs().max() < 1e-13, "({i}, {j}): {t} vs {want_t}");
+                assert!(
+                    (t - want_t).abs().max() < 1e-13,
+                    "({i}, {j}): {t} vs {want_t}"
+                );
                 assert!((frame - want_f).abs().max() < 1e-13, "({i}, {j})");
                 checked += 1;
             }
