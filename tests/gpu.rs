@@ -513,6 +513,35 @@ fn tiled_and_incremental_frames_match_whole_frames() {
     let full_c = whole.deform(&field_c, false).unwrap();
     let d = full_c.map.max_difference(&step_c.map);
     assert!(d < 1e-4, "kept frame vs C: {d:e} of the height range");
+
+    // With a coarse strain raster (step 8) the tiles reach farther, and an
+    // incremental frame B still gives the whole frame's bits.
+    for chain in [&mut whole, &mut incremental] {
+        chain.set_raster_step(8);
+    }
+    incremental.set_incremental(Some(0.0));
+    whole.deform(&field_a, false).unwrap();
+    let coarse_a = whole.last_tiles();
+    assert!(
+        coarse_a.pass_s > tiles.pass_s && 2 * coarse_a.pass_s < coarse_a.total,
+        "{coarse_a:?} vs {tiles:?}"
+    );
+    incremental.deform(&field_a, true).unwrap();
+    let coarse_b = incremental.deform(&field_b, true).unwrap();
+    let fewer = incremental.last_tiles();
+    assert!(
+        fewer.pass_s > 0 && 2 * fewer.pass_s < coarse_a.pass_s,
+        "{fewer:?}"
+    );
+    let whole_b = whole.deform(&field_b, true).unwrap();
+    assert!(
+        coarse_b.map.data == whole_b.map.data,
+        "coarse: incremental B ≠ whole B"
+    );
+    assert!(coarse_b.normals == whole_b.normals);
+    let cpu = skinpatch::micro::convolve::deform_stepped(&neutral, &model, &field_b, 8);
+    let d = cpu.max_difference(&whole_b.map);
+    assert!(d < 1e-4, "coarse GPU − CPU: {d:e} of the height range");
 }
 
 /// A tiled map convolved tile by tile equals the untiled chain within 1e-5
