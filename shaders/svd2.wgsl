@@ -143,16 +143,23 @@ struct TexelPasses {
     stretch: vec2<f32>,
 };
 
-// The raster texel holding the values of raster texel `coord`: itself on
-// the surface, else its nearest surface texel within `info.dilate`, else
-// itself (off the surface).
-fn dilated_coord(coord: vec2<i32>) -> vec2<i32> {
-    if (on_surface(textureLoad(frame_tex, coord, 0))) {
-        return coord;
+// The raster texel holding the values of raster texel `coord` and its
+// Q R^T: itself on the surface, else its nearest surface texel within
+// `info.dilate`, else itself (off the surface, a zero frame).
+struct Dilated {
+    coord: vec2<i32>,
+    frame: vec4<f32>,
+};
+
+fn dilated(coord: vec2<i32>) -> Dilated {
+    let own = textureLoad(frame_tex, coord, 0);
+    if (on_surface(own)) {
+        return Dilated(coord, own);
     }
     let r = i32(info.dilate);
     var best = -1;
     var best_coord = coord;
+    var best_frame = own;
     for (var dj = -r; dj <= r; dj++) {
         for (var di = -r; di <= r; di++) {
             let c = coord + vec2<i32>(di, dj);
@@ -160,13 +167,17 @@ fn dilated_coord(coord: vec2<i32>) -> vec2<i32> {
                 continue;
             }
             let d2 = di * di + dj * dj;
-            if ((best < 0 || d2 < best) && on_surface(textureLoad(frame_tex, c, 0))) {
-                best = d2;
-                best_coord = c;
+            if (best < 0 || d2 < best) {
+                let f = textureLoad(frame_tex, c, 0);
+                if (on_surface(f)) {
+                    best = d2;
+                    best_coord = c;
+                    best_frame = f;
+                }
             }
         }
     }
-    return best_coord;
+    return Dilated(best_coord, best_frame);
 }
 
 // Bilinear read along one side: the lower raster texel, the upper one's
@@ -208,8 +219,11 @@ struct RasterSample {
 
 fn raster_sample(id: vec2<u32>) -> RasterSample {
     if (info.step == 1u) {
-        let coord = dilated_coord(vec2<i32>(id));
-        return RasterSample(textureLoad(t_tex, coord, 0), textureLoad(frame_tex, coord, 0));
+        let d = dilated(vec2<i32>(id));
+        if (!on_surface(d.frame)) {
+            return RasterSample(vec4<f32>(0.0), d.frame);
+        }
+        return RasterSample(textureLoad(t_tex, d.coord, 0), d.frame);
     }
     let ax = coarse_axis(id.x, info.raster_origin.x, info.map_raster.x);
     let ay = coarse_axis(id.y, info.raster_origin.y, info.map_raster.y);
@@ -223,13 +237,11 @@ fn raster_sample(id: vec2<u32>) -> RasterSample {
             let wy = select(1.0 - ay.weight, ay.weight, dy == 1);
             let w = wx * wy;
             if (w > 0.0) {
-                let c = min(vec2<i32>(ax.lower + dx, ay.lower + dy), last);
-                let d = dilated_coord(c);
-                let f = textureLoad(frame_tex, d, 0);
-                if (on_surface(f)) {
+                let d = dilated(min(vec2<i32>(ax.lower + dx, ay.lower + dy), last));
+                if (on_surface(d.frame)) {
                     weight += w;
-                    t += w * textureLoad(t_tex, d, 0);
-                    frame += w * f;
+                    t += w * textureLoad(t_tex, d.coord, 0);
+                    frame += w * d.frame;
                 }
             }
         }
