@@ -229,7 +229,8 @@ fn raster_matches_point_evaluation_and_marks_the_outside() {
         *w = [0.6 * w[0], 0.6 * w[1]];
     }
     let field = SurfaceField::new(&top, &mesh.positions, &x);
-    for (w, h) in [(37, 23), (64, 64), (1, 1)] {
+    // 100 rows: bands of rows drawn in parallel meet inside the surface.
+    for (w, h) in [(37, 23), (64, 64), (1, 1), (50, 100)] {
         let raster = StrainRaster::new(&field, w, h);
         let mut inside = 0;
         for j in 0..h {
@@ -252,6 +253,61 @@ fn raster_matches_point_evaluation_and_marks_the_outside() {
             }
         }
         assert!(w * h == 1 || inside > 0);
+    }
+}
+
+/// The dilation equals its definition, texel by texel: each outside texel
+/// within the window of an inside one copies the nearest (ties to the first
+/// in row-major window order); the others stay outside.
+#[test]
+fn dilation_copies_the_nearest_inside_texel() {
+    let mesh = patch_3k();
+    let mut top = mesh.top.clone();
+    for w in &mut top.uvs {
+        *w = [0.2 + 0.5 * w[0], 0.3 + 0.4 * w[1]];
+    }
+    let field = SurfaceField::new(&top, &mesh.positions, &wavy(&mesh));
+    let (w, h) = (70, 90);
+    let raster = StrainRaster::new(&field, w, h);
+    for radius in [1, 4, 7] {
+        let dilated = raster.clone().dilated(radius);
+        let r = radius as isize;
+        let mut filled = 0;
+        for j in 0..h as isize {
+            for i in 0..w as isize {
+                let idx = (j * w as isize + i) as usize;
+                let mut best: Option<(isize, usize)> = None;
+                if !raster.inside[idx] {
+                    for dj in -r..=r {
+                        for di in -r..=r {
+                            let (x, y) = (i + di, j + dj);
+                            if x < 0 || y < 0 || x >= w as isize || y >= h as isize {
+                                continue;
+                            }
+                            let k = (y * w as isize + x) as usize;
+                            let d2 = di * di + dj * dj;
+                            if raster.inside[k] && best.is_none_or(|b| d2 < b.0) {
+                                best = Some((d2, k));
+                            }
+                        }
+                    }
+                }
+                let source = match best {
+                    Some((_, k)) => {
+                        filled += 1;
+                        k
+                    }
+                    None => idx,
+                };
+                assert_eq!(
+                    dilated.inside[idx], raster.inside[source],
+                    "({i}, {j}) r {radius}"
+                );
+                assert_eq!(dilated.t[idx], raster.t[source], "({i}, {j}) r {radius}");
+                assert_eq!(dilated.uv_frame[idx], raster.uv_frame[source]);
+            }
+        }
+        assert!(filled > 0, "radius {radius} fills some texels");
     }
 }
 

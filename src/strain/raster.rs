@@ -20,6 +20,9 @@ use super::surface::{barycentric, SurfaceField};
 /// How far (texels) the pipeline dilates the raster past the surface edge.
 pub const DILATE_TEXELS: usize = 4;
 
+/// Rows of a raster drawn by one parallel task.
+const BAND_ROWS: usize = 32;
+
 /// A UV raster of the deformation field.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StrainRaster {
@@ -64,37 +67,54 @@ impl StrainRaster {
         height: usize,
         size: Vector2<f64>,
     ) -> StrainRaster {
+        use rayon::prelude::*;
         let (width, height) = (width.max(1), height.max(1));
         let mut raster = StrainRaster::outside(width, height);
         let (tri, uvs) = field.layout();
-        for (k, t) in tri.iter().enumerate() {
-            let w = t.map(|s| uvs[s]);
-            // Texel centres (i + 0.5)/width inside the triangle's UV box.
-            let lo = w[0].inf(&w[1]).inf(&w[2]).component_mul(&size);
-            let hi = w[0].sup(&w[1]).sup(&w[2]).component_mul(&size);
-            let first = |x: f64| (x - 0.5).ceil().max(0.0) as usize;
-            let last = |x: f64, n: usize| ((x - 0.5).floor().min(n as f64 - 1.0)).max(-1.0);
-            let (i1, j1) = (last(hi.x, width), last(hi.y, height));
-            if i1 < 0.0 || j1 < 0.0 {
-                continue;
-            }
-            for j in first(lo.y)..=j1 as usize {
-                for i in first(lo.x)..=i1 as usize {
-                    let p = Vector2::new((i as f64 + 0.5) / size.x, (j as f64 + 0.5) / size.y);
-                    let Some(b) = barycentric(&w, p) else {
-                        continue;
-                    };
-                    if b.iter().any(|&l| l < -1e-12) {
+        // Bands of rows in parallel, each drawing every triangle in order
+        // over its own rows: the same texels and values as one pass over
+        // the triangles (on a shared edge the last triangle still wins).
+        let rows = BAND_ROWS;
+        let band = width * rows;
+        raster
+            .t
+            .par_chunks_mut(band)
+            .zip(raster.uv_frame.par_chunks_mut(band))
+            .zip(raster.inside.par_chunks_mut(band))
+            .enumerate()
+            .for_each(|(b, ((t_band, frame_band), inside_band))| {
+                let (j0, j_end) = (b * rows, (b * rows + rows).min(height));
+                for (k, t) in tri.iter().enumerate() {
+                    let w = t.map(|s| uvs[s]);
+                    // Texel centres (i + 0.5)/width inside the triangle's UV box.
+                    let lo = w[0].inf(&w[1]).inf(&w[2]).component_mul(&size);
+                    let hi = w[0].sup(&w[1]).sup(&w[2]).component_mul(&size);
+                    let first = |x: f64| (x - 0.5).ceil().max(0.0) as usize;
+                    let last = |x: f64, n: usize| ((x - 0.5).floor().min(n as f64 - 1.0)).max(-1.0);
+                    let (i1, j1) = (last(hi.x, width), last(hi.y, height));
+                    if i1 < 0.0 || j1 < 0.0 {
                         continue;
                     }
-                    let s = field.interpolate(k, b);
-                    let idx = j * width + i;
-                    raster.t[idx] = s.t;
-                    raster.uv_frame[idx] = s.uv_frame;
-                    raster.inside[idx] = true;
+                    let (ja, jb) = (first(lo.y).max(j0), (j1 as usize).min(j_end - 1));
+                    for j in ja..=jb {
+                        for i in first(lo.x)..=i1 as usize {
+                            let p =
+                                Vector2::new((i as f64 + 0.5) / size.x, (j as f64 + 0.5) / size.y);
+                            let Some(b) = barycentric(&w, p) else {
+                                continue;
+                            };
+                            if b.iter().any(|&l| l < -1e-12) {
+                                continue;
+                            }
+                            let s = field.interpolate(k, b);
+                            let idx = (j - j0) * width + i;
+                            t_band[idx] = s.t;
+                            frame_band[idx] = s.uv_frame;
+                            inside_band[idx] = true;
+                        }
+                    }
                 }
-            }
-        }
+            });
         raster
     }
 
@@ -104,39 +124,70 @@ impl StrainRaster {
     /// row-major order of the window). Those texels count as inside. The
     /// GPU kernel-field stage applies the same rule when it reads the raster.
     pub fn dilated(mut self, radius: usize) -> StrainRaster {
-        // Writes go only to outside texels and reads only to texels inside
-        // before dilation, so one copy of the mask lets it work in place.
-        let was_inside = self.inside.clone();
-        let r = radius as isize;
-        let (w, h) = (self.width as isize, self.height as isize);
-        for j in 0..h {
-            for i in 0..w {
-                let idx = (j * w + i) as usize;
-                if was_inside[idx] {
+        use rayon::prelude::*;
+        let r = radius;
+        let (w, h) = (self.width, self.height);
+        // Columns of the inside texels per row, then over each row's
+        // window of rows: a texel farther than `r` from that span has no
+        // inside texel in its window and stays outside.
+        let spans: Vec<Option<(usize, usize)>> = (0..h)
+            .map(|j| {
+                let row = &self.inside[j * w..(j + 1) * w];
+                let first = row.iter().position(|&i| i)?;
+                let last = row.iter().rposition(|&i| i)?;
+                Some((first, last))
+            })
+            .collect();
+        let this = &self;
+        // Each row's fills, from the raster before dilation (writes go only
+        // to outside texels and reads only to inside ones).
+        let fills: Vec<Vec<(usize, usize)>> = (0..h)
+            .into_par_iter()
+            .map(|j| {
+                let window = spans[j.saturating_sub(r)..=(j + r).min(h - 1)]
+                    .iter()
+                    .flatten()
+                    .fold(None, |acc: Option<(usize, usize)>, &(a, b)| {
+                        Some(acc.map_or((a, b), |(x, y)| (x.min(a), y.max(b))))
+                    });
+                let Some((lo, hi)) = window else {
+                    return Vec::new();
+                };
+                let (i0, i1) = (lo.saturating_sub(r), (hi + r).min(w - 1));
+                (i0..=i1)
+                    .filter(|&i| !this.inside[j * w + i])
+                    .filter_map(|i| this.nearest_inside(i, j, r).map(|k| (j * w + i, k)))
+                    .collect()
+            })
+            .collect();
+        for (idx, k) in fills.into_iter().flatten() {
+            self.t[idx] = self.t[k];
+            self.uv_frame[idx] = self.uv_frame[k];
+            self.inside[idx] = true;
+        }
+        self
+    }
+
+    /// The nearest inside texel to `(i, j)` within `radius` (square window,
+    /// Euclidean distance; ties to the first in row-major window order).
+    fn nearest_inside(&self, i: usize, j: usize, radius: usize) -> Option<usize> {
+        let (r, w, h) = (radius as isize, self.width as isize, self.height as isize);
+        let (i, j) = (i as isize, j as isize);
+        let mut best: Option<(isize, usize)> = None;
+        for dj in -r..=r {
+            for di in -r..=r {
+                let (x, y) = (i + di, j + dj);
+                if x < 0 || y < 0 || x >= w || y >= h {
                     continue;
                 }
-                let mut best: Option<(isize, usize)> = None;
-                for dj in -r..=r {
-                    for di in -r..=r {
-                        let (x, y) = (i + di, j + dj);
-                        if x < 0 || y < 0 || x >= w || y >= h {
-                            continue;
-                        }
-                        let k = (y * w + x) as usize;
-                        let d2 = di * di + dj * dj;
-                        if was_inside[k] && best.is_none_or(|b| d2 < b.0) {
-                            best = Some((d2, k));
-                        }
-                    }
-                }
-                if let Some((_, k)) = best {
-                    self.t[idx] = self.t[k];
-                    self.uv_frame[idx] = self.uv_frame[k];
-                    self.inside[idx] = true;
+                let k = (y * w + x) as usize;
+                let d2 = di * di + dj * dj;
+                if self.inside[k] && best.is_none_or(|b| d2 < b.0) {
+                    best = Some((d2, k));
                 }
             }
         }
-        self
+        best.map(|(_, k)| k)
     }
 
     /// The raster of a `width × height` map sampled from a coarse raster
