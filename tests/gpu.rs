@@ -329,15 +329,20 @@ fn normals_and_histograms_match_the_cpu_reference() {
     }
 }
 
+/// The whole-frame case: patch_3k deformed, the forehead model, 1000 ×
+/// 777 texels over the 10 × 10 mm patch (10 × 12.9 µm texels).
+fn whole_frame_case() -> (TetMesh, SurfaceField, KernelModel, DisplacementMap) {
+    let mesh = patch_3k();
+    let field = SurfaceField::new(&mesh.top, &mesh.positions, &deformed(&mesh));
+    let mut neutral = skin_map(1000, 777, Edge::Clamp);
+    neutral.texel_um = 10.0;
+    (mesh, field, KernelModel::forehead(), neutral)
+}
+
 #[test]
 fn one_whole_frame_matches_the_cpu_path() {
     let Some(ctx) = context() else { return };
-    let mesh = patch_3k();
-    let field = SurfaceField::new(&mesh.top, &mesh.positions, &deformed(&mesh));
-    let model = KernelModel::forehead();
-    // 1000 × 777 texels over the 10 × 10 mm patch: 10 × 12.9 µm texels.
-    let mut neutral = skin_map(1000, 777, Edge::Clamp);
-    neutral.texel_um = 10.0;
+    let (mesh, field, model, neutral) = whole_frame_case();
     let cpu = skinpatch::micro::convolve::deform(&neutral, &model, &field);
     let mut chain = gpu::micro::GpuMicro::new(ctx, &neutral, &model, DILATE_TEXELS).unwrap();
     for round in 0..2 {
@@ -371,11 +376,7 @@ fn one_whole_frame_matches_the_cpu_path() {
 #[test]
 fn a_coarse_strain_raster_matches_its_cpu_reference() {
     let Some(ctx) = context() else { return };
-    let mesh = patch_3k();
-    let field = SurfaceField::new(&mesh.top, &mesh.positions, &deformed(&mesh));
-    let model = KernelModel::forehead();
-    let mut neutral = skin_map(1000, 777, Edge::Clamp);
-    neutral.texel_um = 10.0;
+    let (_, field, model, neutral) = whole_frame_case();
     let exact = skinpatch::micro::convolve::deform(&neutral, &model, &field);
     let mut chain =
         gpu::micro::GpuMicro::new(ctx.clone(), &neutral, &model, DILATE_TEXELS).unwrap();
