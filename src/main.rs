@@ -132,7 +132,9 @@ enum Command {
     /// `bench micro` runs one microstructure frame (raster, SVD, two
     /// convolution passes, normals) on the GPU and on the CPU references at
     /// each map size, on the scenario's mesh under a fixed deformation, and
-    /// prints both times, their ratio and the largest difference.
+    /// prints both times, their ratio and the largest difference; then per
+    /// stage its time, the bytes it must move and the GB/s achieved, and
+    /// the frame against the GPU's peak bandwidth where known.
     ///
     /// `bench render` simulates the first frames of the scenario and times
     /// per frame the FEM step, the microstructure chain, the geometry and

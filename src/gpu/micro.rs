@@ -563,7 +563,7 @@ impl GpuMicro {
         let (rw, rh) = (w.div_ceil(step), h.div_ceil(step));
         // A coarse raster spans rw·step ≥ w map texels: UVs in its square.
         let drawn = if step == 1 {
-            verts.clone()
+            std::borrow::Cow::Borrowed(&verts)
         } else {
             let scale = [
                 (w as f64 / (rw * step) as f64) as f32,
@@ -573,7 +573,7 @@ impl GpuMicro {
             for x in &mut v {
                 x.uv = [x.uv[0] * scale[0], x.uv[1] * scale[1]];
             }
-            v
+            std::borrow::Cow::Owned(v)
         };
         match (&self.surface, &self.layout) {
             (Some(s), Some(layout)) if layout.0 == tri && layout.1 == uvs => {
@@ -613,14 +613,15 @@ impl GpuMicro {
         };
         let pass_s = write(0, &plan.pass_s);
         let pass_t = write(1, &plan.pass_t);
-        let mut normals_list = None;
-        if normals {
-            normals_list = Some(write(2, &self.normals_due));
-        }
+        let normals_tiles = if normals {
+            write(2, &self.normals_due)
+        } else {
+            0
+        };
         self.tiles = FrameTiles {
             pass_s,
             pass_t,
-            normals: normals_list.unwrap_or(0),
+            normals: normals_tiles,
             total: plan.pass_s.total(),
             texels: [
                 plan.pass_s.texels(w, h),
