@@ -580,6 +580,14 @@ fn tiled_maps_match_the_untiled_chain_across_seams() {
         let folder = dir.path().join(format!("{edge:?}-{step}"));
         let tiled = TiledMap::write(&folder, &neutral, 128).unwrap();
         let mut chains = TiledMicro::new(ctx.clone(), tiled.clone(), &model, DILATE_TEXELS);
+        // A step the tiles (or a wrapping map's size) do not divide is
+        // refused by name: the windows would leave the map's raster grid.
+        let refused = if edge == Edge::Wrap { 8 } else { 3 };
+        let err = chains.set_raster_step(refused).unwrap_err().to_string();
+        assert!(
+            err.contains("microstructure.strain_raster_step") && err.contains("multiple"),
+            "{err}"
+        );
         chains.set_raster_step(step).unwrap();
         let (mut worst, mut worst_normal, mut kept, mut seen) = (0.0f32, 0.0f32, 0, 0);
         chains
