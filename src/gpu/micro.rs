@@ -343,17 +343,13 @@ impl GpuMicro {
     /// reads it bilinearly in the passes (the CPU reference is
     /// [`crate::micro::convolve::deform_stepped`]); 1 (the default) gives a
     /// raster texel per map texel. The raster's dilation becomes
-    /// [`crate::strain::raster::coarse_dilation`] raster texels. The next
+    /// [`crate::strain::raster::raster_dilation`] raster texels. The next
     /// frame starts over (maps and raster reset).
     pub fn set_raster_step(&mut self, step: usize) {
         let step = step.max(1);
         let (w, h) = (self.width, self.height);
-        let mut info = if step == 1 {
-            self.svd2.info(w, h, self.dilate)
-        } else {
-            let dilate = crate::strain::raster::coarse_dilation_of(self.dilate, step);
-            self.svd2.info_stepped(w, h, dilate, step)
-        };
+        let dilate = crate::strain::raster::raster_dilation(self.dilate, step);
+        let mut info = self.svd2.info_stepped(w, h, dilate, step);
         if let Some(win) = self.window {
             // Reads clamp at the larger map's edges, as its own chain's do
             // (the window starts on its raster grid: the origin is a
@@ -595,7 +591,7 @@ impl GpuMicro {
                 (self.width, self.height),
                 &tri,
                 &uvs,
-                crate::strain::raster::stepped_reach_of(self.dilate, self.step),
+                crate::strain::raster::stepped_reach(self.dilate, self.step),
                 self.sigma_max_um,
                 self.tolerance.map(|t| t as f32),
             )

@@ -195,7 +195,7 @@ impl TiledMicro {
 
     /// How far (texels) the raster's values reach past the surface.
     fn reach_past_surface(&self) -> usize {
-        crate::strain::raster::stepped_reach_of(self.dilate, self.step)
+        crate::strain::raster::stepped_reach(self.dilate, self.step)
     }
 
     /// Chains for the tiles within `reach + dilate + 2` texels of the

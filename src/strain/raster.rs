@@ -215,32 +215,27 @@ impl StrainRaster {
     }
 }
 
-/// Dilation of a coarse raster (its texels): far enough that every map
-/// texel within [`DILATE_TEXELS`] of the surface has an inside texel
-/// among its four bilinear neighbours.
-pub fn coarse_dilation(step: usize) -> usize {
-    coarse_dilation_of(DILATE_TEXELS, step)
-}
-
-/// [`coarse_dilation`] for a dilation of `dilate` map texels.
-pub fn coarse_dilation_of(dilate: usize, step: usize) -> usize {
-    dilate.div_ceil(step.max(1)) + 1
-}
-
-/// How far (map texels) values of a raster with one texel per `step` map
-/// texels reach past the surface's UV bounding boxes: the coarse
-/// dilation and the bilinear footprint; [`DILATE_TEXELS`] for the exact
-/// raster.
-pub fn stepped_reach(step: usize) -> usize {
-    stepped_reach_of(DILATE_TEXELS, step)
-}
-
-/// [`stepped_reach`] for a dilation of `dilate` map texels.
-pub fn stepped_reach_of(dilate: usize, step: usize) -> usize {
+/// Dilation (raster texels) of a raster with one texel per `step` map
+/// texels when the map's is `dilate` texels: `dilate` itself at step 1;
+/// beyond, far enough that every map texel within `dilate` of the surface
+/// has an inside texel among its four bilinear neighbours.
+pub fn raster_dilation(dilate: usize, step: usize) -> usize {
     if step <= 1 {
         dilate
     } else {
-        step * (coarse_dilation_of(dilate, step) + 2)
+        dilate.div_ceil(step) + 1
+    }
+}
+
+/// How far (map texels) values of a raster with one texel per `step` map
+/// texels, dilated as [`raster_dilation`] says, reach past the surface's
+/// UV bounding boxes: the dilation and the bilinear footprint; `dilate`
+/// for the exact raster.
+pub fn stepped_reach(dilate: usize, step: usize) -> usize {
+    if step <= 1 {
+        dilate
+    } else {
+        step * (raster_dilation(dilate, step) + 2)
     }
 }
 
@@ -251,7 +246,7 @@ pub fn stepped_reach_of(dilate: usize, step: usize) -> usize {
 /// step)` (map texel `i` spans `[i, i + 1)`), so the coarse grid starts at
 /// the map's corner whatever its size, and a window of the map starting
 /// at a multiple of `step` sees the same grid. The raster is dilated by
-/// [`coarse_dilation`]. Map texel `i` reads coarse coordinate
+/// [`raster_dilation`]. Map texel `i` reads coarse coordinate
 /// `x = (i + ½)/step − ½` (clamped to the raster), the four neighbours with
 /// bilinear weights; outside neighbours drop out and the weights of the
 /// inside ones are renormalised, and a texel with no inside neighbour of
@@ -296,7 +291,8 @@ impl CoarseRaster {
             map_height as f64 / step as f64,
         );
         CoarseRaster {
-            raster: StrainRaster::sampled(field, w, h, size).dilated(coarse_dilation(step)),
+            raster: StrainRaster::sampled(field, w, h, size)
+                .dilated(raster_dilation(DILATE_TEXELS, step)),
             step,
             map_width,
             map_height,
@@ -440,13 +436,16 @@ mod tests {
 
     #[test]
     fn coarse_reach_covers_the_dilation_and_the_bilinear_footprint() {
-        assert_eq!(stepped_reach(1), DILATE_TEXELS);
+        assert_eq!(stepped_reach(DILATE_TEXELS, 1), DILATE_TEXELS);
         for step in 2..=16 {
-            let d = coarse_dilation(step);
+            let d = raster_dilation(DILATE_TEXELS, step);
             // Every map texel within DILATE_TEXELS of the surface has an
             // inside (dilated) neighbour.
             assert!(d * step >= DILATE_TEXELS + step, "step {step}");
-            assert!(stepped_reach(step) >= (d + 1) * step, "step {step}");
+            assert!(
+                stepped_reach(DILATE_TEXELS, step) >= (d + 1) * step,
+                "step {step}"
+            );
         }
         assert_eq!(coarse_neighbours(0, 4, 10), (0, 0.0));
         assert_eq!(coarse_neighbours(6, 4, 10), (1, 0.125));
