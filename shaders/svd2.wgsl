@@ -71,7 +71,8 @@ struct FieldInfo {
 // (r_s, r_t) per texel.
 @group(0) @binding(9) var<storage, read_write> stretch: array<vec2<f32>>;
 
-const IDENTITY = vec4<f32>(1.0, 0.0, 0.0, 0.0);
+// No axis, alpha 0: all zeros, like the CPU's PassParams::IDENTITY.
+const IDENTITY = vec4<f32>(0.0, 0.0, 0.0, 0.0);
 
 // Piecewise-linear table, constant beyond its ends (kernel.rs PiecewiseLinear::at).
 fn table_at(start: u32, len: u32, r: f32) -> f32 {

@@ -28,7 +28,7 @@ use super::map::DisplacementMap;
 use crate::strain::{StrainRaster, Svd2};
 
 /// Kernel parameters of one pass at one texel.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Zeroable)]
 pub struct PassParams {
     /// Unit axis in texel units (x along u, y along v).
     pub axis: [f32; 2],
@@ -39,9 +39,10 @@ pub struct PassParams {
 }
 
 impl PassParams {
-    /// The identity pass.
+    /// The identity pass (α = 0; no axis, no σ): all zeros, so a field
+    /// allocated zeroed starts as the identity everywhere.
     pub const IDENTITY: PassParams = PassParams {
-        axis: [1.0, 0.0],
+        axis: [0.0, 0.0],
         alpha: 0.0,
         sigma: 0.0,
     };
@@ -74,9 +75,6 @@ impl KernelField {
         assert_eq!((raster.width, raster.height), (map.width, map.height));
         let (w, h) = (map.width as f64, map.height as f64);
         let texel = |idx: usize| {
-            if !raster.inside[idx] {
-                return (PassParams::IDENTITY, PassParams::IDENTITY);
-            }
             let svd = Svd2::of(&raster.t[idx]);
             let s_matrix = raster.uv_frame[idx] * svd.v();
             let pass = |col: usize, r: f64| {
@@ -95,10 +93,23 @@ impl KernelField {
             };
             (pass(0, svd.rs), pass(1, svd.rt))
         };
-        let (s, t) = (0..map.width * map.height)
-            .into_par_iter()
-            .map(texel)
-            .unzip();
+        // Zeroed (identity) allocations, written only at the texels on the
+        // surface: most of a map larger than its surface is never touched.
+        let n = map.width * map.height;
+        let (mut s, mut t) = (
+            bytemuck::zeroed_vec::<PassParams>(n),
+            bytemuck::zeroed_vec::<PassParams>(n),
+        );
+        let width = map.width.max(1);
+        s.par_chunks_mut(width)
+            .zip(t.par_chunks_mut(width))
+            .enumerate()
+            .for_each(|(j, (s_row, t_row))| {
+                let inside = &raster.inside[j * width..j * width + s_row.len()];
+                for (i, _) in inside.iter().enumerate().filter(|(_, &on)| on) {
+                    (s_row[i], t_row[i]) = texel(j * width + i);
+                }
+            });
         KernelField {
             width: map.width,
             height: map.height,
@@ -236,7 +247,8 @@ pub fn convolve_texel(src: &DisplacementMap, i: usize, j: usize, p: &PassParams)
         && y - ry >= 0.0
         && x + rx < (src.width - 1) as f32
         && y + ry < (src.height - 1) as f32;
-    // The normalised Gaussian sum, with a reader chosen once per texel.
+    // The normalised Gaussian sum, with a reader chosen once per texel; the
+    // reader takes tap k's two points `(x − dx, y − dy, x + dx, y + dy)`.
     fn taps(
         centre: f32,
         n: i32,
@@ -244,7 +256,7 @@ pub fn convolve_texel(src: &DisplacementMap, i: usize, j: usize, p: &PassParams)
         q: f32,
         at: (f32, f32),
         axis: [f32; 2],
-        read: impl Fn(f32, f32) -> f32,
+        read: impl Fn([f32; 4]) -> [f32; 2],
     ) -> f32 {
         let (x, y) = at;
         let mut sum = centre;
@@ -256,18 +268,19 @@ pub fn convolve_texel(src: &DisplacementMap, i: usize, j: usize, p: &PassParams)
             step *= q * q;
             let w = if k == n { g * taper } else { g };
             let (dx, dy) = (k as f32 * axis[0], k as f32 * axis[1]);
-            sum += w * (read(x - dx, y - dy) + read(x + dx, y + dy));
+            let [behind, ahead] = read([x - dx, y - dy, x + dx, y + dy]);
+            sum += w * (behind + ahead);
             norm += 2.0 * w;
         }
         sum / norm
     }
     let blurred = if interior {
-        taps(centre, n, taper, q, (x, y), p.axis, |u, v| {
-            src.bilinear_interior(u, v)
+        taps(centre, n, taper, q, (x, y), p.axis, |at| {
+            src.bilinear_interior_pair(at)
         })
     } else {
-        taps(centre, n, taper, q, (x, y), p.axis, |u, v| {
-            src.bilinear(u, v)
+        taps(centre, n, taper, q, (x, y), p.axis, |at| {
+            [src.bilinear(at[0], at[1]), src.bilinear(at[2], at[3])]
         })
     };
     (1.0 - p.alpha) * centre + p.alpha * blurred
@@ -302,4 +315,23 @@ pub fn deform_stepped(
 pub fn convolve(map: &DisplacementMap, field: &KernelField) -> DisplacementMap {
     let first = convolve_pass(map, &field.s);
     convolve_pass(&first, &field.t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_identity_pass_is_all_zeros_and_changes_nothing() {
+        // `KernelField::from_strain` relies on it: zeroed texels are identity.
+        assert_eq!(
+            <PassParams as bytemuck::Zeroable>::zeroed(),
+            PassParams::IDENTITY
+        );
+        let map = DisplacementMap::from_fn(9, 7, 5.0, super::super::map::Edge::Wrap, |i, j| {
+            (i * 3 + j * 5) as f32 * 0.25
+        });
+        let out = convolve_pass(&map, &vec![PassParams::IDENTITY; 63]);
+        assert_eq!(out, map);
+    }
 }

@@ -42,11 +42,13 @@ impl StrainRaster {
     /// A `width × height` raster with every texel outside (zero values).
     pub fn outside(width: usize, height: usize) -> StrainRaster {
         let n = width * height;
+        // Zeroed allocations: the pages of texels that are never drawn are
+        // never written (a map larger than its surface is mostly outside).
         StrainRaster {
             width,
             height,
-            t: vec![Matrix2::zeros(); n],
-            uv_frame: vec![Matrix2::zeros(); n],
+            t: bytemuck::zeroed_vec(n),
+            uv_frame: bytemuck::zeroed_vec(n),
             inside: vec![false; n],
         }
     }
@@ -106,10 +108,10 @@ impl StrainRaster {
                             if b.iter().any(|&l| l < -1e-12) {
                                 continue;
                             }
-                            let s = field.interpolate(k, b);
+                            let (t, frame) = field.interpolate_matrices(k, b);
                             let idx = (j - j0) * width + i;
-                            t_band[idx] = s.t;
-                            frame_band[idx] = s.uv_frame;
+                            t_band[idx] = t;
+                            frame_band[idx] = frame;
                             inside_band[idx] = true;
                         }
                     }

@@ -270,13 +270,21 @@ impl SurfaceField {
 
     /// The field inside triangle `k` at barycentric coordinates `bary`.
     pub fn interpolate(&self, k: usize, bary: [f64; 3]) -> SurfaceStrain {
+        let (t, frame) = self.interpolate_matrices(k, bary);
+        SurfaceStrain::of(t, frame)
+    }
+
+    /// `T` and `Q Rᵀ` inside triangle `k` at barycentric coordinates `bary`:
+    /// [`SurfaceField::interpolate`] without the decomposition (what the
+    /// strain raster stores; the kernel field decomposes each texel later).
+    pub fn interpolate_matrices(&self, k: usize, bary: [f64; 3]) -> (Matrix2<f64>, Matrix2<f64>) {
         let mut t = Matrix2::zeros();
         let mut frame = Matrix2::zeros();
         for (&s, b) in self.tri[k].iter().zip(bary) {
             t += self.vertices[s].t * b;
             frame += self.vertices[s].uv_frame * b;
         }
-        SurfaceStrain::of(t, frame)
+        (t, frame)
     }
 
     /// Triangles (surface-vertex indices) and vertex UVs.
