@@ -258,7 +258,12 @@ pub fn convolve_texel(src: &DisplacementMap, i: usize, j: usize, p: &PassParams)
         axis: [f32; 2],
         read: impl Fn([f32; 4]) -> [f32; 2],
     ) -> f32 {
+        use wide::f32x4;
         let (x, y) = at;
+        // Tap k's points as `base + k·dir`: `x + k·(−a) = x − k·a` exactly
+        // (negation is exact), so this is `x ∓ dx` with `dx = k·a`.
+        let base = f32x4::from([x, y, x, y]);
+        let dir = f32x4::from([-axis[0], -axis[1], axis[0], axis[1]]);
         let mut sum = centre;
         let mut norm = 1.0f32;
         let mut g = 1.0f32;
@@ -267,8 +272,8 @@ pub fn convolve_texel(src: &DisplacementMap, i: usize, j: usize, p: &PassParams)
             g *= step;
             step *= q * q;
             let w = if k == n { g * taper } else { g };
-            let (dx, dy) = (k as f32 * axis[0], k as f32 * axis[1]);
-            let [behind, ahead] = read([x - dx, y - dy, x + dx, y + dy]);
+            let at = base + f32x4::splat(k as f32) * dir;
+            let [behind, ahead] = read(at.to_array());
             sum += w * (behind + ahead);
             norm += 2.0 * w;
         }
