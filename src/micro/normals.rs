@@ -51,7 +51,9 @@ pub fn normal_map(map: &DisplacementMap) -> Vec<[f32; 3]> {
     out.par_chunks_mut(w).enumerate().for_each(|(j, row)| {
         let by_rule = |i: usize| normal(slope(map, i, j, [1.0, 1.0]));
         if j == 0 || j + 1 >= h || w < 3 {
-            row.iter_mut().enumerate().for_each(|(i, n)| *n = by_rule(i));
+            row.iter_mut()
+                .enumerate()
+                .for_each(|(i, n)| *n = by_rule(i));
             return;
         }
         let line = |jj: usize| &map.data[jj * w..(jj + 1) * w];
@@ -195,7 +197,11 @@ mod tests {
                 for j in 0..h {
                     for i in 0..w {
                         let want = normal_of(slope(&map, i, j, [1.0, 1.0])).map(|c| c as f32);
-                        assert_eq!(normals[j * w + i], want, "{edge:?} {w}×{h} texel ({i}, {j})");
+                        assert_eq!(
+                            normals[j * w + i],
+                            want,
+                            "{edge:?} {w}×{h} texel ({i}, {j})"
+                        );
                     }
                 }
             }
