@@ -105,9 +105,9 @@ impl KernelField {
             .zip(t.par_chunks_mut(width))
             .enumerate()
             .for_each(|(j, (s_row, t_row))| {
-                let inside = &raster.inside[j * width..j * width + s_row.len()];
-                for (i, _) in inside.iter().enumerate().filter(|(_, &on)| on) {
-                    (s_row[i], t_row[i]) = texel(j * width + i);
+                let row = j * width;
+                for i in (0..s_row.len()).filter(|&i| raster.inside[row + i]) {
+                    (s_row[i], t_row[i]) = texel(row + i);
                 }
             });
         KernelField {
