@@ -22,10 +22,16 @@ pub const HISTOGRAM_BINS: usize = 64;
 #[inline]
 pub fn slope(map: &DisplacementMap, i: usize, j: usize, stretch: [f64; 2]) -> [f64; 2] {
     let (i, j) = (i as isize, j as isize);
-    let k = map.height_unit_um / (2.0 * map.texel_um);
+    let k = central_difference_scale(map);
     let dx = (map.texel(i + 1, j) - map.texel(i - 1, j)) as f64 * k / stretch[0];
     let dy = (map.texel(i, j + 1) - map.texel(i, j - 1)) as f64 * k / stretch[1];
     [dx, dy]
+}
+
+/// The factor that turns a central difference of two heights (two texels
+/// apart, in the map's height unit) into a slope.
+fn central_difference_scale(map: &DisplacementMap) -> f64 {
+    map.height_unit_um / (2.0 * map.texel_um)
 }
 
 /// Unit normal from a slope.
@@ -46,7 +52,7 @@ pub fn normal_map(map: &DisplacementMap) -> Vec<[f32; 3]> {
     if w == 0 {
         return out;
     }
-    let k = map.height_unit_um / (2.0 * map.texel_um);
+    let k = central_difference_scale(map);
     let normal = |s: [f64; 2]| normal_of(s).map(|c| c as f32);
     out.par_chunks_mut(w).enumerate().for_each(|(j, row)| {
         let by_rule = |i: usize| normal(slope(map, i, j, [1.0, 1.0]));
