@@ -1,6 +1,8 @@
 //! The `skinpatch` command: parses arguments, calls the library, prints
 //! results and errors. All work happens in the library.
 
+mod cli;
+
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -347,7 +349,7 @@ fn fit(samples: &Path) -> anyhow::Result<()> {
         );
         bar
     });
-    let report = skinpatch::pipeline::fit(samples, |k, total, fraction| {
+    let report = cli::fit::fit(samples, |k, total, fraction| {
         if let Some(bar) = &bar {
             bar.set_message(format!("sample {}/{total}", k + 1));
             bar.set_position(((k as f64 + fraction) / total as f64 * 1000.0) as u64);
@@ -677,7 +679,7 @@ fn bench(stage: &str, path: &Path, frames: usize) -> anyhow::Result<()> {
         ("two-level", LinearSolver::TwoLevel),
     ] {
         setup.simulation.newton.linear = solver;
-        let f = skinpatch::pipeline::bench_fem(&setup, frames)?;
+        let f = skinpatch::bench::bench_fem(&setup, frames)?;
         let t = f.timings;
         let other = f.wall_s - t.forces_s - t.assembly_s - t.linear_s;
         report += &format!(
@@ -964,7 +966,7 @@ fn bench_render(path: &Path, frames: usize, width: usize, height: usize) -> anyh
         setup.mesh.num_tets(),
         frames
     );
-    let b = skinpatch::pipeline::bench_render(&setup, frames, (width, height), 5)?;
+    let b = skinpatch::bench::bench_render(&setup, frames, (width, height), 5)?;
     let (w, h, ss) = b.size;
     let full = b.fem_ms + b.micro_ms + b.geometry_ms + b.render_ms;
     println!("GPU: {}", b.adapter);

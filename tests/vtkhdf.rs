@@ -2,8 +2,13 @@
 //! frame's VTU holds, the connectivity and unchanged arrays are stored once,
 //! and VTK's own reader (the Python `vtk` package, when installed; `.ci/run`
 //! requires it) reads the same grid and arrays as from the VTUs.
-#![cfg(feature = "vtkhdf")]
+//!
+//! A test binary of its own (the others are modules of `tests/main`): it
+//! needs the `vtkhdf` feature, and building the whole suite a second time
+//! with that feature would cost minutes for these few cases.
 
+#[allow(dead_code)]
+#[path = "main/common.rs"]
 mod common;
 
 use std::path::Path;

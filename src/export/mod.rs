@@ -59,11 +59,88 @@ const HEADER: &str = "frame,time_s,probe_force_x_n,probe_force_y_n,probe_force_z
 contact_nodes,contact_area_mm2,max_penetration_mm,newton_iterations,linear_iterations,rel_residual,\
 rs_min,rs_max,rt_min,rt_max,folded_vertices,inverted_tets,min_volume_ratio,step_wall_s";
 
+/// A row type of `metrics.csv`: its header and how a row is written.
+pub trait MetricsRow {
+    /// The header line (column names, comma-separated, no newline).
+    const HEADER: &'static str;
+    /// One row, newline included.
+    fn csv_row(&self) -> String;
+}
+
+impl MetricsRow for FrameMetrics {
+    const HEADER: &'static str = HEADER;
+
+    fn csv_row(&self) -> String {
+        let m = self;
+        let [fx, fy, fz] = m.probe_force_n;
+        format!(
+            "{},{},{fx:e},{fy:e},{fz:e},{},{:e},{:e},{},{},{:e},{:e},{:e},{:e},{:e},{},{},{:e},{:.6}\n",
+            m.frame,
+            m.time_s,
+            m.contact_nodes,
+            m.contact_area_mm2,
+            m.max_penetration_mm,
+            m.newton_iterations,
+            m.linear_iterations,
+            m.rel_residual,
+            m.rs_range[0],
+            m.rs_range[1],
+            m.rt_range[0],
+            m.rt_range[1],
+            m.folded_vertices,
+            m.inverted_tets,
+            m.min_volume_ratio,
+            m.step_wall_s
+        )
+    }
+}
+
+/// One frame's row of an animated surface's `metrics.csv`.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct SurfaceMetrics {
+    /// Frame index (0 is the first sample of the animation).
+    pub frame: usize,
+    /// Time (s).
+    pub time_s: f64,
+    /// Least and greatest r_s over the surface vertices.
+    pub rs_range: [f64; 2],
+    /// Least and greatest r_t over the surface vertices.
+    pub rt_range: [f64; 2],
+    /// Surface vertices whose averaged T folds (det T < 0).
+    pub folded_vertices: usize,
+    /// Triangles without area at rest, in UV or in this frame.
+    pub degenerate_triangles: usize,
+    /// Wall time of the frame's stages (s).
+    pub wall_s: f64,
+}
+
+impl MetricsRow for SurfaceMetrics {
+    const HEADER: &'static str =
+        "frame,time_s,rs_min,rs_max,rt_min,rt_max,folded_vertices,degenerate_triangles,wall_s";
+
+    fn csv_row(&self) -> String {
+        let m = self;
+        format!(
+            "{},{},{},{},{},{},{},{},{:.6}\n",
+            m.frame,
+            m.time_s,
+            m.rs_range[0],
+            m.rs_range[1],
+            m.rt_range[0],
+            m.rt_range[1],
+            m.folded_vertices,
+            m.degenerate_triangles,
+            m.wall_s
+        )
+    }
+}
+
 /// `metrics.csv`, appended and flushed per frame. Each row is formatted
 /// first and written with one call; a write that fails (a full disk)
 /// truncates the file back to its last whole row, so the file never ends
 /// in half a row.
-pub struct MetricsWriter<W: Truncate = std::fs::File> {
+pub struct MetricsWriter<R: MetricsRow, W: Truncate = std::fs::File> {
+    rows: std::marker::PhantomData<fn(&R)>,
     path: PathBuf,
     file: W,
     /// Length of the file up to its last whole row (bytes).
@@ -84,49 +161,30 @@ impl Truncate for std::fs::File {
     }
 }
 
-impl MetricsWriter {
+impl<R: MetricsRow> MetricsWriter<R> {
     /// Creates (truncates) the file and writes the header.
-    pub fn create(path: &Path) -> Result<MetricsWriter> {
+    pub fn create(path: &Path) -> Result<MetricsWriter<R>> {
         let file = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
         MetricsWriter::new(path, file)
     }
 }
 
-impl<W: Truncate> MetricsWriter<W> {
+impl<R: MetricsRow, W: Truncate> MetricsWriter<R, W> {
     /// Writes the header to `file` (reported as `path` in errors).
-    pub fn new(path: &Path, file: W) -> Result<MetricsWriter<W>> {
+    pub fn new(path: &Path, file: W) -> Result<MetricsWriter<R, W>> {
         let mut writer = MetricsWriter {
+            rows: std::marker::PhantomData,
             path: path.to_path_buf(),
             file,
             whole: 0,
         };
-        writer.write_line(&format!("{HEADER}\n"))?;
+        writer.write_line(&format!("{}\n", R::HEADER))?;
         Ok(writer)
     }
 
     /// Appends one row.
-    pub fn push(&mut self, m: &FrameMetrics) -> Result<()> {
-        let [fx, fy, fz] = m.probe_force_n;
-        let row = format!(
-            "{},{},{fx:e},{fy:e},{fz:e},{},{:e},{:e},{},{},{:e},{:e},{:e},{:e},{:e},{},{},{:e},{:.6}\n",
-            m.frame,
-            m.time_s,
-            m.contact_nodes,
-            m.contact_area_mm2,
-            m.max_penetration_mm,
-            m.newton_iterations,
-            m.linear_iterations,
-            m.rel_residual,
-            m.rs_range[0],
-            m.rs_range[1],
-            m.rt_range[0],
-            m.rt_range[1],
-            m.folded_vertices,
-            m.inverted_tets,
-            m.min_volume_ratio,
-            m.step_wall_s
-        );
-        self.write_line(&row)
+    pub fn push(&mut self, row: &R) -> Result<()> {
+        self.write_line(&row.csv_row())
     }
 
     /// Writes `line` whole, or on failure cuts the file back to its last
@@ -362,10 +420,23 @@ mod tests {
     /// with the last whole row, and the error names the file.
     #[test]
     fn a_full_disk_leaves_only_whole_rows() {
-        let row = FrameMetrics::default();
+        full_disk_leaves_only_whole_rows(&FrameMetrics::default());
+        full_disk_leaves_only_whole_rows(&SurfaceMetrics {
+            frame: 12,
+            time_s: 0.4,
+            rs_range: [0.9, 1.2],
+            rt_range: [0.8, 1.1],
+            folded_vertices: 0,
+            degenerate_triangles: 0,
+            wall_s: 0.01,
+        });
+    }
+
+    fn full_disk_leaves_only_whole_rows<R: MetricsRow>(row: &R) {
         let path = Path::new("out/metrics.csv");
-        for room in [HEADER.len() + 1 + 10, HEADER.len() + 1 + 150, 2000] {
-            let mut w = MetricsWriter::new(
+        let header = R::HEADER;
+        for room in [header.len() + 1 + 10, header.len() + 1 + 150, 2000] {
+            let mut w = MetricsWriter::<R, _>::new(
                 path,
                 Full {
                     data: Vec::new(),
@@ -375,7 +446,7 @@ mod tests {
             .unwrap();
             let mut written = 0;
             let err = loop {
-                match w.push(&row) {
+                match w.push(row) {
                     Ok(()) => written += 1,
                     Err(e) => break e,
                 }
@@ -388,7 +459,7 @@ mod tests {
             assert!(
                 text.lines()
                     .skip(1)
-                    .all(|l| l.split(',').count() == HEADER.split(',').count()),
+                    .all(|l| l.split(',').count() == header.split(',').count()),
                 "{text}"
             );
         }

@@ -9,6 +9,7 @@ pub mod coarse;
 pub mod contact;
 pub mod corotation;
 pub mod integrate;
+pub mod load_steps;
 pub mod material;
 pub mod solve;
 

@@ -172,3 +172,36 @@ pub fn read_texture_texels<T: Pod>(
         .flat_map(|j| words[j * stride..j * stride + width].iter().copied())
         .collect())
 }
+
+/// Uploads a 2D texture of `format` from raw texel bytes.
+pub fn upload_texture(
+    ctx: &Context,
+    label: &str,
+    (width, height): (usize, usize),
+    format: wgpu::TextureFormat,
+    bytes_per_texel: usize,
+    data: &[u8],
+) -> wgpu::Texture {
+    let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+    let texture = texture(ctx, label, (width, height), format, usage);
+    ctx.queue.write_texture(
+        wgpu::TexelCopyTextureInfo {
+            texture: &texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
+        data,
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some((width * bytes_per_texel) as u32),
+            rows_per_image: Some(height as u32),
+        },
+        wgpu::Extent3d {
+            width: width as u32,
+            height: height as u32,
+            depth_or_array_layers: 1,
+        },
+    );
+    texture
+}

@@ -298,21 +298,6 @@ impl GpuMicro {
         })
     }
 
-    /// The chain of a scenario's microstructure: its neutral map and kernel
-    /// model, the standard raster dilation, incremental frames when the
-    /// scenario asks for them.
-    pub fn for_scenario(ctx: Context, micro: &crate::scenario::MicroSetup) -> Result<GpuMicro> {
-        let mut chain = GpuMicro::new(
-            ctx,
-            micro.neutral.whole("the untiled GPU chain")?,
-            &micro.model,
-            crate::strain::raster::DILATE_TEXELS,
-        )?;
-        chain.set_incremental(micro.incremental_tolerance);
-        chain.set_raster_step(micro.raster_step);
-        Ok(chain)
-    }
-
     /// A chain over `window_map`, the texels of a larger map that `window`
     /// says (the surface field's UVs stay those of the larger map).
     pub fn for_window(

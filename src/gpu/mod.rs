@@ -35,7 +35,6 @@ pub mod fit;
 pub mod histogram;
 pub mod map;
 pub mod micro;
-pub mod moments;
 pub mod normals;
 pub mod raster;
 pub mod svd2;
@@ -517,25 +516,16 @@ pub(crate) fn encoder(ctx: &Context) -> wgpu::CommandEncoder {
         .create_command_encoder(&wgpu::CommandEncoderDescriptor::default())
 }
 
-/// All shader sources by file name, for validation and docs.
-/// Whole modules as compiled: the map-reading stages with
-/// `shaders/map.wgsl` prepended.
+/// The compute stages' shader sources by file name, for validation: whole
+/// modules as compiled (the map-reading stages with `shaders/map.wgsl`
+/// prepended). The renderer and the viewer list their own.
 pub fn shader_sources() -> Vec<(&'static str, String)> {
     vec![
         ("raster.wgsl", raster::SHADER.to_string()),
         ("svd2.wgsl", svd2::SHADER.to_string()),
         ("convolve.wgsl", convolve::source()),
         ("normals.wgsl", map::with_map_access(normals::SHADER)),
-        ("moments.wgsl", moments::SHADER.to_string()),
         ("histogram.wgsl", map::with_map_access(histogram::SHADER)),
         ("fit.wgsl", fit::SHADER.to_string()),
-        ("shadow.wgsl", crate::render::shadow::SHADER.to_string()),
-        ("irradiance.wgsl", crate::render::irradiance::source()),
-        (
-            "diffusion.wgsl",
-            crate::render::diffusion::SHADER.to_string(),
-        ),
-        ("skin.wgsl", crate::render::skin::source()),
-        ("resolve.wgsl", crate::render::resolve::SHADER.to_string()),
     ]
 }

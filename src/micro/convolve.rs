@@ -304,8 +304,8 @@ pub fn deform(
 
 /// [`deform`] with the strain rasterised at one texel per `step × step` map
 /// texels and read bilinearly ([`crate::strain::raster::CoarseRaster`];
-/// `step = 1` is [`deform`]). The reference of the GPU chain with
-/// [`crate::gpu::micro::GpuMicro::set_raster_step`].
+/// `step = 1` is [`deform`]). The reference of the GPU chain with the same
+/// raster step (`GpuMicro::set_raster_step`, a layer above).
 pub fn deform_stepped(
     map: &DisplacementMap,
     model: &KernelModel,

@@ -6,7 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
-use super::MicroEngine;
+use super::micro::MicroEngine;
 use crate::error::{Error, Result};
 use crate::export::frames;
 use crate::gpu::micro::GpuMicro;
@@ -14,7 +14,7 @@ use crate::gpu::Context;
 use crate::mesh::Vec3;
 use crate::render::albedo::Albedo;
 use crate::render::scene::FrameGeometry;
-use crate::render::{FrameStage, Mode, NormalMap, RenderSetup, Renderer, Roughness};
+use crate::render::{Mode, NormalMap, RenderSetup, Renderer, Roughness};
 use crate::scenario::MicroSetup;
 use crate::strain::SurfaceField;
 
@@ -30,7 +30,7 @@ pub(super) struct RenderEngine {
 }
 
 /// The message for a render request without a GPU.
-fn no_gpu() -> Error {
+pub(crate) fn no_gpu() -> Error {
     Error::Gpu(
         "[render] needs a GPU adapter (the warning above says why none is usable) — or remove \
          the [render] section"
@@ -231,147 +231,9 @@ fn probe_writable(folder: &Path) -> Result<()> {
 }
 
 /// The device of the microstructure chain, or `own` without one.
-fn device<'a>(chain: Option<&'a GpuMicro>, own: Option<&'a Context>) -> &'a Context {
+pub(crate) fn device<'a>(chain: Option<&'a GpuMicro>, own: Option<&'a Context>) -> &'a Context {
     chain
         .map(GpuMicro::context)
         .or(own)
         .expect("a device: the chain's or its own")
-}
-
-/// Figures of `skinpatch bench render` (means over the timed frames, ms).
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct RenderBench {
-    /// The adapter.
-    pub adapter: String,
-    /// Output size and supersampling.
-    pub size: (usize, usize, usize),
-    /// Frames timed.
-    pub frames: usize,
-    /// FEM step (CPU).
-    pub fem_ms: f64,
-    /// Microstructure chain (GPU, no read-back).
-    pub micro_ms: f64,
-    /// Geometry build and upload (CPU).
-    pub geometry_ms: f64,
-    /// Render only: shadow maps to resolve, submitted and waited for.
-    pub render_ms: f64,
-    /// Render with the image read back.
-    pub render_readback_ms: f64,
-    /// Each pass of the render submitted alone and waited for, in
-    /// [`FrameStage::ALL`] order (wall time; a profile, not a throughput).
-    pub stages_ms: [f64; FrameStage::COUNT],
-}
-
-/// Simulates the first `frames` frames of `setup` and times, per frame, the
-/// FEM step, the microstructure chain, the geometry and the render (mean of
-/// `repeats` renders) at `width × height`, without writing files. Uses the
-/// scenario's `[render]` settings (defaults without one) in the dynamic mode
-/// (mode `none` without a microstructure).
-pub fn bench_render(
-    setup: &crate::scenario::Setup,
-    frames: usize,
-    (width, height): (usize, usize),
-    repeats: usize,
-) -> Result<RenderBench> {
-    use std::time::Instant;
-    let mut setup = setup.clone();
-    setup.simulation.frames = frames.max(1).min(setup.simulation.frames);
-    let micro = setup.micro.clone();
-    let mut render = match &setup.render {
-        Some(r) => r.clone(),
-        None => crate::scenario::RenderSection::default().setup(Path::new("."), micro.is_some())?,
-    };
-    render.width = width;
-    render.height = height;
-    let mode = if micro.is_some() {
-        Mode::Dynamic
-    } else {
-        Mode::None
-    };
-    render.modes = vec![mode];
-    let ctx = crate::gpu::acquire()?.ok_or_else(no_gpu)?;
-    let adapter = ctx.describe();
-    let mut ctx = Some(ctx);
-    let (lo, hi) = setup.mesh.bounds();
-    let albedo = Albedo::from_source(&render.albedo, render.texture_px, hi.x - lo.x)?;
-    let mut chain = match &micro {
-        Some(m) => Some(GpuMicro::for_scenario(
-            ctx.take().expect("the device is unused so far"),
-            m,
-        )?),
-        None => None,
-    };
-    let own = ctx;
-    let mut renderer = {
-        let ctx = device(chain.as_ref(), own.as_ref());
-        Renderer::new(
-            ctx,
-            &render,
-            &albedo,
-            None,
-            chain.as_ref().map(|c| c.normals_texture()),
-            [1.0; 16],
-            texel_mm((lo, hi), render.texture_px),
-        )?
-    };
-    let mut figures = RenderBench {
-        adapter,
-        size: (width, height, render.supersample),
-        ..Default::default()
-    };
-    let mesh = &setup.mesh;
-    super::simulate(&setup, |m, sim| {
-        let field = SurfaceField::new(&mesh.top, &mesh.positions, &sim.x);
-        let start = Instant::now();
-        if let Some(chain) = chain.as_mut() {
-            chain.run(&field)?;
-        }
-        let micro_ms = start.elapsed().as_secs_f64() * 1e3;
-        let ctx = device(chain.as_ref(), own.as_ref());
-        let start = Instant::now();
-        let probe = setup.simulation.probe.as_ref().map(|p| p.pose(m.time_s));
-        let geometry =
-            crate::render::scene::build(mesh, &sim.x, &field, probe.as_ref(), render.tessellate);
-        renderer.set_geometry(ctx, &geometry);
-        let geometry_ms = start.elapsed().as_secs_f64() * 1e3;
-        // Warm-up (pipelines, first use of the resources).
-        renderer.submit(ctx, mode);
-        ctx.finish()?;
-        let start = Instant::now();
-        for _ in 0..repeats.max(1) {
-            renderer.submit(ctx, mode);
-        }
-        ctx.finish()?;
-        let render_ms = start.elapsed().as_secs_f64() * 1e3 / repeats.max(1) as f64;
-        let start = Instant::now();
-        renderer.render(ctx, mode)?;
-        let readback_ms = start.elapsed().as_secs_f64() * 1e3;
-        let stages = renderer.time_stages(ctx, mode)?;
-        if m.frame > 0 {
-            for (sum, t) in figures.stages_ms.iter_mut().zip(stages) {
-                *sum += t;
-            }
-            figures.frames += 1;
-            figures.fem_ms += m.step_wall_s * 1e3;
-            figures.micro_ms += micro_ms;
-            figures.geometry_ms += geometry_ms;
-            figures.render_ms += render_ms;
-            figures.render_readback_ms += readback_ms;
-        }
-        Ok(())
-    })?;
-    let n = figures.frames.max(1) as f64;
-    for x in [
-        &mut figures.fem_ms,
-        &mut figures.micro_ms,
-        &mut figures.geometry_ms,
-        &mut figures.render_ms,
-        &mut figures.render_readback_ms,
-    ]
-    .into_iter()
-    .chain(figures.stages_ms.iter_mut())
-    {
-        *x /= n;
-    }
-    Ok(figures)
 }

@@ -7,25 +7,7 @@ use std::path::Path;
 use noise::{Fbm, MultiFractal, NoiseFn, Perlin};
 
 use crate::error::{Error, Result};
-
-/// The sRGB transfer function inverted: encoded `[0, 1]` → linear.
-pub fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.040_45 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
-}
-
-/// The sRGB transfer function: linear → encoded `[0, 1]` (clamped).
-pub fn linear_to_srgb(c: f32) -> f32 {
-    let c = c.clamp(0.0, 1.0);
-    if c <= 0.003_130_8 {
-        12.92 * c
-    } else {
-        1.055 * c.powf(1.0 / 2.4) - 0.055
-    }
-}
+pub use crate::imaging::colour::{linear_to_srgb, srgb_to_linear};
 
 /// A linear RGBA albedo texture, row 0 at v = 0.
 #[derive(Clone, Debug, PartialEq)]

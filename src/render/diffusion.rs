@@ -206,7 +206,7 @@ pub fn diffuse_on_gpu(
             .flatten()
             .map(|&x| half::f16::from_f32(x).to_bits())
             .collect();
-        super::renderer::upload_texture(
+        crate::gpu::buffers::upload_texture(
             ctx,
             label,
             (size, size),

@@ -28,6 +28,7 @@ pub mod diffusion;
 pub mod irradiance;
 pub mod light;
 pub mod lighting;
+pub mod moments;
 pub mod overlay;
 pub mod profile;
 pub mod renderer;
@@ -40,6 +41,7 @@ pub mod stage;
 
 use std::path::PathBuf;
 
+pub use crate::imaging::{FrameFormat, Image};
 pub use renderer::{FrameStage, NormalMap, Renderer};
 
 /// A comparison mode.
@@ -60,27 +62,6 @@ impl Mode {
             Mode::None => "none",
             Mode::Static => "static",
             Mode::Dynamic => "dynamic",
-        }
-    }
-}
-
-/// Frame file format.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum FrameFormat {
-    /// 8-bit sRGB PNG.
-    Png8,
-    /// 16-bit sRGB PNG.
-    Png16,
-    /// Linear 32-bit float OpenEXR.
-    Exr,
-}
-
-impl FrameFormat {
-    /// File extension.
-    pub fn extension(self) -> &'static str {
-        match self {
-            FrameFormat::Png8 | FrameFormat::Png16 => "png",
-            FrameFormat::Exr => "exr",
         }
     }
 }
@@ -169,13 +150,16 @@ pub struct RenderSetup {
     pub environment: Option<light::Environment>,
 }
 
-/// A linear RGBA image, row 0 at the top.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Image {
-    /// Width (px).
-    pub width: usize,
-    /// Height (px).
-    pub height: usize,
-    /// Linear RGBA, row-major.
-    pub pixels: Vec<[f32; 4]>,
+/// The renderer's shader sources by file name, for validation: whole
+/// modules as compiled (`shaders/lighting.wgsl` and `overlay.wgsl`
+/// prepended where the passes use them).
+pub fn shader_sources() -> Vec<(&'static str, String)> {
+    vec![
+        ("moments.wgsl", moments::SHADER.to_string()),
+        ("shadow.wgsl", shadow::SHADER.to_string()),
+        ("irradiance.wgsl", irradiance::source()),
+        ("diffusion.wgsl", diffusion::SHADER.to_string()),
+        ("skin.wgsl", skin::source()),
+        ("resolve.wgsl", resolve::SHADER.to_string()),
+    ]
 }

@@ -1,13 +1,13 @@
 //! Strain overlays (`shaders/overlay.wgsl`): the skin pass can draw the
 //! stretch ratios or the stretch axes as colour in place of the skin's
 //! albedo (the viewer's overlays). The colours are those of the strain
-//! images ([`crate::export::strain_images`]), which are the CPU reference:
+//! images ([`crate::imaging::colour`]), which are the CPU reference:
 //! [`reference`] here, [`evaluate_gpu`] runs the shader's function on the
 //! GPU for the parity test.
 
 use crate::error::Result;
-use crate::export::strain_images::{direction_colour, diverging};
 use crate::gpu::{bind_group, buffers, compute_pipeline, encoder, Context};
+use crate::imaging::colour::{direction_colour, diverging, srgb_to_linear};
 use crate::strain::Svd2;
 
 /// The shader's functions (prepended to the skin pass).
@@ -44,8 +44,7 @@ pub fn reference(kind: OverlayKind, strain: [f32; 4], range: f32) -> [f32; 3] {
             direction_colour(su, sv, &svd, range as f64)
         }
     };
-    rgb.0
-        .map(|c| crate::render::albedo::srgb_to_linear(c as f32 / 255.0))
+    rgb.0.map(|c| srgb_to_linear(c as f32 / 255.0))
 }
 
 const HARNESS: &str = r#"

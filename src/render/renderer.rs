@@ -11,6 +11,7 @@ use super::diffusion::DiffusionStage;
 use super::irradiance::IrradianceStage;
 use super::light::Light;
 use super::lighting::{Bounds, Globals};
+use super::moments::{MomentPyramidGpu, MomentStage};
 use super::overlay::OverlayKind;
 use super::resolve::ResolveStage;
 use super::scene::FrameGeometry;
@@ -20,7 +21,6 @@ use super::specular::EnergyTable;
 use super::stage::{linear_sampler, texture_entry, uniform_entry, DEPTH_FORMAT};
 use super::{Image, MicroFilter, Mode, RenderSetup, Roughness};
 use crate::error::Result;
-use crate::gpu::moments::{MomentPyramidGpu, MomentStage};
 use crate::gpu::{bind_group, buffers, encoder, Context};
 
 /// The passes of one frame, in the order they are recorded.
@@ -137,39 +137,6 @@ fn moment_sampler(ctx: &Context, filtering: bool) -> wgpu::Sampler {
 
 fn view(texture: &wgpu::Texture) -> wgpu::TextureView {
     texture.create_view(&wgpu::TextureViewDescriptor::default())
-}
-
-/// Uploads a 2D texture of `format` from raw texel bytes.
-pub(crate) fn upload_texture(
-    ctx: &Context,
-    label: &str,
-    (width, height): (usize, usize),
-    format: wgpu::TextureFormat,
-    bytes_per_texel: usize,
-    data: &[u8],
-) -> wgpu::Texture {
-    let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
-    let texture = buffers::texture(ctx, label, (width, height), format, usage);
-    ctx.queue.write_texture(
-        wgpu::TexelCopyTextureInfo {
-            texture: &texture,
-            mip_level: 0,
-            origin: wgpu::Origin3d::ZERO,
-            aspect: wgpu::TextureAspect::All,
-        },
-        data,
-        wgpu::TexelCopyBufferLayout {
-            offset: 0,
-            bytes_per_row: Some((width * bytes_per_texel) as u32),
-            rows_per_image: Some(height as u32),
-        },
-        wgpu::Extent3d {
-            width: width as u32,
-            height: height as u32,
-            depth_or_array_layers: 1,
-        },
-    );
-    texture
 }
 
 /// The resident renderer.
@@ -309,7 +276,7 @@ impl Renderer {
                         },
                     ],
                 });
-        let energy = upload_texture(
+        let energy = buffers::upload_texture(
             ctx,
             "energy table",
             (table.mu_samples, table.m_samples),
@@ -325,7 +292,7 @@ impl Renderer {
                 [c(t[0]), c(t[1]), c(t[2]), 255]
             })
             .collect();
-        let albedo_tex = upload_texture(
+        let albedo_tex = buffers::upload_texture(
             ctx,
             "albedo",
             (albedo.width, albedo.height),
@@ -410,7 +377,7 @@ impl Renderer {
             .iter()
             .map(|n| [n[0], n[1], n[2], 0.0])
             .collect();
-        let neutral_tex = upload_texture(
+        let neutral_tex = buffers::upload_texture(
             ctx,
             "neutral normals",
             (neutral.width, neutral.height),

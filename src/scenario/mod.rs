@@ -175,7 +175,7 @@ pub struct Setup {
     /// The simulation.
     pub simulation: SimulationSetup,
     /// Run even when the planned output exceeds
-    /// [`crate::pipeline::plan::MAX_PLANNED_BYTES`] (`skinpatch run --force`).
+    /// the pipeline's planned-output limit (`skinpatch run --force`).
     pub force_large_output: bool,
 }
 

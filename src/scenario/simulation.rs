@@ -579,7 +579,7 @@ impl TimeSection {
     pub fn frames(&self) -> Result<(usize, f64, usize)> {
         let duration = positive("time.duration_s", self.duration_s)?;
         let rate = positive("time.frame_rate_hz", self.frame_rate_hz)?;
-        let most = crate::pipeline::MAX_LOAD_STEPS;
+        let most = crate::fem::load_steps::MAX_LOAD_STEPS;
         if self.substeps == 0 || self.substeps > most {
             return Err(Error::parameter(
                 "time.substeps",

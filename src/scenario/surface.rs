@@ -1,6 +1,6 @@
 //! `[surface]`: an animated surface from another tool in place of the FEM
-//! patch, validated into a [`SurfaceSetup`] (run by
-//! [`crate::pipeline::surface::run`]).
+//! patch, validated into a [`SurfaceSetup`] (which the pipeline's surface
+//! run takes).
 
 use std::path::{Path, PathBuf};
 
@@ -63,7 +63,7 @@ pub struct SurfaceSetup {
     /// The renderer, if the scenario has one.
     pub render: Option<crate::render::RenderSetup>,
     /// Run even when the planned output exceeds
-    /// [`crate::pipeline::plan::MAX_PLANNED_BYTES`] (`skinpatch run --force`).
+    /// the pipeline's planned-output limit (`skinpatch run --force`).
     pub force_large_output: bool,
 }
 

@@ -8,7 +8,7 @@
 //! * [`svd2`]: the closed-form 2×2 SVD (the GPU stage runs the same formulas);
 //! * [`raster`]: the CPU reference raster of the field into a UV grid.
 //!
-//! No I/O here: images and VTU fields are written by [`crate::export`].
+//! No I/O here: the exporters, a layer above, write images and VTU fields.
 
 pub mod element;
 pub mod raster;

@@ -271,7 +271,7 @@ impl App {
         surface.configure(&ctx.device, &config);
         let (chain, own) = match &self.loaded.setup.micro {
             Some(m) => {
-                let chain = GpuMicro::for_scenario(ctx, m)?;
+                let chain = crate::pipeline::gpu_chain(ctx, m)?;
                 (Some(chain), None)
             }
             None => (None, Some(ctx)),
@@ -1510,7 +1510,7 @@ fn legend(ui: &mut egui::Ui, overlay: Overlay, range: f64) {
     for k in 0..steps {
         let a = k as f64 / (steps - 1) as f64;
         let rgb = match overlay {
-            Overlay::Axes => crate::export::strain_images::direction_colour(
+            Overlay::Axes => crate::imaging::colour::direction_colour(
                 (a * std::f64::consts::PI).cos(),
                 (a * std::f64::consts::PI).sin(),
                 &crate::strain::Svd2 {
@@ -1521,7 +1521,7 @@ fn legend(ui: &mut egui::Ui, overlay: Overlay, range: f64) {
                 },
                 range,
             ),
-            _ => crate::export::strain_images::diverging(1.0 - range + 2.0 * range * a, range),
+            _ => crate::imaging::colour::diverging(1.0 - range + 2.0 * range * a, range),
         };
         let x0 = rect.left() + rect.width() * k as f32 / steps as f32;
         let x1 = rect.left() + rect.width() * (k + 1) as f32 / steps as f32;

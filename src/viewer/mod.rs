@@ -23,6 +23,12 @@ pub mod script;
 pub mod state;
 pub mod worker;
 
+/// The viewer's shader sources by file name, for validation (the passes
+/// it draws through are the renderer's).
+pub fn shader_sources() -> Vec<(&'static str, String)> {
+    vec![("present.wgsl", present::SHADER.to_string())]
+}
+
 /// How the viewer runs.
 #[derive(Clone, Debug)]
 pub struct ViewOptions {

@@ -1,7 +1,7 @@
 //! Microstructure on the CPU: map files, the procedural generator, and the
 //! reference convolution's invariants.
 
-mod common;
+use crate::common;
 
 use nalgebra::{Matrix2, Matrix3};
 use skinpatch::mesh::{io, Vec3};

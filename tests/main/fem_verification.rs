@@ -1,7 +1,8 @@
 //! FEM verification: patch test, rigid motion, caliper stretch (exact
 //! homogeneous solution), inversion recovery, determinism.
 
-mod common;
+use crate::common;
+use crate::common::patch_3k;
 
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use skinpatch::fem::boundary::{
@@ -11,10 +12,6 @@ use skinpatch::fem::integrate::Simulation;
 use skinpatch::fem::solve::Filter;
 use skinpatch::fem::{Corotation, Material, TangentKind};
 use skinpatch::mesh::{io, TetMesh, Vec3};
-
-fn patch_3k() -> TetMesh {
-    io::read_tetgen(&common::root().join("meshes/patch_3k")).unwrap()
-}
 
 fn skin(region: i32) -> Material {
     let kpa = if region == 1 { 150.0 } else { 15.0 };

@@ -1,7 +1,7 @@
 //! Generated meshes: exact volume and area, orientation, closed manifold
 //! boundary, UV layout, regions by depth, determinism.
 
-mod common;
+use crate::common;
 
 use common::{deep_zone, small_patch};
 use skinpatch::mesh::generate::{generate, PatchSpec, RefineZone, ZoneShape};

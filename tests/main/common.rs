@@ -1,5 +1,4 @@
 //! Helpers shared by the integration tests.
-#![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
 
@@ -8,6 +7,11 @@ use skinpatch::mesh::generate::{LayerSpec, PatchSpec, RefineZone, ZoneShape};
 /// Folder of the crate, for shipped meshes and fixtures.
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The shipped ~3k-tet two-layer patch (`meshes/patch_3k`).
+pub fn patch_3k() -> skinpatch::mesh::TetMesh {
+    skinpatch::mesh::io::read_tetgen(&root().join("meshes/patch_3k")).unwrap()
 }
 
 /// The GPU adapter, or `None` (test skipped with a note) when there is

@@ -5,7 +5,7 @@
 //! test is skipped with a note unless `SKINPATCH_REQUIRE_XVFB=1`.
 #![cfg(feature = "viewer")]
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::Command;

@@ -1,7 +1,7 @@
 //! Malformed meshes give an error naming the file and line (or the tet),
 //! never a panic. Each case edits a valid file and states the expected error.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 

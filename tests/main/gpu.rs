@@ -9,7 +9,8 @@
 //! histograms within a total variation of 2e-3 (texels whose normal lies on
 //! a cell border can fall either side in f32 versus f64).
 
-mod common;
+use crate::common;
+use crate::common::patch_3k;
 
 use common::context;
 
@@ -39,10 +40,6 @@ impl Rng {
         let x = self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11;
         lo + (hi - lo) * (x as f64 / (1u64 << 53) as f64)
     }
-}
-
-fn patch_3k() -> TetMesh {
-    io::read_tetgen(&common::root().join("meshes/patch_3k")).unwrap()
 }
 
 /// A smooth, strongly non-uniform deformation of the patch: stretch on one
@@ -78,9 +75,19 @@ fn skin_map(width: usize, height: usize, edge: Edge) -> DisplacementMap {
     map
 }
 
+/// Every shader module as compiled: the compute stages', the renderer's and
+/// the viewer's lists chained.
+fn all_shader_sources() -> Vec<(&'static str, String)> {
+    let mut sources = gpu::shader_sources();
+    sources.extend(skinpatch::render::shader_sources());
+    #[cfg(feature = "viewer")]
+    sources.extend(skinpatch::viewer::shader_sources());
+    sources
+}
+
 #[test]
 fn every_shader_validates_with_naga() {
-    for (name, source) in gpu::shader_sources() {
+    for (name, source) in all_shader_sources() {
         let module = naga::front::wgsl::parse_str(&source)
             .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(&source)));
         naga::valid::Validator::new(
@@ -89,6 +96,39 @@ fn every_shader_validates_with_naga() {
         )
         .validate(&module)
         .unwrap_or_else(|e| panic!("{name}: {e:?}"));
+    }
+}
+
+/// No shader file escapes validation: each file under `shaders/` is a
+/// listed module or part of one (a file prepended to others, such as
+/// `map.wgsl`).
+#[test]
+fn every_shader_file_is_in_a_validated_module() {
+    let sources = all_shader_sources();
+    let mut files = 0;
+    for entry in std::fs::read_dir(common::root().join("shaders")).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|e| e != "wgsl") {
+            continue;
+        }
+        files += 1;
+        let name = path.file_name().unwrap().to_str().unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        #[cfg(not(feature = "viewer"))]
+        if name == "present.wgsl" {
+            continue;
+        }
+        assert!(
+            sources.iter().any(|(_, s)| s.contains(text.trim())),
+            "shaders/{name} is in no validated module"
+        );
+    }
+    assert!(files >= 16, "only {files} shader files found");
+    for (name, _) in &sources {
+        assert!(
+            common::root().join("shaders").join(name).exists(),
+            "{name} is listed but is no file of shaders/"
+        );
     }
 }
 
@@ -690,7 +730,7 @@ fn moment_pyramid_matches_the_cpu_reference() {
         let map = skin_map(w, h, Edge::Wrap);
         let normals = normal_map(&map);
         let cpu = MomentPyramid::from_normals(&normals, w, h);
-        let gpu = gpu::moments::moment_pyramid(&ctx, &normals, w, h).unwrap();
+        let gpu = skinpatch::render::moments::moment_pyramid(&ctx, &normals, w, h).unwrap();
         assert_eq!(gpu.levels.len(), cpu.levels.len());
         for (k, (g, c)) in gpu.levels.iter().zip(&cpu.levels).enumerate() {
             assert_eq!((g.width, g.height), (c.width, c.height), "level {k}");

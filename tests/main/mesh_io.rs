@@ -1,7 +1,7 @@
 //! Mesh files: TetGen round trips, the Gmsh fixture, VTU read-back, and the
 //! shipped meshes.
 
-mod common;
+use crate::common;
 
 use common::{cube_tetgen, root, small_patch, write_tetgen_text};
 use skinpatch::mesh::generate::generate;

@@ -18,7 +18,7 @@ use skinpatch::render::specular::{
     beckmann, beckmann_aniso, directional_albedo, ks_brdf, smith_g1, EnergyTable, SKIN_F0,
 };
 
-mod common;
+use crate::common;
 
 use common::{context, root};
 

@@ -1,6 +1,6 @@
 //! Probe contact: penetration bound, force balance, friction behaviour.
 
-mod common;
+use crate::common;
 
 use nalgebra::Vector3;
 use skinpatch::fem::boundary::{

@@ -1,7 +1,7 @@
 //! Properties that hold for any similarity transform and vertex relabelling
 //! of a valid mesh.
 
-mod common;
+use crate::common;
 
 use nalgebra::{Rotation3, Vector3};
 use proptest::prelude::*;

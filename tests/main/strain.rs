@@ -2,7 +2,8 @@
 //! deformation gradients, independence of the UV layout, the raster, and the
 //! closed-form 2×2 SVD.
 
-mod common;
+use crate::common;
+use crate::common::patch_3k;
 
 use nalgebra::{Matrix2, Matrix3, Rotation3, Vector2};
 use proptest::prelude::*;
@@ -10,10 +11,6 @@ use skinpatch::mesh::{io, TetMesh, Vec3};
 use skinpatch::strain::element::deformation_gradient;
 use skinpatch::strain::svd2::rotation;
 use skinpatch::strain::{StrainRaster, SurfaceField, Svd2};
-
-fn patch_3k() -> TetMesh {
-    io::read_tetgen(&common::root().join("meshes/patch_3k")).unwrap()
-}
 
 /// `x = A p + c` for every node.
 fn affine(mesh: &TetMesh, a: &Matrix3<f64>, c: Vec3) -> Vec<Vec3> {

@@ -3,7 +3,7 @@
 //! surfaces with UV seams and mirrored charts, UDIM and wrapping layouts,
 //! GPU parity and bad input.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 

@@ -3,7 +3,7 @@
 //! status, that the message names the key or frame, and what is left of
 //! the outputs.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::{Command, Output};

@@ -3,7 +3,7 @@
 //! The seed and the case counts are fixed, so every CI run replays the
 //! same corpus; a failure prints the input that caused it.
 
-mod common;
+use crate::common;
 
 use proptest::prelude::*;
 use proptest::strategy::ValueTree;

@@ -4,8 +4,8 @@
 //! down to 1 × 1, resident for the skin pass. Rebuilt by [`MomentStage::encode`]
 //! whenever the normals change (every dynamic frame).
 
-use super::{buffers, compute_pipeline, dispatch, Context};
 use crate::error::Result;
+use crate::gpu::{buffers, compute_pipeline, dispatch, Context};
 use crate::micro::moments::{level_count, level_side, MomentLevel, MomentPyramid};
 
 /// The shader source.
@@ -111,7 +111,7 @@ impl MomentStage {
                 .map(wgpu::BindingResource::TextureView)
                 .collect();
             passes.push((
-                super::bind_group(ctx, &layout, &resources),
+                crate::gpu::bind_group(ctx, &layout, &resources),
                 level_size((width, height), level as usize),
             ));
         }
@@ -175,7 +175,7 @@ fn read_level<T: bytemuck::Pod>(
         texture.format(),
         wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::COPY_SRC,
     );
-    let mut encoder = super::encoder(ctx);
+    let mut encoder = crate::gpu::encoder(ctx);
     encoder.copy_texture_to_texture(
         wgpu::TexelCopyTextureInfo {
             texture,
@@ -203,7 +203,7 @@ pub fn moment_pyramid(
 ) -> Result<MomentPyramid> {
     ctx.check_map(width, height, 16)?;
     let rgba: Vec<[f32; 4]> = normals.iter().map(|n| [n[0], n[1], n[2], 0.0]).collect();
-    let texture = crate::render::renderer::upload_texture(
+    let texture = buffers::upload_texture(
         ctx,
         "normals",
         (width, height),
@@ -213,7 +213,7 @@ pub fn moment_pyramid(
     );
     let stage = MomentStage::new(ctx);
     let pyramid = stage.pyramid(ctx, &texture, (width, height));
-    let mut encoder = super::encoder(ctx);
+    let mut encoder = crate::gpu::encoder(ctx);
     stage.encode(&mut encoder, &pyramid);
     ctx.queue.submit([encoder.finish()]);
     pyramid.read(ctx)

@@ -1,7 +1,7 @@
 //! The `skinpatch` command end to end: the README's main job, mesh
 //! generation from flags, and error reporting.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::{Command, Output};

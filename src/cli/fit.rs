@@ -1,0 +1,334 @@
+//! `skinpatch fit`: reads a samples file (its format is
+//! [`skinpatch::scenario::FitSamples`]), fits each map sample's kernel
+//! (α, σ) with the histogram search of [`skinpatch::micro::fit`] — counted
+//! on the GPU when a hardware adapter exists — and writes the fitted kernel
+//! model as a `[microstructure.kernel]` table.
+
+use std::path::PathBuf;
+
+use skinpatch::error::{Error, Result};
+use skinpatch::mesh::io;
+
+/// One row of a fit: a sample's stretch ratio and fitted parameters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FitRow {
+    /// Where the row came from (map file or `point`).
+    pub source: String,
+    /// Stretch ratio.
+    pub r: f64,
+    /// α.
+    pub alpha: f64,
+    /// σ (µm).
+    pub sigma_um: f64,
+    /// The search's outcome (fitted samples only).
+    pub fit: Option<SampleFit>,
+}
+
+/// What the search found for one sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SampleFit {
+    /// Axis of the sample.
+    pub axis: skinpatch::micro::fit::Axis,
+    /// Histogram half range used for target and candidates.
+    pub range: f64,
+    /// The optimum, its distance and valley.
+    pub result: skinpatch::micro::fit::FitResult,
+    /// Seconds the search took.
+    pub seconds: f64,
+}
+
+/// What `skinpatch fit` found.
+#[derive(Clone, Debug)]
+pub struct FitReport {
+    /// Per sample, in file order (samples, then points).
+    pub rows: Vec<FitRow>,
+    /// The fitted model.
+    pub model: skinpatch::micro::KernelModel,
+    /// Its lines, for the report.
+    pub lines: skinpatch::micro::fit::ModelLines,
+    /// The kernel file written, if the samples file names one.
+    pub written: Option<PathBuf>,
+    /// Where the candidates were counted (`None` without map samples).
+    pub device: Option<String>,
+}
+
+/// Whether the fit counts on the GPU: a hardware adapter only (a software
+/// one such as lavapipe counts slower than the CPU path), unless
+/// `SKINPATCH_REQUIRE_GPU=1` asks for the GPU.
+fn fit_on_gpu(ctx: &skinpatch::gpu::Context) -> bool {
+    ctx.info.device_type != wgpu::DeviceType::Cpu || skinpatch::gpu::gpu_required()
+}
+
+/// Runs a `skinpatch fit` samples file (see [`skinpatch::scenario::FitSamples`]).
+/// `progress(sample, samples, fraction)` follows each sample's search.
+pub fn fit(
+    path: &std::path::Path,
+    mut progress: impl FnMut(usize, usize, f64),
+) -> Result<FitReport> {
+    use skinpatch::micro::fit::{fit_model, Axis, FittedPoint, HistogramSettings, Objective};
+    use skinpatch::micro::io::{read_map, MapDefaults, TexelSize};
+    use skinpatch::micro::NormalHistogram;
+    let samples: skinpatch::scenario::FitSamples = skinpatch::scenario::read_toml_file(path)?;
+    let base = path.parent().unwrap_or(std::path::Path::new("."));
+    let bins = samples
+        .bins
+        .unwrap_or(skinpatch::micro::normals::HISTOGRAM_BINS);
+    if !(2..=1024).contains(&bins) {
+        return Err(Error::parameter(
+            "bins",
+            format!("must be in 2..=1024, got {bins}"),
+        ));
+    }
+    if let Some(range) = samples.range {
+        if !(range.is_finite() && range > 0.0 && range <= 1.0) {
+            return Err(Error::parameter(
+                "range",
+                format!("must be in (0, 1] (a normal's tangent component), got {range}"),
+            ));
+        }
+    }
+    let defaults = MapDefaults {
+        texel: TexelSize::Um(samples.texel_um.unwrap_or(1.0)),
+        height_unit_um: 1.0,
+        edge: skinpatch::micro::Edge::Clamp,
+    };
+    let mut rows = Vec::new();
+    let mut device = None;
+    if !samples.sample.is_empty() {
+        let neutral_path = samples
+            .neutral
+            .as_ref()
+            .ok_or_else(|| Error::parameter("neutral", "is required to fit [[sample]] maps"))?;
+        let neutral = read_map(&base.join(neutral_path), &defaults)?;
+        let ctx = skinpatch::gpu::acquire()?.filter(fit_on_gpu);
+        device = Some(match &ctx {
+            Some(c) => format!("GPU: {}", c.describe()),
+            None => "CPU".to_string(),
+        });
+        let total = samples.sample.len();
+        for (k, s) in samples.sample.iter().enumerate() {
+            let axis = match s.axis.as_str() {
+                "u" => Axis::U,
+                "v" => Axis::V,
+                other => {
+                    return Err(Error::parameter(
+                        format!("sample[{k}].axis"),
+                        format!("must be \"u\" or \"v\", got \"{other}\""),
+                    ))
+                }
+            };
+            if !(s.r.is_finite() && s.r >= 0.1 && s.r <= 10.0) {
+                return Err(Error::parameter(
+                    format!("sample[{k}].r"),
+                    format!("must be in [0.1, 10], got {}", s.r),
+                ));
+            }
+            let (target, range, source) = match (&s.map, &s.histogram) {
+                (Some(map), None) => {
+                    let deformed = read_map(&base.join(map), &defaults)?;
+                    let range = samples.range.unwrap_or_else(|| {
+                        skinpatch::micro::fit::auto_range(&[
+                            &skinpatch::micro::fit::resample(&neutral, axis, s.r),
+                            &deformed,
+                        ])
+                    });
+                    let h = NormalHistogram::of(&deformed, bins, range, [1.0, 1.0]);
+                    (h, range, map.display().to_string())
+                }
+                (None, Some(file)) => {
+                    let range = samples.range.ok_or_else(|| {
+                        Error::parameter(
+                            format!("sample[{k}].histogram"),
+                            "needs `range` in the samples file: the half range its cells cover",
+                        )
+                    })?;
+                    let hist = HistogramSettings { bins, range };
+                    (
+                        read_histogram(&base.join(file), hist)?,
+                        range,
+                        file.display().to_string(),
+                    )
+                }
+                _ => {
+                    return Err(Error::parameter(
+                        format!("sample[{k}]"),
+                        "needs exactly one of map and histogram",
+                    ))
+                }
+            };
+            let hist = HistogramSettings { bins, range };
+            let objective = Objective::new(&neutral, &target, axis, s.r, hist);
+            let start = std::time::Instant::now();
+            let on_gpu = match &ctx {
+                Some(c) => skinpatch::gpu::or_cpu(skinpatch::gpu::fit::GpuFit::new(
+                    c,
+                    &objective.base,
+                    bins,
+                ))?,
+                None => None,
+            };
+            let result = match &on_gpu {
+                Some(f) => f.fit_params(&objective, |x| progress(k, total, x))?,
+                None => skinpatch::micro::fit::search(
+                    &objective,
+                    |b, d, alphas| {
+                        Ok(skinpatch::micro::fit::count_histograms(
+                            b, d, alphas, bins, range,
+                        ))
+                    },
+                    |x| progress(k, total, x),
+                )?,
+            };
+            let seconds = start.elapsed().as_secs_f64();
+            log::info!(
+                "fitted {source}: α {:.2}, σ {:.1} µm, TV {:.4} ({} candidates, {seconds:.1} s)",
+                result.alpha,
+                result.sigma_um,
+                result.distance,
+                result.evaluations
+            );
+            rows.push(FitRow {
+                source,
+                r: s.r,
+                alpha: result.alpha,
+                sigma_um: result.sigma_um,
+                fit: Some(SampleFit {
+                    axis,
+                    range,
+                    result,
+                    seconds,
+                }),
+            });
+        }
+    }
+    for p in &samples.point {
+        rows.push(FitRow {
+            source: "point".into(),
+            r: p.r,
+            alpha: p.alpha,
+            sigma_um: p.sigma_um,
+            fit: None,
+        });
+    }
+    let points: Vec<FittedPoint> = rows
+        .iter()
+        .map(|r| FittedPoint {
+            r: r.r,
+            alpha: r.alpha,
+            sigma_um: r.sigma_um,
+        })
+        .collect();
+    let (model, lines) = fit_model(&points, &samples.alpha_breaks)?;
+    let written = match &samples.output {
+        Some(out) => {
+            let out = base.join(out);
+            let section = skinpatch::scenario::KernelSection::of(&model);
+            let body =
+                toml::to_string(&section).map_err(|e| Error::io(&out, std::io::Error::other(e)))?;
+            let mut fitted = String::new();
+            for row in &rows {
+                match &row.fit {
+                    Some(f) => {
+                        let v = &f.result;
+                        fitted += &format!(
+                            "#   {}: r {}, axis {:?}, bins {bins}, range {}: α {:.2}, σ {:.1} µm, \
+                             TV {:.4}; within {:.4}: α {:.2}…{:.2}, σ {:.1}…{:.1} µm\n",
+                            row.source,
+                            row.r,
+                            f.axis,
+                            f.range,
+                            v.alpha,
+                            v.sigma_um,
+                            v.distance,
+                            skinpatch::micro::fit::valley_margin(v.distance),
+                            v.alpha_range.0,
+                            v.alpha_range.1,
+                            v.sigma_range_um.0,
+                            v.sigma_range_um.1
+                        )
+                    }
+                    None => {
+                        fitted += &format!(
+                            "#   point: r {}, α {}, σ {} µm\n",
+                            row.r, row.alpha, row.sigma_um
+                        )
+                    }
+                }
+            }
+            let text = format!(
+                "# Kernel model fitted by `skinpatch fit` from {}:\n{fitted}\
+                 # Use it with [microstructure] kernel_file = \"…\".\n{body}",
+                path.display()
+            );
+            io::write_atomically(&out, text.as_bytes())?;
+            Some(out)
+        }
+        None => None,
+    };
+    Ok(FitReport {
+        rows,
+        model,
+        lines,
+        written,
+        device,
+    })
+}
+
+/// Reads a target histogram: `bins` lines of `bins` comma-separated
+/// non-negative weights, normalised to sum 1.
+fn read_histogram(
+    path: &std::path::Path,
+    hist: skinpatch::micro::fit::HistogramSettings,
+) -> Result<skinpatch::micro::NormalHistogram> {
+    let text = io::read_input_text(path)?;
+    let bad = |line: usize, message: String| Error::Parse {
+        path: path.to_path_buf(),
+        line,
+        message,
+    };
+    let rows: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
+    if rows.len() != hist.bins {
+        return Err(bad(
+            0,
+            format!(
+                "expected {} rows of weights, found {}",
+                hist.bins,
+                rows.len()
+            ),
+        ));
+    }
+    let mut cells = Vec::with_capacity(hist.bins * hist.bins);
+    for (k, row) in rows.iter().enumerate() {
+        let values: Vec<&str> = row.split(',').collect();
+        if values.len() != hist.bins {
+            return Err(bad(
+                k + 1,
+                format!("expected {} weights, found {}", hist.bins, values.len()),
+            ));
+        }
+        for v in values {
+            let w: f64 = v
+                .trim()
+                .parse()
+                .ok()
+                .filter(|w: &f64| w.is_finite() && *w >= 0.0)
+                .ok_or_else(|| {
+                    bad(
+                        k + 1,
+                        format!("{:?} is not a non-negative number", v.trim()),
+                    )
+                })?;
+            cells.push(w);
+        }
+    }
+    let total: f64 = cells.iter().sum();
+    if total <= 0.0 {
+        return Err(bad(0, "the histogram is empty (all weights 0)".into()));
+    }
+    cells.iter_mut().for_each(|c| *c /= total);
+    Ok(skinpatch::micro::NormalHistogram {
+        bins: hist.bins,
+        range: hist.range,
+        cells,
+    })
+}

@@ -1,0 +1,4 @@
+//! The command line's per-command drivers (the binary's side; `main.rs`
+//! parses and dispatches).
+
+pub mod fit;

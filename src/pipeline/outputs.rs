@@ -1,0 +1,267 @@
+//! The output stage both kinds of run share: a frame source (the FEM
+//! [`Stepper`](super::Stepper) or an animated surface's frames) hands it each
+//! frame, and it writes what the scenario asks for — the frame's VTU and the
+//! ParaView collection, per map the strain images and the deformed
+//! microstructure (NaN-checked, normals too), the rendered frames — and then
+//! the frame's `metrics.csv` row through [`MetricsWriter`] (whole rows only,
+//! even on a full disk). A row in `metrics.csv` therefore means that the
+//! frame's files are complete.
+//!
+//! Setting up is ordered so that everything that can fail before the first
+//! frame (the adapters, ffmpeg) is checked before an earlier run's files are
+//! removed from the output folder.
+
+use std::path::{Path, PathBuf};
+
+use super::micro::{write_neutral, MicroEngine};
+use super::render::RenderEngine;
+use crate::error::{Error, Result};
+use crate::export::{self, MetricsRow, MetricsWriter};
+use crate::mesh::io::{Grid, VtuFormat};
+use crate::render::scene::FrameGeometry;
+use crate::render::RenderSetup;
+use crate::scenario::{MicroSetup, StrainImageSettings};
+use crate::strain::{StrainRaster, SurfaceField};
+
+/// What every kind of run writes per frame, borrowed from its setup.
+pub(super) struct OutputSpec<'a> {
+    /// The output folder.
+    pub dir: &'a Path,
+    /// Write `frames/frame_NNNN.vtu` and `frames.pvd`.
+    pub write_frames: bool,
+    /// How the VTU files store their arrays.
+    pub vtu_format: VtuFormat,
+    /// Strain maps per frame and map, if asked for.
+    pub strain_images: Option<StrainImageSettings>,
+    /// The microstructure stage, if any.
+    pub micro: Option<&'a MicroSetup>,
+    /// The renderer, if any.
+    pub render: Option<&'a RenderSetup>,
+    /// Width of the surface's UV square (mm) and of a render texel (mm).
+    pub extent_mm: (f64, f64),
+    /// Frame rate of the MP4 files (Hz).
+    pub frame_rate_hz: f64,
+}
+
+/// One map of the surface: the unit square (tag `""`), or a UDIM tile with
+/// its triangles (tag `"1001_"`).
+pub(super) struct MapPiece<'a> {
+    /// Text before the frame number in the map's file names.
+    pub tag: String,
+    /// The triangles of the piece, moved into the unit square; `None`: every
+    /// triangle in place.
+    pub triangles: Option<&'a [(usize, [f64; 2])]>,
+}
+
+/// One frame as a source hands it to the output stage.
+pub(super) struct FrameInput<'a> {
+    /// Frame index.
+    pub frame: usize,
+    /// Time (s).
+    pub time_s: f64,
+    /// The surface's deformation in texture space.
+    pub field: &'a SurfaceField,
+    /// The frame's VTU grid (built by the source when frames are written).
+    pub grid: Option<&'a Grid>,
+    /// The render geometry at a tessellation (called on rendered frames).
+    pub geometry: &'a dyn Fn(usize) -> FrameGeometry,
+}
+
+/// The output stage of a run: set up once, then fed frame by frame.
+pub(super) struct FrameOutputs<'a, R: MetricsRow> {
+    spec: OutputSpec<'a>,
+    pieces: Vec<MapPiece<'a>>,
+    /// One microstructure engine per piece.
+    engines: Vec<MicroEngine>,
+    renderer: Option<RenderEngine>,
+    metrics: Option<MetricsWriter<R>>,
+    collection: Vec<(f64, PathBuf)>,
+    /// Files written before the frames, in order.
+    pub written: Vec<PathBuf>,
+    /// Every frame's row, in order.
+    pub rows: Vec<R>,
+}
+
+impl<'a, R: MetricsRow + Copy> FrameOutputs<'a, R> {
+    /// Acquires the engines and the renderer (the checks that can fail
+    /// before the folder is touched), then clears an earlier run's files
+    /// from the folder. The run writes its own rest files next, then calls
+    /// [`FrameOutputs::start`].
+    pub fn open(spec: OutputSpec<'a>, pieces: Vec<MapPiece<'a>>) -> Result<FrameOutputs<'a, R>> {
+        let mut engines = Vec::new();
+        if let Some(micro) = spec.micro {
+            for _ in &pieces {
+                engines.push(MicroEngine::new(micro)?);
+            }
+        }
+        let dir = spec.dir;
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+        let renderer = match spec.render {
+            Some(r) => Some(RenderEngine::new(
+                dir,
+                r,
+                spec.micro,
+                engines.first(),
+                spec.extent_mm,
+            )?),
+            None => None,
+        };
+        // Then the previous run's files go, so the folder holds one run.
+        clear_previous_run(dir)?;
+        for (folder, wanted) in [
+            ("frames", spec.write_frames),
+            ("strain", spec.strain_images.is_some()),
+        ] {
+            if wanted {
+                let path = dir.join(folder);
+                std::fs::create_dir_all(&path).map_err(|e| Error::io(&path, e))?;
+            }
+        }
+        Ok(FrameOutputs {
+            spec,
+            pieces,
+            engines,
+            renderer,
+            metrics: None,
+            collection: Vec::new(),
+            written: Vec::new(),
+            rows: Vec::new(),
+        })
+    }
+
+    /// Writes the neutral microstructure and the header of `metrics.csv`.
+    pub fn start(&mut self) -> Result<()> {
+        if let Some(micro) = self.spec.micro {
+            let neutral = write_neutral(self.spec.dir, self.spec.extent_mm.0, micro)?;
+            self.written.extend(neutral);
+        }
+        let path = self.spec.dir.join("metrics.csv");
+        self.metrics = Some(MetricsWriter::create(&path)?);
+        self.written.push(path);
+        Ok(())
+    }
+
+    /// Whether frames need their VTU grid.
+    pub fn wants_grid(&self) -> bool {
+        self.spec.write_frames
+    }
+
+    /// Writes one frame's files: VTU, strain images and microstructure per
+    /// map, rendered frames. The frame's row follows with [`Self::row`].
+    pub fn frame(&mut self, input: &FrameInput<'_>) -> Result<()> {
+        let (dir, f) = (self.spec.dir, input.frame);
+        if let (true, Some(grid)) = (self.spec.write_frames, input.grid) {
+            let path = export::write_frame(dir, f, grid, self.spec.vtu_format)?;
+            self.collection.push((input.time_s, path));
+            // Rewritten (atomically) after every frame, so a killed run's
+            // frames open in ParaView too.
+            export::write_collection(dir, &self.collection)?;
+        }
+        let mut fresh_normals = false;
+        for (k, piece) in self.pieces.iter().enumerate() {
+            let view;
+            let field = match piece.triangles {
+                None => input.field,
+                Some(triangles) => {
+                    view = input.field.view(triangles);
+                    &view
+                }
+            };
+            if let Some(images) = self.spec.strain_images {
+                let raster = StrainRaster::new(field, images.px, images.px);
+                export::strain_images::StrainImages::new(&raster, images.range)
+                    .write_tagged(dir, &piece.tag, f)?;
+            }
+            if let (Some(micro), Some(engine)) = (self.spec.micro, self.engines.get_mut(k)) {
+                if f % micro.frame_stride == 0 {
+                    engine.write_frame(micro, field, &dir.join("micro"), &piece.tag, f)?;
+                    fresh_normals = micro.normal_maps;
+                }
+            }
+        }
+        if let (Some(r), Some(renderer)) = (self.spec.render, self.renderer.as_mut()) {
+            if f % r.frame_stride == 0 {
+                let geometry = (input.geometry)(r.tessellate);
+                renderer.frame(
+                    &geometry,
+                    input.field,
+                    self.engines.first_mut(),
+                    f,
+                    fresh_normals,
+                )?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Appends the frame's row to `metrics.csv` (after its files).
+    pub fn row(&mut self, row: R) -> Result<()> {
+        self.metrics
+            .as_mut()
+            .expect("FrameOutputs::start opens metrics.csv before the frames")
+            .push(&row)?;
+        self.rows.push(row);
+        Ok(())
+    }
+
+    /// After the last frame: the collection file and the folders of
+    /// per-frame files (when `folders`) added to the files written, the MP4
+    /// files encoded, and where the microstructure ran.
+    pub fn finish(mut self, folders: bool) -> Result<Finished<R>> {
+        let dir = self.spec.dir;
+        if !self.collection.is_empty() {
+            self.written.push(dir.join("frames.pvd"));
+        }
+        if folders {
+            for (folder, wanted) in [
+                ("frames", self.spec.write_frames),
+                ("strain", self.spec.strain_images.is_some()),
+                ("micro", self.spec.micro.is_some()),
+            ] {
+                if wanted {
+                    self.written.push(dir.join(folder));
+                }
+            }
+        }
+        let rendered = match (self.spec.render, &self.renderer) {
+            (Some(r), Some(renderer)) => renderer.finish(r, self.spec.frame_rate_hz)?,
+            _ => Vec::new(),
+        };
+        let micro_device = self
+            .engines
+            .first()
+            .zip(self.spec.micro)
+            .map(|(e, m)| e.summary(m));
+        Ok(Finished {
+            written: self.written,
+            rendered,
+            rows: self.rows,
+            micro_device,
+        })
+    }
+}
+
+/// What the output stage wrote, for the run's summary.
+pub(super) struct Finished<R> {
+    /// Files written before the frames, the collection, the per-frame
+    /// folders.
+    pub written: Vec<PathBuf>,
+    /// The renderer's closing files (MP4s).
+    pub rendered: Vec<PathBuf>,
+    /// Every frame's row.
+    pub rows: Vec<R>,
+    /// Where the microstructure stages ran.
+    pub micro_device: Option<String>,
+}
+
+/// Removes an earlier run's files from the output folder (and says so).
+fn clear_previous_run(dir: &Path) -> Result<()> {
+    let cleared = export::outputs::clear_previous_run(dir)?;
+    if cleared > 0 {
+        log::info!(
+            "removed {cleared} files of an earlier run from {}",
+            dir.display()
+        );
+    }
+    Ok(())
+}

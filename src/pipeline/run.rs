@@ -1,0 +1,216 @@
+//! The FEM run: [`run`] steps a validated [`Setup`] frame by frame (the
+//! [`Stepper`](super::Stepper)) and writes each frame's outputs — the VTU
+//! and VTKHDF frames, strain maps, the top surface's animation, the
+//! deformed microstructure, rendered frames and a `metrics.csv` row. A
+//! failing frame stops the run with an error naming it; everything written
+//! before stays.
+
+use std::path::PathBuf;
+
+use super::outputs::{FrameInput, FrameOutputs, MapPiece, OutputSpec};
+use super::{plan, stepper::simulate, texel_mm, vtkhdf};
+use crate::error::{Error, Result};
+use crate::export::{self, FrameMetrics};
+use crate::mesh::{io, QualityReport, Vec3};
+use crate::scenario::Setup;
+use crate::strain::{ElementStrains, SurfaceField};
+
+/// What a run produced.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct RunSummary {
+    /// Files written, in order (frame files are summarised by the collection).
+    pub written: Vec<PathBuf>,
+    /// Quality of the mesh used.
+    pub quality: QualityReport,
+    /// Metrics of every frame.
+    pub frames: Vec<FrameMetrics>,
+    /// Where the microstructure stages ran (`None` without microstructure).
+    pub micro_device: Option<String>,
+}
+
+/// One finished frame as [`run`]'s callback sees it: the metrics row and the
+/// frame's fields, borrowed for the duration of the call.
+pub struct Frame<'a> {
+    /// The frame's row of `metrics.csv` (probe force, contact, ranges, …).
+    pub metrics: &'a FrameMetrics,
+    /// Frames in the run, the rest frame included (for progress).
+    pub total_frames: usize,
+    /// The rest mesh (its `positions` are the rest positions, mm).
+    pub mesh: &'a crate::mesh::TetMesh,
+    /// Deformed positions of every mesh vertex (mm), indexed like the mesh.
+    pub positions: &'a [Vec3],
+    /// The deformation of the top surface in texture space: per top
+    /// triangle T (eq. 10) and per top vertex its area-weighted average
+    /// with stretch ratios and axes (eq. 11–13).
+    pub surface: &'a SurfaceField,
+    strains: &'a std::cell::OnceCell<ElementStrains>,
+}
+
+impl Frame<'_> {
+    /// Displacement of vertex `v` from its rest position (mm).
+    pub fn displacement(&self, v: usize) -> Vec3 {
+        self.positions[v] - self.mesh.positions[v]
+    }
+
+    /// Principal strains of every tet (computed on first use, and shared
+    /// with the frame's VTU when frames are written).
+    pub fn strains(&self) -> &ElementStrains {
+        self.strains
+            .get_or_init(|| ElementStrains::compute(self.mesh, self.positions))
+    }
+}
+
+/// Runs the scenario and writes its outputs; `on_frame` is called after
+/// each frame's files are written, with the frame's metrics and fields
+/// (for progress, or to read results without going through files).
+///
+/// ```
+/// # fn main() -> skinpatch::Result<()> {
+/// use skinpatch::scenario::Setup;
+/// let mut setup = Setup::load(std::path::Path::new("tests/fixtures/press_small.toml"))?;
+/// let out = std::env::temp_dir().join(format!("skinpatch-doc-{}", std::process::id()));
+/// setup.output_dir = out.clone();
+/// let (mut forces, mut peak_rs) = (Vec::new(), 0.0f64);
+/// let summary = skinpatch::pipeline::run(&setup, |frame| {
+///     forces.push(frame.metrics.probe_force_n[2]);
+///     for v in &frame.surface.vertices {
+///         peak_rs = peak_rs.max(v.strain().svd.rs);
+///     }
+/// })?;
+/// assert_eq!(forces.len(), 7);
+/// assert!(forces[3] > 0.01, "the skin pushes the probe back: {forces:?}");
+/// assert!(peak_rs > 1.01, "the skin stretches around the probe");
+/// assert!(summary.written.contains(&out.join("metrics.csv")));
+/// std::fs::remove_dir_all(&out).ok();
+/// # Ok(())
+/// # }
+/// ```
+pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<RunSummary> {
+    let dir = &setup.output_dir;
+    let mesh = &setup.mesh;
+    // Everything that can fail before the first frame is checked before
+    // the folder is touched: the planned output size, the adapters and
+    // ffmpeg (opening the outputs).
+    plan::check(setup, setup.force_large_output)?;
+    let (lo, hi) = mesh.bounds();
+    let spec = OutputSpec {
+        dir,
+        write_frames: setup.write_frames,
+        vtu_format: setup.vtu_format,
+        strain_images: setup.strain_images,
+        micro: setup.micro.as_ref(),
+        render: setup.render.as_ref(),
+        extent_mm: (
+            hi.x - lo.x,
+            setup
+                .render
+                .as_ref()
+                .map_or(0.0, |r| texel_mm((lo, hi), r.texture_px)),
+        ),
+        frame_rate_hz: 1.0 / setup.simulation.frame_dt,
+    };
+    let whole = MapPiece {
+        tag: String::new(),
+        triangles: None,
+    };
+    let mut outputs = FrameOutputs::open(spec, vec![whole])?;
+    let mut written = Vec::new();
+    if setup.write_mesh_vtu {
+        let path = dir.join("mesh.vtu");
+        io::write_vtu_as(&path, &io::Grid::from_mesh(mesh), setup.vtu_format)?;
+        written.push(path);
+    }
+    if setup.write_mesh_tetgen {
+        let base = dir.join("mesh");
+        io::write_tetgen(mesh, &base)?;
+        written.extend(io::tetgen_paths(&base));
+    }
+    outputs.start()?;
+    let mut written_after = Vec::new();
+    let mut hdf = None;
+    // The top surface's animation, when exported.
+    let mut exported = (setup.write_surface_glb || setup.write_surface_obj).then(|| {
+        crate::surface::AnimatedSurface::from_top(
+            &setup.name,
+            &mesh.top,
+            &mesh.positions,
+            &[],
+            1.0 / setup.simulation.frame_dt,
+        )
+    });
+    if setup.write_surface_obj {
+        let folder = dir.join("surface");
+        std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
+    }
+    let result = simulate(setup, |m, sim| {
+        let mut m = *m;
+        let field = SurfaceField::new(&mesh.top, &mesh.positions, &sim.x);
+        let (rs, rt, folded) = field.extremes();
+        m.rs_range = [rs.0, rs.1];
+        m.rt_range = [rt.0, rt.1];
+        m.folded_vertices = folded;
+        let strains = std::cell::OnceCell::new();
+        let grid = (outputs.wants_grid() || setup.write_vtkhdf).then(|| {
+            let strains = strains.get_or_init(|| ElementStrains::compute(mesh, &sim.x));
+            export::frame_grid(mesh, &sim.x, strains, &field)
+        });
+        if let (true, Some(grid)) = (setup.write_vtkhdf, &grid) {
+            vtkhdf::push(&mut hdf, dir, setup, m.time_s, grid)?;
+        }
+        if let Some(surface) = exported.as_mut() {
+            surface
+                .frames
+                .push(mesh.top.vertices.iter().map(|&v| sim.x[v]).collect());
+            if setup.write_surface_obj {
+                let path = dir
+                    .join("surface")
+                    .join(format!("frame_{:04}.obj", m.frame));
+                crate::surface::obj::write_obj(&path, surface, Some(surface.frames.len() - 1))?;
+            }
+        }
+        let probe = setup.simulation.probe.as_ref().map(|p| p.pose(m.time_s));
+        let geometry = |tessellate: usize| {
+            crate::render::scene::build(mesh, &sim.x, &field, probe.as_ref(), tessellate)
+        };
+        outputs.frame(&FrameInput {
+            frame: m.frame,
+            time_s: m.time_s,
+            field: &field,
+            grid: grid.as_ref(),
+            geometry: &geometry,
+        })?;
+        outputs.row(m)?;
+        on_frame(&Frame {
+            metrics: &m,
+            total_frames: setup.simulation.frames + 1,
+            mesh,
+            positions: &sim.x,
+            surface: &field,
+            strains: &strains,
+        });
+        Ok(())
+    });
+    // Closed whether or not the run finished: the steps so far stay. The
+    // run's own error, if any, is the one reported.
+    let closed = vtkhdf::finish(hdf);
+    result?;
+    written_after.extend(closed?);
+    if setup.write_surface_obj {
+        written_after.push(dir.join("surface"));
+    }
+    if let (true, Some(surface)) = (setup.write_surface_glb, &exported) {
+        let path = dir.join("surface.glb");
+        crate::surface::gltf::write_glb(&path, surface)?;
+        written_after.push(path);
+    }
+    let finished = outputs.finish(false)?;
+    written.extend(finished.written);
+    written.extend(written_after);
+    written.extend(finished.rendered);
+    Ok(RunSummary {
+        written,
+        quality: QualityReport::of(mesh),
+        frames: finished.rows,
+        micro_device: finished.micro_device,
+    })
+}

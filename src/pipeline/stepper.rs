@@ -1,0 +1,257 @@
+//! The FEM frame source: a [`Stepper`] carries the simulation from one
+//! frame to the next — load steps (the rules of
+//! [`crate::fem::load_steps`]), the predicted start of each solve,
+//! equilibrium with contact, the inversion rule — and [`simulate`] steps it
+//! through a scenario's frames.
+
+use std::time::Instant;
+
+use crate::error::{Error, Result};
+use crate::export::FrameMetrics;
+use crate::fem::contact::{solve_with_contact, ContactState};
+use crate::fem::integrate::{Dynamics, Simulation};
+use crate::fem::load_steps::{load_steps, press_in, MAX_PROBE_STEP};
+use crate::mesh::Vec3;
+use crate::scenario::Setup;
+
+/// Longest prediction, in increments of the last step. A step much longer
+/// than the last (the first after a frame split for a fast probe) would
+/// carry the skin on at the old speed after the load has stopped, through
+/// and past the probe.
+const MAX_PREDICTION_RATIO: f64 = 1.5;
+
+/// The frame loop; `emit` receives each finished frame. Returns the solver
+/// timings.
+pub fn simulate(
+    setup: &Setup,
+    mut emit: impl FnMut(&FrameMetrics, &Simulation) -> Result<()>,
+) -> Result<crate::fem::integrate::Timings> {
+    let s = &setup.simulation;
+    let mut stepper = Stepper::new(s, &setup.mesh);
+    for _ in 0..=s.frames {
+        let m = stepper.step(s, &setup.mesh, s.probe.as_ref())?;
+        emit(&m, stepper.simulation())?;
+    }
+    Ok(stepper.simulation().timings)
+}
+
+/// The state carried from one frame to the next: the simulation, the
+/// contact set, the last solved state (for the predicted start of the next
+/// solve) and the warnings already given. [`simulate`] steps it through a
+/// scenario's frames; the viewer steps it frame by frame with a probe path
+/// that grows as the user drives it — the same frames, so a recorded path
+/// replays to the same states.
+#[derive(Clone)]
+pub struct Stepper {
+    sim: Simulation,
+    contact: ContactState,
+    no_loads: Vec<Vec3>,
+    frame: usize,
+    t_prev: f64,
+    // The last solved state and its time.
+    last_solved: Option<(Vec<Vec3>, f64)>,
+    inverted_before: usize,
+    split_before: bool,
+}
+
+impl Stepper {
+    /// The patch at rest, before frame 0.
+    pub fn new(s: &crate::scenario::SimulationSetup, mesh: &crate::mesh::TetMesh) -> Stepper {
+        let mut sim = Simulation::new(mesh, &s.tet_material);
+        sim.settings = s.newton;
+        sim.dynamics = s.dynamics;
+        let sides: Vec<usize> = s.sets.sides.iter().flatten().copied().collect();
+        Stepper {
+            sim,
+            contact: ContactState::new(mesh, &sides),
+            no_loads: vec![Vec3::zeros(); mesh.num_vertices()],
+            frame: 0,
+            t_prev: 0.0,
+            last_solved: None,
+            inverted_before: 0,
+            split_before: false,
+        }
+    }
+
+    /// The frame [`Stepper::step`] solves next.
+    pub fn next_frame(&self) -> usize {
+        self.frame
+    }
+
+    /// The simulation as last solved.
+    pub fn simulation(&self) -> &Simulation {
+        &self.sim
+    }
+
+    /// New materials (one per tet) from the next frame on; the deformed
+    /// state is kept.
+    pub fn set_materials(
+        &mut self,
+        mesh: &crate::mesh::TetMesh,
+        tet_material: &[crate::fem::material::Material],
+    ) {
+        self.sim.set_materials(mesh, tet_material);
+    }
+
+    /// Solves the next frame (at `frame × frame_dt`) with `probe` — the
+    /// scenario's, or one whose path reaches at least that time — and
+    /// returns its metrics. After an error the stepper must not be stepped
+    /// again.
+    pub fn step(
+        &mut self,
+        s: &crate::scenario::SimulationSetup,
+        mesh: &crate::mesh::TetMesh,
+        probe: Option<&crate::fem::contact::Probe>,
+    ) -> Result<FrameMetrics> {
+        let sim = &mut self.sim;
+        let frame = self.frame;
+        let t_prev = self.t_prev;
+        let start = Instant::now();
+        let t = frame as f64 * s.frame_dt;
+        let mut m = FrameMetrics {
+            frame,
+            time_s: t,
+            ..Default::default()
+        };
+        // A probe that starts inside the skin is pressed in from just above
+        // it during frame 0, in steps like any other motion.
+        let mut lift = 0.0;
+        let substeps = if frame == 0 {
+            let (height, n) = press_in(probe, mesh, sim.position_tol());
+            lift = height;
+            n
+        } else {
+            let n = load_steps(probe, s.substeps, t_prev, t, frame)?;
+            if n > s.substeps {
+                if !self.split_before {
+                    log::warn!(
+                        "frame {frame}: the probe moves more than {MAX_PROBE_STEP} of its radius in \
+                         a load step; the frame is split into {n} load steps (and so is any later \
+                         frame that needs it) so that it cannot pass through the skin"
+                    );
+                    self.split_before = true;
+                }
+                log::info!("frame {frame}: {n} load steps for the probe's motion");
+            }
+            if let Some(d) = s.dynamics {
+                // A split frame takes shorter backward-Euler steps.
+                let dt = if n == s.substeps {
+                    d.dt
+                } else {
+                    (t - t_prev) / n as f64
+                };
+                sim.dynamics = Some(Dynamics { dt, ..d });
+            }
+            n
+        };
+        for k in 1..=substeps {
+            let ts = t_prev + (t - t_prev) * k as f64 / substeps as f64;
+            let context = format!("frame {frame} (t = {ts:.4} s)");
+            let (filters, targets) = s.boundary.constraints(&s.sets, &mesh.positions, ts);
+            if sim.dynamics.is_some() {
+                sim.begin_step();
+            }
+            // Start from the last state moved on by the last increment
+            // (constant velocity), scaled to this step's length (the contact
+            // solve starts its candidates where they were solved).
+            if s.predict {
+                let solved = sim.x.clone();
+                let t_solved = t_prev + (t - t_prev) * (k - 1) as f64 / substeps as f64;
+                if let Some((before, t_before)) = &self.last_solved {
+                    if t_solved > *t_before {
+                        let ratio = (ts - t_solved) / (t_solved - t_before);
+                        sim.predict(before, ratio.min(MAX_PREDICTION_RATIO));
+                    }
+                }
+                self.last_solved = Some((solved, t_solved));
+            }
+            match probe {
+                Some(probe) => {
+                    let r = solve_with_contact(
+                        sim,
+                        (&filters, &targets, &self.no_loads),
+                        &probe
+                            .pose(ts)
+                            .lifted(lift * (1.0 - k as f64 / substeps as f64)),
+                        probe.mode,
+                        &mut self.contact,
+                        &context,
+                    )?;
+                    m.probe_force_n = r.probe_force.into();
+                    m.contact_nodes = r.contact_nodes;
+                    m.contact_area_mm2 = r.contact_area_mm2;
+                    m.max_penetration_mm = r.max_penetration_mm;
+                    m.newton_iterations += r.newton_iterations;
+                    m.linear_iterations += r.cg_iterations;
+                    m.rel_residual = r.rel_residual;
+                }
+                None => {
+                    sim.filters = filters;
+                    sim.targets = targets;
+                    let st = sim.solve_static(&context)?;
+                    m.newton_iterations += st.iterations;
+                    m.linear_iterations += st.cg_iterations;
+                    m.rel_residual = st.rel_residual;
+                }
+            }
+            sim.end_step();
+        }
+        self.t_prev = t;
+        self.frame += 1;
+        let inversion = sim.inversion();
+        m.inverted_tets = inversion.inverted;
+        m.min_volume_ratio = inversion.min_volume_ratio;
+        check_inversion(
+            &m,
+            mesh.num_tets(),
+            s.max_inverted_fraction,
+            &mut self.inverted_before,
+        )?;
+        m.step_wall_s = start.elapsed().as_secs_f64();
+        log::info!(
+            "frame {frame}: t = {t:.4} s, probe force {:?} N, {} contact nodes, {} Newton / {} CG iterations",
+            m.probe_force_n,
+            m.contact_nodes,
+            m.newton_iterations,
+            m.linear_iterations
+        );
+        Ok(m)
+    }
+}
+
+/// Applies the inversion rule to a solved frame: a warning when inverted
+/// tets appear (or their number changes from none), an error when more
+/// than `max_fraction` of the `tets` are inverted. The frame is not
+/// written then: its state has no physical meaning.
+fn check_inversion(
+    m: &FrameMetrics,
+    tets: usize,
+    max_fraction: f64,
+    inverted_before: &mut usize,
+) -> Result<()> {
+    let fraction = m.inverted_tets as f64 / tets.max(1) as f64;
+    if fraction > max_fraction || m.min_volume_ratio.is_nan() {
+        return Err(Error::Solver(format!(
+            "frame {} (t = {:.4} s): {} of {tets} tets ({:.2}%) are inverted, the smallest volume \
+             ratio is {:.3}; solver.max_inverted_fraction is {max_fraction}. The patch has turned \
+             inside out (a load beyond what the mesh and material can follow): reduce the load, \
+             add substeps, or raise the limit to keep going",
+            m.frame,
+            m.time_s,
+            m.inverted_tets,
+            100.0 * fraction,
+            m.min_volume_ratio
+        )));
+    }
+    if m.inverted_tets > 0 && *inverted_before == 0 {
+        log::warn!(
+            "frame {}: {} tets are inverted (smallest volume ratio {:.3}); their strains are not \
+             physical",
+            m.frame,
+            m.inverted_tets,
+            m.min_volume_ratio
+        );
+    }
+    *inverted_before = m.inverted_tets;
+    Ok(())
+}

@@ -1,0 +1,24 @@
+//! The integration and verification tests, one module per topic, in one
+//! test binary: every binary links wgpu, faer and TetGen again, so one
+//! binary instead of one per topic saves most of the suite's build time.
+//! Shared helpers live in [`common`]. The `vtkhdf` cases are a binary of
+//! their own (`tests/vtkhdf.rs`), built only with that feature.
+
+mod common;
+
+mod bad_input;
+mod cli;
+mod contact;
+mod fem_verification;
+mod fuzz;
+mod gpu;
+mod mesh_generation;
+mod mesh_invariants;
+mod mesh_io;
+mod micro;
+mod render;
+mod robustness;
+mod strain;
+mod surface;
+mod synth;
+mod viewer;
