@@ -17,7 +17,7 @@ use super::outputs::{FrameInput, FrameOutputs, MapPiece, OutputSpec};
 use super::plan;
 use crate::error::Result;
 pub use crate::export::SurfaceMetrics;
-use crate::export::{self};
+use crate::export;
 use crate::mesh::{io, Vec3};
 use crate::scenario::SurfaceSetup;
 use crate::strain::SurfaceField;

@@ -11,7 +11,7 @@ use skinpatch::fem::boundary::{
 use skinpatch::fem::integrate::Simulation;
 use skinpatch::fem::solve::Filter;
 use skinpatch::fem::{Corotation, Material, TangentKind};
-use skinpatch::mesh::{io, TetMesh, Vec3};
+use skinpatch::mesh::Vec3;
 
 fn skin(region: i32) -> Material {
     let kpa = if region == 1 { 150.0 } else { 15.0 };

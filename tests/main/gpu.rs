@@ -16,7 +16,7 @@ use common::context;
 
 use nalgebra::Matrix2;
 use skinpatch::gpu::{self, Context};
-use skinpatch::mesh::{io, TetMesh, Vec3};
+use skinpatch::mesh::{TetMesh, Vec3};
 use skinpatch::micro::fit::{
     candidate_histogram, count_histograms, fit_params, Axis, HistogramSettings, Objective,
 };
