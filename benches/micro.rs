@@ -1,4 +1,4 @@
-//! Criterion benchmark of the CPU reference convolution (DESIGN §5.4) at
+//! Criterion benchmark of the CPU reference convolution at
 //! 2048² against a plain constant-kernel separable Gaussian blur of the same
 //! size (integer taps along rows then columns), in one run.
 //!

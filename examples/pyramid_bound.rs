@@ -1,5 +1,5 @@
 //! How far a pre-blurred pyramid of the neutral map can stand in for the
-//! exact strain-driven convolution (DESIGN §5.4), measured on the CPU
+//! exact strain-driven convolution, measured on the CPU
 //! reference.
 //!
 //! ```sh

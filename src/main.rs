@@ -71,7 +71,7 @@ enum Command {
     /// mesh). It always prints the quality report.
     Mesh(Box<MeshArgs>),
     /// Fit kernel parameters (α, σ) to measured deformed maps and a
-    /// piecewise-linear kernel model to them (seed 000 eq. 7, Fig. 11–12).
+    /// piecewise-linear kernel model to them (Nagano et al. 2015 eq. 7, Fig. 11–12).
     ///
     /// The samples file names the neutral map, each deformed map with its
     /// stretch ratio and axis, and/or already fitted points; with `output`
@@ -80,7 +80,7 @@ enum Command {
         /// Samples file (TOML).
         samples: PathBuf,
     },
-    /// Synthesize a neutral microstructure map from an exemplar (seed 002 §4).
+    /// Synthesize a neutral microstructure map from an exemplar (Graham et al. 2013 §4).
     ///
     /// Image-analogies texture synthesis: a measured micro map (the
     /// exemplar) details a coarser mesostructure map (a scan), keeping the

@@ -1,4 +1,4 @@
-//! PNG maps of the surface strain in texture space, like seed 000's strain
+//! PNG maps of the surface strain in texture space, like Nagano et al. 2015's strain
 //! figure: `strain/rs_NNNN.png` and `strain/rt_NNNN.png` (stretch ratios
 //! with a diverging colour map centred at 1 and a colour bar on the right)
 //! and `strain/axes_NNNN.png` (direction of the s axis).

@@ -1,4 +1,4 @@
-//! Boundary conditions of the box patch (DESIGN §5.2).
+//! Boundary conditions of the box patch.
 //!
 //! Node sets are found geometrically on the mesh's bounding box (tolerance
 //! 1e-9 of its diagonal), so they work for generated and loaded box meshes:

@@ -1,4 +1,4 @@
-//! The rigid probe and its contact with the top surface (DESIGN §5.2).
+//! The rigid probe and its contact with the top surface.
 //!
 //! Shapes: sphere (centre, radius), capsule (segment through the centre
 //! along an axis, radius) and flat cylindrical punch (circular flat face of a

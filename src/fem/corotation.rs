@@ -1,5 +1,5 @@
 //! Corotational linear tetrahedra (Müller & Gross 2004) with the invertible
-//! rotation of Irving et al. 2004 (DESIGN §5.2).
+//! rotation of Irving et al. 2004.
 //!
 //! Per tet with rest vertices `X0..X3`, `Dm = [X1−X0, X2−X0, X3−X0]`; the
 //! shape-function gradients are the rows of `Dm⁻¹` (`g1..g3`) and

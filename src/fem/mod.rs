@@ -1,4 +1,4 @@
-//! Corotational tetrahedral FEM (DESIGN §5.2).
+//! Corotational tetrahedral FEM.
 //!
 //! * [`material`]: per-region isotropic materials and Lamé parameters;
 //! * [`corotation`]: per-element rest data, rotation, forces, energy.

@@ -1,4 +1,4 @@
-//! GPU compute stages on wgpu (DESIGN §2, §7): the per-frame microstructure
+//! GPU compute stages on wgpu (§7): the per-frame microstructure
 //! stages of [`crate::strain`] and [`crate::micro`], one module and one
 //! shader each, every one compared with its CPU reference in the tests.
 //!

@@ -17,7 +17,7 @@
 //! * no triangle is shared by more than two tets;
 //! * every named region owns at least one tet.
 //!
-//! Vertex positions follow DESIGN §4: z up, skin surface at the top (largest z).
+//! Vertex positions follow the project's convention: z up, skin surface at the top (largest z).
 
 pub mod generate;
 pub mod io;

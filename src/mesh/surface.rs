@@ -3,7 +3,7 @@
 //! A boundary face is a tet face that no other tet shares. The top surface is
 //! the set of boundary faces marked [`markers::TOP`]; a mesh without such
 //! markers (e.g. a Gmsh file) uses the boundary faces that face +z and lie at
-//! the highest z instead. UVs follow DESIGN §4: `u = (x − x_min)/width`,
+//! the highest z instead. UVs follow the project's convention: `u = (x − x_min)/width`,
 //! `v = (y − y_min)/depth` over the top surface's rest bounding box.
 
 use std::collections::HashMap;

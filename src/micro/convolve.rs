@@ -1,5 +1,5 @@
-//! CPU reference of the spatially varying separable convolution (DESIGN
-//! §5.4, seed 000 eq. 3–6, 13).
+//! CPU reference of the spatially varying separable convolution (Nagano et
+//! al. 2015 eq. 3–6, 13).
 //!
 //! Two 1D passes: along each texel's s axis into an intermediate map
 //! (`D^s`, eq. 5), then along its t axis into the output (`D′`, eq. 4). A

@@ -1,4 +1,4 @@
-//! Fitting kernel parameters to measured deformations (seed 000 eq. 7 and
+//! Fitting kernel parameters to measured deformations (Nagano et al. 2015 eq. 7 and
 //! Fig. 11–12).
 //!
 //! **The objective.** A candidate (α, σ) convolves the neutral map `D` once
@@ -8,7 +8,7 @@
 //! normals; its score is the total variation to the target's histogram
 //! (eq. 7). [`candidate_histogram`] is that definition, texel for texel.
 //!
-//! **The search** ([`search`]) covers the seed's grid, α ∈ [−2, 1] in steps
+//! **The search** ([`search`]) covers the paper's grid, α ∈ [−2, 1] in steps
 //! of 0.01 and σ ∈ [1, 100] µm in steps of 0.5 µm, using that the convolved
 //! map, its resampling and so its slopes are linear in α: per σ, one blur
 //! gives the slope field `s₀` of the resampled neutral map and the change

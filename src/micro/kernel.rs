@@ -1,4 +1,4 @@
-//! The convolution kernel and the kernel model (DESIGN §5.4, seed 000
+//! The convolution kernel and the kernel model (Nagano et al. 2015
 //! eq. 6, 8, 9).
 //!
 //! A 1D kernel mixes the identity and a normalised discrete Gaussian:
@@ -10,7 +10,7 @@
 //! The kernel model maps a stretch ratio r to (α, σ) with piecewise-linear
 //! tables, held constant beyond their first and last points: α(r) through
 //! (1, 0) exactly, and σ(r) in two tables, one for compression (r < 1) and
-//! one for stretch (r ≥ 1), which may disagree at r = 1 (seed 000 eq. 9 has a
+//! one for stretch (r ≥ 1), which may disagree at r = 1 (Nagano et al. 2015 eq. 9 has a
 //! jump there). The built-in forehead model is eq. 8–9 written as such
 //! tables: α = min(1, 15.4r − 13.8, 3.09(r − 1)) clamped to [−2, 1] has
 //! its corners at r = 13.8/15.4 − 2/15.4, (13.8 − 3.09)/(15.4 − 3.09) and
@@ -95,7 +95,7 @@ pub struct KernelModel {
 }
 
 impl KernelModel {
-    /// The forehead model of seed 000 eq. 8–9 (see the module docs).
+    /// The forehead model of Nagano et al. 2015 eq. 8–9 (see the module docs).
     pub fn forehead() -> KernelModel {
         let corner = (13.8 - 3.09) / (15.4 - 3.09);
         KernelModel {

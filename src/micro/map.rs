@@ -1,4 +1,4 @@
-//! Displacement maps: f32 heights on a texel grid (DESIGN §5.4).
+//! Displacement maps: f32 heights on a texel grid.
 //!
 //! A map covers the UV square of the skin surface: texel `(i, j)` has its
 //! centre at `u = (i + ½)/width`, `v = (j + ½)/height` (row 0 at v = 0, like

@@ -1,4 +1,4 @@
-//! Microstructure on the CPU (DESIGN §5.4, seed 000 §3–5): the reference
+//! Microstructure on the CPU (Nagano et al. 2015 §3–5): the reference
 //! implementation the GPU stages are compared with.
 //!
 //! * [`map`]: displacement maps (f32 heights, texel size, edge handling);
@@ -13,8 +13,8 @@
 //! * [`moments`]: slope moments of a normal map and their mip pyramid, for
 //!   prefiltered (LEAN) specular;
 //! * [`roughness`]: per-axis Beckmann roughness m(r) from the kernel model
-//!   (seed 003), for the renderer;
-//! * [`synth`]: microstructure synthesis from an exemplar (seed 002 §4,
+//!   (Nagano et al. 2014), for the renderer;
+//! * [`synth`]: microstructure synthesis from an exemplar (Graham et al. 2013 §4,
 //!   Image Analogies): a neutral map from a measured patch and a scan;
 //! * [`spectrum`]: radially averaged height power spectra per octave;
 //! * [`io`]: 16-bit PNG and f32 EXR files;

@@ -1,6 +1,6 @@
 //! Slope moments of a microstructure map and their mip pyramid, for
 //! prefiltered specular (LEAN mapping, Olano & Baker 2010; the future work
-//! of seed 000 §8). CPU reference of `shaders/moments.wgsl`.
+//! of Nagano et al. 2015 §8). CPU reference of `shaders/moments.wgsl`.
 //!
 //! A height field `h(u, v)` has, per texel, the slopes `x̃ = ∂h/∂u` and
 //! `ỹ = ∂h/∂v` in tangent units, which the normal `n = (n_x, n_y, n_z)`

@@ -1,5 +1,5 @@
 //! Normals, normal histograms and slope statistics of a displacement map
-//! (DESIGN §5.4).
+//!.
 //!
 //! Slopes are central differences in micrometres:
 //! `∂h/∂x ≈ (h(i+1, j) − h(i−1, j))·unit / (2·texel)` (edge handling of the
@@ -13,7 +13,7 @@ use rayon::prelude::*;
 
 use super::map::DisplacementMap;
 
-/// Default histogram size (64 × 64 buckets, seed 000).
+/// Default histogram size (64 × 64 buckets, Nagano et al. 2015).
 pub const HISTOGRAM_BINS: usize = 64;
 
 /// Slope `(∂h/∂x, ∂h/∂y)` at texel `(i, j)`, dimensionless (µm per µm).
@@ -128,7 +128,7 @@ impl NormalHistogram {
     }
 
     /// Total variation `Σ_b |H_b − Ĥ_b|` to another histogram of the same
-    /// size (seed 000 eq. 7); in [0, 2].
+    /// size (Nagano et al. 2015 eq. 7); in [0, 2].
     pub fn distance(&self, other: &NormalHistogram) -> f64 {
         self.cells
             .iter()

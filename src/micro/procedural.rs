@@ -1,4 +1,4 @@
-//! Procedural neutral skin microstructure (DESIGN §5.4).
+//! Procedural neutral skin microstructure.
 //!
 //! Skin surface detail is a network of fine grooves bounding polygonal
 //! plateaus, a finer network inside those, pores, and fine texture. The

@@ -1,4 +1,4 @@
-//! Strain-driven anisotropic roughness (seed 003; DESIGN §5.4).
+//! Strain-driven anisotropic roughness (Nagano et al. 2014).
 //!
 //! Where the renderer does not use the deformed microgeometry itself, it can
 //! use an anisotropic Beckmann lobe whose roughness along each principal

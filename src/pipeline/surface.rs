@@ -1,6 +1,6 @@
 //! Runs a [`SurfaceSetup`]: an animated surface from another tool through
 //! the same strain, microstructure, render and export stages as the FEM
-//! patch's top surface (seed 000 §5, "novel surface animation").
+//! patch's top surface (Nagano et al. 2015 §5, "novel surface animation").
 //!
 //! Per frame: the surface field (eq. 10–13) from the rest and frame
 //! positions, a `metrics.csv` row, `frames/frame_NNNN.vtu` (the surface with

@@ -1,5 +1,5 @@
 //! Diffuse albedo over the patch's UV square: a procedural skin colour or
-//! an sRGB image decoded to linear values (seed 001 §2.7: shading happens in
+//! an sRGB image decoded to linear values (Chappuis 2011 §2.7: shading happens in
 //! linear space).
 
 use std::path::Path;

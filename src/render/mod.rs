@@ -1,4 +1,4 @@
-//! The skin renderer (seed 001 ch. 2–3, seed 002 §3, §5; DESIGN §5.5).
+//! The skin renderer (Chappuis 2011 ch. 2–3, Graham et al. 2013 §3, §5).
 //!
 //! Per frame and comparison mode, on the GPU (wgpu render and compute
 //! passes):
@@ -16,8 +16,8 @@
 //!    and the probe;
 //! 5. [`resolve`]: the supersampled image box-filtered to the output size.
 //!
-//! Comparison modes (seed 000 Fig. 1): `None` shades with mesoscale normals
-//! and the mesoscale lobes (seed 002 Table 2), `Static` with the neutral
+//! Comparison modes (Nagano et al. 2015 Fig. 1): `None` shades with mesoscale normals
+//! and the mesoscale lobes (Graham et al. 2013 Table 2), `Static` with the neutral
 //! map's normals and the microscale lobes (Table 1), `Dynamic` with the
 //! deformed map D′'s normals. Everything is linear until the frame writer
 //! encodes sRGB.
@@ -81,7 +81,7 @@ pub enum Roughness {
     /// Normals of the displacement map.
     Microgeometry,
     /// Mesoscale normals with anisotropic Beckmann roughness along the
-    /// strain axes (seed 003).
+    /// strain axes (Nagano et al. 2014).
     Anisotropic,
 }
 

@@ -2,7 +2,7 @@
 //! texture-space convolution (CPU reference of `shaders/diffusion.wgsl`).
 //!
 //! The profile (d'Eon & Luebke's fit of a three-layer skin model, tabulated
-//! in seed 001 Fig. 2.7) is `R_c(r) = Σ_i w_{i,c} G(v_i, r)` with the
+//! in Chappuis 2011 Fig. 2.7) is `R_c(r) = Σ_i w_{i,c} G(v_i, r)` with the
 //! normalised 2D Gaussian `G(v, r) = exp(−r²/2v) / (2πv)`; each colour
 //! channel's weights sum to one, so white light diffuses to white.
 //!
@@ -58,7 +58,7 @@ pub fn variance_steps() -> [f64; 6] {
 
 /// The seven tap weights: samples of a Gaussian at the tap offsets whose
 /// width is chosen so the discrete kernel has unit sum and unit variance
-/// (the seed's rounded weights sum to 1.001 with variance 1.08, which would
+/// (the paper's rounded weights sum to 1.001 with variance 1.08, which would
 /// inflate every step of the chain).
 pub fn tap_weights() -> [f64; 7] {
     // Bisection on the sampled Gaussian's width s: the variance of the
@@ -254,7 +254,7 @@ mod tests {
             (sum - 1.0).abs() < 1e-12 && (var - 1.0).abs() < 1e-9,
             "{sum} {var}"
         );
-        // Close to the seed's rounded weights (0.006, 0.061, 0.242, 0.383).
+        // Close to the paper's rounded weights (0.006, 0.061, 0.242, 0.383).
         for (a, b) in w[..4].iter().zip([0.006, 0.061, 0.242, 0.383]) {
             assert!((a - b).abs() < 0.03, "{a} vs {b}");
         }

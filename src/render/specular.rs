@@ -1,8 +1,8 @@
 //! Skin specular reflection: the Kelemen/Szirmay-Kalos BRDF with Beckmann
-//! microfacets and Schlick's Fresnel (seed 001 §2.3), two lobes per region
-//! (seed 002 Table 1), the energy-conservation table `ρ_dt` (seed 001 §2.6)
+//! microfacets and Schlick's Fresnel (Chappuis 2011 §2.3), two lobes per region
+//! (Graham et al. 2013 Table 1), the energy-conservation table `ρ_dt` (Chappuis 2011 §2.6)
 //! and the anisotropic Beckmann distribution of the strain-driven roughness
-//! model (seed 003).
+//! model (Nagano et al. 2014).
 //!
 //! With the half vector `h = normalize(l + v)`, the BRDF is
 //! `f(l, v) = ρ_s D(h) F(v·h) / |l + v|²`, where `|l + v|² = 4 (l·h)²`
@@ -59,7 +59,7 @@ pub struct Lobes {
     pub w: f64,
 }
 
-/// Measured two-lobe fits (seed 002): microscale (Table 1) and mesoscale
+/// Measured two-lobe fits (Graham et al. 2013): microscale (Table 1) and mesoscale
 /// (Table 2) parameters per facial region, for subjects 1 and 2.
 pub fn region_lobes(region: &str, subject: usize, microscale: bool) -> Option<Lobes> {
     // (region, [subject 1, subject 2]) as (m1, m2, w).

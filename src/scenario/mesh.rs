@@ -12,7 +12,7 @@ use crate::mesh::generate::{LayerSpec, PatchSpec, RefineZone, ZoneShape};
 ///
 /// The patch spans x ∈ [−w/2, w/2], y ∈ [−d/2, d/2], z ∈ [−h, 0] with the
 /// skin surface at z = 0. All generation keys are optional; their defaults
-/// are the design's skin patch (DESIGN §5.1–5.2).
+/// are the design's skin patch.
 #[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct MeshSection {

@@ -27,12 +27,12 @@ pub struct MicrostructureSection {
     pub edge: String,
     /// The procedural generator's parameters (used when `map` is not set).
     pub procedural: ProceduralSection,
-    /// A neutral map synthesized from an exemplar (seed 002 §4) instead of
+    /// A neutral map synthesized from an exemplar (Graham et al. 2013 §4) instead of
     /// `map` or `procedural`; the same keys as a `skinpatch synth` file's
     /// `[synthesis]`. Cached in the output folder's `cache/` by a hash of
     /// the settings and input files, so reruns do not synthesize again.
     pub synthesis: Option<super::synth::SynthesisSection>,
-    /// Custom kernel model tables. Default: the forehead model (seed 000 eq. 8–9).
+    /// Custom kernel model tables. Default: the forehead model (Nagano et al. 2015 eq. 8–9).
     pub kernel: Option<KernelSection>,
     /// A kernel model file written by `skinpatch fit` (its tables, as in
     /// `[microstructure.kernel]`), relative to the scenario file.
@@ -44,7 +44,7 @@ pub struct MicrostructureSection {
     /// Write the maps of every n-th frame (frame 0 always). Default 1.
     pub frame_stride: usize,
     /// Write `micro/roughness.csv`: Beckmann roughness m(r) of the neutral map
-    /// under the kernel model for r = 0.70 … 1.40 (seed 003). Default false.
+    /// under the kernel model for r = 0.70 … 1.40 (Nagano et al. 2014). Default false.
     pub roughness_table: bool,
     /// Incremental frames on the GPU: a map tile is convolved again only
     /// when a surface vertex it depends on changed its stretch (`T − I`

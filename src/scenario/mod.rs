@@ -1,6 +1,6 @@
 //! Scenario files (TOML) and their validation into a [`Setup`].
 //!
-//! Configuration comes in two steps (DESIGN §9.2): [`Scenario`] mirrors the
+//! Configuration comes in two steps: [`Scenario`] mirrors the
 //! file — serde with `deny_unknown_fields`, every field documented with unit
 //! and default — and [`Setup::from_scenario`] checks ranges, resolves paths
 //! and builds or loads the mesh. Stages only ever see a `Setup`.

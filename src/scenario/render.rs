@@ -33,7 +33,7 @@ pub struct RenderSection {
     /// relative to static, in false colour (black 0, white ≥ 50%). Needs
     /// both modes. Default false.
     pub difference: bool,
-    /// Comparison modes rendered per frame (seed 000 Fig. 1): any of `none`
+    /// Comparison modes rendered per frame (Nagano et al. 2015 Fig. 1): any of `none`
     /// (mesoscale surface, mesoscale BRDF), `static` (neutral
     /// microstructure), `dynamic` (deformed microstructure D′). Default
     /// `["dynamic"]`.
@@ -51,7 +51,7 @@ pub struct RenderSection {
     pub shadow_map_px: usize,
     /// Subdivisions of each surface-triangle edge (1 … 8). Default 1.
     pub tessellate: usize,
-    /// Pre-scatter share of the albedo (seed 001 §2.2.4), [0, 1]. Default 0.5.
+    /// Pre-scatter share of the albedo (Chappuis 2011 §2.2.4), [0, 1]. Default 0.5.
     pub mix_ratio: f64,
     /// Draw the probe. Default true.
     pub draw_probe: bool,
@@ -60,7 +60,7 @@ pub struct RenderSection {
     /// `procedural` or an sRGB image file (relative to the scenario file)
     /// mapped over the patch's UV square. Default `procedural`.
     pub albedo: String,
-    /// Facial region of the measured specular lobes (seed 002 Tables 1–2):
+    /// Facial region of the measured specular lobes (Graham et al. 2013 Tables 1–2):
     /// forehead, temple, cheek, nose, chin. Default `forehead`.
     pub region: String,
     /// Subject of the measured lobes, 1 or 2. Default 1.
@@ -73,7 +73,7 @@ pub struct RenderSection {
     /// Specular detail in `static`/`dynamic` modes: `microgeometry` (normals
     /// of the displacement map) or `anisotropic` (mesoscale normals with
     /// Beckmann roughness along the strain axes following the map's m(r),
-    /// seed 003). Default `microgeometry`.
+    /// Nagano et al. 2014). Default `microgeometry`.
     pub roughness: String,
     /// How `microgeometry` specular reads the map: `moments` (the slope
     /// moments' mip pyramid over each pixel's footprint, LEAN mapping:

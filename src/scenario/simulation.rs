@@ -22,7 +22,7 @@ use crate::mesh::TetMesh;
 
 /// `[material.<region>]`: one region's material. Defaults: the top layer
 /// (`dermis`) 150 kPa, the bottom layer (`hypodermis`) 15 kPa, ν = 0.45,
-/// 1100 kg/m³ (DESIGN §5.2). Other regions need a section.
+/// 1100 kg/m³. Other regions need a section.
 #[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct MaterialSection {

@@ -496,7 +496,7 @@ impl SynthesisSection {
         let sources = self.load(base, key)?;
         let (w, h) = sources.inputs().output_size()?;
         crate::gpu::precheck_map(w, h)?;
-        log::info!("neutral map: synthesizing from the exemplar (seed 002 §4)");
+        log::info!("neutral map: synthesizing from the exemplar (Graham et al. 2013 §4)");
         let result = crate::micro::synth::synthesize(&sources.inputs(), &params, &mut |l| {
             log::info!(
                 "synthesis level {}: {} × {} texels, window {}, {:.1} s",

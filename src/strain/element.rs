@@ -1,4 +1,4 @@
-//! Per-tet principal strains (DESIGN §5.3).
+//! Per-tet principal strains.
 //!
 //! For each tet the deformation gradient `F = Ds·Dm⁻¹` is decomposed by the
 //! sign-corrected SVD of the FEM ([`crate::fem::Corotation`]):

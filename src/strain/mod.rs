@@ -1,9 +1,9 @@
-//! Strain fields (DESIGN §5.3): what drives the microstructure.
+//! Strain fields: what drives the microstructure.
 //!
 //! * [`element`]: per-tet deformation gradient, principal stretches and
 //!   directions, Biot and Green strains, volume ratio;
 //! * [`surface`]: the 2×2 deformation `T` of the top surface in texture
-//!   space (seed 000 eq. 10), per triangle and per vertex, evaluated at any
+//!   space (Nagano et al. 2015 eq. 10), per triangle and per vertex, evaluated at any
 //!   UV point through the closed-form SVD (eq. 11–13);
 //! * [`svd2`]: the closed-form 2×2 SVD (the GPU stage runs the same formulas);
 //! * [`raster`]: the CPU reference raster of the field into a UV grid.

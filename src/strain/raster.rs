@@ -1,4 +1,4 @@
-//! CPU reference raster of the surface field into a UV texture (DESIGN §5.3).
+//! CPU reference raster of the surface field into a UV texture.
 //!
 //! Texel `(i, j)` of a `width × height` raster covers
 //! `u ∈ [i, i+1)/width`, `v ∈ [j, j+1)/height` (row 0 at v = 0) and samples

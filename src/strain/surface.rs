@@ -1,5 +1,5 @@
 //! The 2×2 deformation field of the top surface in texture space
-//! (DESIGN §5.3, seed 000 §5 eq. 10–13).
+//! (Nagano et al. 2015 §5 eq. 10–13).
 //!
 //! Per top triangle with rest vertices `v_i`, deformed `v′_i` and UVs `w_i`:
 //!

@@ -1,4 +1,4 @@
-//! Closed-form SVD of a 2×2 matrix (DESIGN §5.3, seed 000 eq. 11–12).
+//! Closed-form SVD of a 2×2 matrix (Nagano et al. 2015 eq. 11–12).
 //!
 //! Any real 2×2 matrix splits into a conformal part (a scaled rotation) and
 //! an anticonformal part (a scaled reflection):

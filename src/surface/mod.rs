@@ -1,4 +1,4 @@
-//! Animated surfaces made by other tools (seed 000 §5, "novel surface
+//! Animated surfaces made by other tools (Nagano et al. 2015 §5, "novel surface
 //! animation"): a rest triangle mesh with UVs and its positions per frame,
 //! read from glTF 2.0 (morph targets and skins with their animation,
 //! [`gltf`]) or an OBJ sequence ([`obj`]), in millimetres.

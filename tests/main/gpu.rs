@@ -1,4 +1,4 @@
-//! GPU stages against their CPU references (DESIGN §7), on whatever Vulkan
+//! GPU stages against their CPU references, on whatever Vulkan
 //! adapter is present — lavapipe in CI, where `SKINPATCH_REQUIRE_GPU=1`
 //! makes a missing adapter fail these tests instead of skipping them.
 //!

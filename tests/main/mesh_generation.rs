@@ -59,7 +59,7 @@ fn check_patch(spec: &PatchSpec, mesh: &TetMesh) {
         assert_eq!(f.marker, expected, "face {:?} normal {n:?}", f.nodes);
     }
 
-    // Top surface: area w·d at z = 0, normals up, UVs per DESIGN §4.
+    // Top surface: area w·d at z = 0, normals up, UVs from x, y at rest.
     let top = &mesh.top;
     assert!(rel(top.area(&mesh.positions), w * d) < 1e-9);
     for (s, &v) in top.vertices.iter().enumerate() {

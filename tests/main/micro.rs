@@ -642,7 +642,7 @@ fn fitting_sweep_recovers_every_target() {
     assert!(worst.0 <= 0.01 + 1e-9 && worst.1 <= 0.5 + 1e-9, "{table}");
 }
 
-/// The seed's Fig. 11 table (forehead): r, α, σ (µm).
+/// The paper's Fig. 11 table (forehead): r, α, σ (µm).
 const SEED_TABLE: ([f64; 8], [f64; 8], [f64; 8]) = (
     [0.73, 0.79, 0.88, 0.94, 1.08, 1.15, 1.22, 1.28],
     [-2.0, -1.76, -0.2, -0.02, 0.54, 0.27, 1.0, 1.0],
@@ -660,7 +660,7 @@ fn seed_table() -> Vec<skinpatch::micro::fit::FittedPoint> {
         .collect()
 }
 
-/// The seed's Fig. 11 points give a model through (1, 0) that blurs when
+/// The paper's Fig. 11 points give a model through (1, 0) that blurs when
 /// stretched and sharpens when compressed.
 #[test]
 fn fitting_the_seed_points_gives_a_neutral_model() {
@@ -684,9 +684,9 @@ fn fitting_the_seed_points_gives_a_neutral_model() {
     );
 }
 
-/// Fed the seed's Fig. 11 table with one α break at r = 0.87 (where the
+/// Fed the paper's Fig. 11 table with one α break at r = 0.87 (where the
 /// lines of its eq. 8 meet), the fitted model reproduces the table at least
-/// as closely as the seed's own eq. 8–9 (RMS over the eight points: α
+/// as closely as the paper's own eq. 8–9 (RMS over the eight points: α
 /// 0.149 against eq. 8's 0.199, σ 2.09 µm against eq. 9's 2.10) and stays
 /// near eq. 8–9 at every tabulated r (α within 0.21, σ within 0.35 µm: the
 /// seed's lines were drawn by hand, these are least squares).

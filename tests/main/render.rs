@@ -219,7 +219,7 @@ fn beckmann_is_normalised() {
 
 /// The hemisphere integrator against independent renderers: the
 /// directional albedo of Beckmann α = 0.5 with F = 1 and uncorrelated
-/// Smith masking (DESIGN §5.5 reference values).
+/// Smith masking (the reference values of the renderer's tests).
 #[test]
 fn integrator_reproduces_reference_directional_albedo() {
     let m = 0.5;
@@ -580,7 +580,7 @@ fn dynamic_and_static_differ_only_where_strained() {
     );
 }
 
-/// The same with the strain-driven anisotropic roughness (seed 003), lit
+/// The same with the strain-driven anisotropic roughness (Nagano et al. 2014), lit
 /// from near the view direction so the mesoscale highlight fills the view:
 /// the lobes change only where r ≠ 1.
 #[test]

@@ -1,4 +1,4 @@
-//! Animated surfaces from other tools (seed 000 §5): round trips of the FEM
+//! Animated surfaces from other tools (Nagano et al. 2015 §5): round trips of the FEM
 //! top surface through glTF and OBJ, analytic deformations on curved
 //! surfaces with UV seams and mirrored charts, UDIM and wrapping layouts,
 //! GPU parity and bad input.

@@ -1,4 +1,4 @@
-//! Microstructure synthesis (seed 002 §4): the result against the exemplar
+//! Microstructure synthesis (Graham et al. 2013 §4): the result against the exemplar
 //! and the mesostructure it details, seams, determinism and bad input.
 //!
 //! The data: an exemplar of procedural skin at 5 µm texels (seed 1), and a
@@ -191,7 +191,7 @@ fn synthesis_keeps_the_mesostructure_and_reproduces_the_exemplar() {
 
 #[test]
 fn the_mesostructure_constraint_matters() {
-    // α = 1 ignores B in the match (seed 002 Fig. 9d): B′'s medium
+    // α = 1 ignores B in the match (Graham et al. 2013 Fig. 9d): B′'s medium
     // frequencies follow B's much less. Measured before the restoring
     // passes, which would put B's medium frequencies back either way.
     let exemplar = skin(1, 256);

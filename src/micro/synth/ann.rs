@@ -1,7 +1,7 @@
 //! Approximate nearest-neighbour search over neighbourhood vectors: a k-d
 //! tree with a run-time dimension and best-bin-first queries that stop
 //! after a given number of leaves (the priority search of Arya and Mount's
-//! ANN, which the synthesis of seed 002 §4 uses).
+//! ANN, which the synthesis of Graham et al. 2013 §4 uses).
 //!
 //! The dimension is a run-time value because the synthesis compares
 //! PCA-reduced neighbourhoods (5 … 13 dimensions) with whole ones (up to

@@ -1,4 +1,4 @@
-//! Microstructure synthesis from a measured exemplar (seed 002 §4):
+//! Microstructure synthesis from a measured exemplar (Graham et al. 2013 §4):
 //! constrained texture synthesis in the Image Analogies framework.
 //!
 //! Given an exemplar micro map A′ (≈ 1 cm² at ≈ 10 µm) and a mesostructure
@@ -27,7 +27,7 @@
 //!    around q, weighted √(1 − α), next to the window of the current B′_h,
 //!    weighted √α; an exemplar texel p has [A_h window, A′_h window] the
 //!    same way. So the squared distance is α |N_A′(p) − N_B′(q)|² +
-//!    (1 − α) |N_A(p) − N_B(q)|², α the seed's weight. Features are reduced
+//!    (1 − α) |N_A(p) − N_B(q)|², α the paper's weight. Features are reduced
 //!    by PCA to `pca_dims` (default the window side n for an n × n window,
 //!    as in the seed).
 //! 6. Best approximate match: the nearest exemplar feature from a k-d tree
