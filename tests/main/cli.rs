@@ -1225,10 +1225,11 @@ fn tiles_split_and_join_round_trip() {
         "{}",
         text(&o.stderr)
     );
+    // An unknown action is refused by name.
     let o = skinpatch(&["tiles", "merge", &p(&folder), "-o", &p(&joined)]);
     assert!(!o.status.success());
     assert!(
-        text(&o.stderr).contains("`split` or `join`"),
+        text(&o.stderr).contains("unrecognized subcommand 'merge'"),
         "{}",
         text(&o.stderr)
     );

@@ -1,0 +1,178 @@
+//! `skinpatch mesh`: a layered patch generated with TetGen from a
+//! scenario's `[mesh]` section and/or flags, or a mesh file inspected; the
+//! quality report, and with `--out` the mesh files.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context};
+use clap::Args;
+use skinpatch::mesh::generate::{generate_scaled, poly_text};
+use skinpatch::mesh::quality::max_edge_within;
+use skinpatch::mesh::{io, QualityReport, TetMesh, Vec3};
+use skinpatch::scenario::{MeshSection, RefineSection, Scenario, ZoneKind};
+
+use super::print_stdout;
+
+/// `skinpatch mesh`'s arguments.
+#[derive(Args)]
+pub struct MeshArgs {
+    /// Read the [mesh] section of this scenario.
+    #[arg(long, conflicts_with = "input")]
+    scenario: Option<PathBuf>,
+    /// Load this mesh (.msh, .node/.ele or TetGen base name) instead of generating.
+    #[arg(long)]
+    input: Option<PathBuf>,
+    /// Write BASE.node/.ele/.face, BASE.vtu (and BASE.poly when generating).
+    #[arg(long, value_name = "BASE")]
+    out: Option<PathBuf>,
+    /// Patch extent in x (mm) [default 10].
+    #[arg(long)]
+    width_mm: Option<f64>,
+    /// Patch extent in y (mm) [default 10].
+    #[arg(long)]
+    depth_mm: Option<f64>,
+    /// Top layer (epidermis + dermis) thickness (mm) [default 1.5].
+    #[arg(long)]
+    top_layer_mm: Option<f64>,
+    /// Bottom layer (hypodermis) thickness (mm); 0 for one layer [default 3.5].
+    #[arg(long)]
+    bottom_layer_mm: Option<f64>,
+    /// Largest tet volume in the top layer (mm³) [default 0.004].
+    #[arg(long)]
+    top_max_volume_mm3: Option<f64>,
+    /// Largest tet volume in the bottom layer (mm³) [default 0.02].
+    #[arg(long)]
+    bottom_max_volume_mm3: Option<f64>,
+    /// Scale all volume limits until the mesh has about this many tets.
+    #[arg(long)]
+    target_tets: Option<usize>,
+    /// TetGen radius-edge ratio bound (≥ 1.1) [default 1.5].
+    #[arg(long)]
+    radius_edge_max: Option<f64>,
+    /// Fail unless every dihedral angle is at least this (degrees) [default 0: off].
+    #[arg(long)]
+    min_dihedral_deg: Option<f64>,
+    /// Refine a hemisphere under the top surface: X,Y,RADIUS (mm).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        value_name = "X,Y,R",
+        conflicts_with = "refine_box"
+    )]
+    refine_sphere: Option<Vec<f64>>,
+    /// Refine a box hanging from the top surface: X,Y,SIZE_X,SIZE_Y,DEPTH (mm).
+    #[arg(long, value_delimiter = ',', value_name = "X,Y,SX,SY,D")]
+    refine_box: Option<Vec<f64>>,
+    /// Largest tet volume inside the refinement zone (mm³).
+    #[arg(long)]
+    refine_max_volume_mm3: Option<f64>,
+    /// Also report the longest edge of the tets within R of the point (X, Y, Z) (mm).
+    #[arg(long, value_delimiter = ',', value_name = "X,Y,Z,R")]
+    edges_within: Option<Vec<f64>>,
+}
+
+impl MeshArgs {
+    /// Applies the flags on top of a [mesh] section.
+    fn overlay(&self, mut m: MeshSection) -> anyhow::Result<MeshSection> {
+        macro_rules! set {
+            ($($field:ident),*) => { $( if self.$field.is_some() { m.$field = self.$field; } )* };
+        }
+        set!(
+            width_mm,
+            depth_mm,
+            top_layer_mm,
+            bottom_layer_mm,
+            top_max_volume_mm3,
+            bottom_max_volume_mm3,
+            target_tets,
+            radius_edge_max,
+            min_dihedral_deg
+        );
+        let zone = match (&self.refine_sphere, &self.refine_box) {
+            (Some(s), _) if s.len() != 3 => bail!("--refine-sphere takes X,Y,R, got {s:?}"),
+            (_, Some(b)) if b.len() != 5 => bail!("--refine-box takes X,Y,SX,SY,D, got {b:?}"),
+            (Some(s), _) => Some(RefineSection {
+                shape: ZoneKind::Sphere,
+                center_mm: [s[0], s[1]],
+                radius_mm: Some(s[2]),
+                size_mm: None,
+                max_volume_mm3: f64::NAN,
+            }),
+            (_, Some(b)) => Some(RefineSection {
+                shape: ZoneKind::Box,
+                center_mm: [b[0], b[1]],
+                radius_mm: None,
+                size_mm: Some([b[2], b[3], b[4]]),
+                max_volume_mm3: f64::NAN,
+            }),
+            _ => None,
+        };
+        if let Some(mut zone) = zone {
+            zone.max_volume_mm3 = self
+                .refine_max_volume_mm3
+                .or(m.refine.as_ref().map(|r| r.max_volume_mm3))
+                .context("--refine-sphere/--refine-box need --refine-max-volume-mm3")?;
+            m.refine = Some(zone);
+        } else if let (Some(v), Some(r)) = (self.refine_max_volume_mm3, m.refine.as_mut()) {
+            r.max_volume_mm3 = v;
+        } else if self.refine_max_volume_mm3.is_some() {
+            bail!(
+                "--refine-max-volume-mm3 needs a refinement zone (--refine-sphere or --refine-box)"
+            );
+        }
+        Ok(m)
+    }
+}
+
+/// Runs `skinpatch mesh`.
+pub fn run(args: MeshArgs) -> anyhow::Result<()> {
+    let (mesh, poly) = if let Some(input) = &args.input {
+        let mesh = io::read_mesh(input)?;
+        (mesh, None)
+    } else {
+        let section = match &args.scenario {
+            Some(path) => Scenario::load(path)?.mesh,
+            None => MeshSection::default(),
+        };
+        if section.file.is_some() {
+            bail!("the scenario's [mesh] loads a file; use --input to inspect a mesh file");
+        }
+        let spec = args.overlay(section)?.patch_spec()?;
+        let (mesh, scale) = generate_scaled(&spec)?;
+        (mesh, Some(poly_text(&spec, scale)))
+    };
+    let mut report = QualityReport::of(&mesh).to_string();
+    if let Some(e) = &args.edges_within {
+        let [x, y, z, r] = e[..] else {
+            bail!("--edges-within takes X,Y,Z,R, got {e:?}");
+        };
+        let (longest, n) = max_edge_within(&mesh, &Vec3::new(x, y, z), r);
+        report +=
+            &format!("within {r} mm of ({x}, {y}, {z}): {n} tets, longest edge {longest:.4} mm\n");
+    }
+    // Files first: a closed stdout must not cost the user their mesh.
+    if let Some(base) = &args.out {
+        report += &write_mesh_files(&mesh, base, poly.as_deref())?;
+    }
+    print_stdout(&report)
+}
+
+fn write_mesh_files(mesh: &TetMesh, base: &Path, poly: Option<&str>) -> anyhow::Result<String> {
+    if let Some(dir) = base.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let mut written: Vec<PathBuf> = io::tetgen_paths(base).into();
+    io::write_tetgen(mesh, base)?;
+    let vtu = PathBuf::from(format!("{}.vtu", base.display()));
+    io::write_vtu(&vtu, &io::Grid::from_mesh(mesh))?;
+    written.push(vtu);
+    if let Some(text) = poly {
+        let path = PathBuf::from(format!("{}.poly", base.display()));
+        io::write_atomically(&path, text.as_bytes())?;
+        written.push(path);
+    }
+    Ok(written
+        .iter()
+        .map(|p| format!("wrote {}\n", p.display()))
+        .collect())
+}
