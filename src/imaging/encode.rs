@@ -81,14 +81,21 @@ pub fn write_difference(path: &Path, stat: &Image, dynamic: &Image) -> Result<()
             heat((d - s).abs() / s.max(1e-4) / DIFFERENCE_RANGE)
         })
         .collect();
+    write_rgb8_png(path, (stat.width, stat.height), &bytes)
+}
+
+/// Writes already encoded 8-bit RGB pixels (`width × height × 3` bytes,
+/// row 0 at the top) as a PNG, atomically: the false-colour images and the
+/// viewer's window captures.
+pub fn write_rgb8_png(path: &Path, (width, height): (usize, usize), rgb: &[u8]) -> Result<()> {
     let failed = |e: png::EncodingError| Error::io(path, std::io::Error::other(e));
     let mut out = Vec::new();
     {
-        let mut encoder = png::Encoder::new(&mut out, stat.width as u32, stat.height as u32);
+        let mut encoder = png::Encoder::new(&mut out, width as u32, height as u32);
         encoder.set_color(png::ColorType::Rgb);
         encoder.set_depth(png::BitDepth::Eight);
         let mut writer = encoder.write_header().map_err(failed)?;
-        writer.write_image_data(&bytes).map_err(failed)?;
+        writer.write_image_data(rgb).map_err(failed)?;
         writer.finish().map_err(failed)?;
     }
     write_atomically(path, &out)

@@ -7,8 +7,9 @@
 //! Layout: [`state`] (the view and its commands, no window), [`keys`] (the
 //! key table), [`script`] (`--script` steps), [`worker`] (the simulation
 //! thread), [`record`] (frames and the replayable path), [`present`]
-//! (`shaders/present.wgsl`, the image into the window) and `app` (winit and
-//! egui, thin).
+//! (`shaders/present.wgsl`, the image into the window) and `app` (the winit
+//! event loop, with its rooms: the egui panel, presentation and window
+//! captures, the script runner, key actions).
 
 use std::path::{Path, PathBuf};
 
