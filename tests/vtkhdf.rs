@@ -18,7 +18,10 @@ use skinpatch::mesh::io::{self, Values};
 
 /// Runs `press_small` (7 frames on patch_3k) writing both the VTUs and
 /// `frames.vtkhdf` with the given precision and compression.
-fn run(precision: &str, compression: &str) -> (skinpatch::pipeline::RunSummary, tempfile::TempDir) {
+fn run(
+    precision: &str,
+    compression: &str,
+) -> (skinpatch::pipeline::FemRunSummary, tempfile::TempDir) {
     common::run_fixture("press_small.toml", |text| {
         format!(
             "{text}\n[output]\nframes_vtkhdf = true\nvtu_precision = \"{precision}\"\n\
@@ -70,7 +73,7 @@ fn same(a: &[f64], b: &[f64]) -> bool {
             .all(|(x, y)| x == y || (x.is_nan() && y.is_nan()))
 }
 
-fn check_against_vtus(out: &Path, summary: &skinpatch::pipeline::RunSummary) {
+fn check_against_vtus(out: &Path, summary: &skinpatch::pipeline::FemRunSummary) {
     let path = out.join("frames.vtkhdf");
     assert!(summary.written.contains(&path), "{:?}", summary.written);
     let file = hdf5::File::open(&path).unwrap();

@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Args;
+use skinpatch::export::{FrameMetrics, SurfaceMetrics};
 use skinpatch::scenario::{Scenario, Setup};
 
 use super::print_stdout;
@@ -69,7 +70,10 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         .sum::<f64>()
         .into();
     let summary_path = write_record(&setup.output_dir, &record)?;
-    let report = format!("scenario {}: mesh\n{}", setup.name, summary.quality);
+    let mut report = format!("scenario {}: mesh\n", setup.name);
+    if let Some(quality) = &summary.quality {
+        report += &quality.to_string();
+    }
     report_run(
         report,
         summary.micro_device.as_deref(),
@@ -159,11 +163,13 @@ fn run_surface(
     let progress = (!quiet).then(Progress::new);
     let result = skinpatch::pipeline::surface::run(&setup, |frame| {
         if let Some(p) = &progress {
-            p.surface_frame(frame.metrics, frame.total_frames)
+            p.frame(frame.metrics, frame.total_frames)
         }
     });
     let summary = finished(result, progress, path, &setup.output_dir)?;
-    let record = run_record(path, overrides, scenario, &setup.output_dir, &summary)?;
+    let mut record = run_record(path, overrides, scenario, &setup.output_dir, &summary)?;
+    // The same fields as a FEM run's record; no FEM ran.
+    record["fem_wall_s"] = serde_json::Value::Null;
     let summary_path = write_record(&setup.output_dir, &record)?;
     let s = &setup.surface;
     let mut report = format!(
@@ -195,6 +201,41 @@ fn run_surface(
     )
 }
 
+/// What the progress shows of a frame's metrics row.
+trait ProgressLine {
+    /// The frame's index.
+    fn index(&self) -> usize;
+    /// The frame's line after "frame k/n".
+    fn line(&self) -> String;
+}
+
+impl ProgressLine for FrameMetrics {
+    fn index(&self) -> usize {
+        self.frame
+    }
+
+    fn line(&self) -> String {
+        let [fx, fy, fz] = self.probe_force_n;
+        format!(
+            "t = {:.3} s, probe force ({fx:.3e}, {fy:.3e}, {fz:.3e}) N, {} contact nodes",
+            self.time_s, self.contact_nodes
+        )
+    }
+}
+
+impl ProgressLine for SurfaceMetrics {
+    fn index(&self) -> usize {
+        self.frame
+    }
+
+    fn line(&self) -> String {
+        format!(
+            "t = {:.3} s, r_s {:.4} … {:.4}, r_t {:.4} … {:.4}",
+            self.time_s, self.rs_range[0], self.rs_range[1], self.rt_range[0], self.rt_range[1]
+        )
+    }
+}
+
 /// A progress bar on a terminal, plain lines otherwise.
 struct Progress {
     bar: Option<indicatif::ProgressBar>,
@@ -217,24 +258,9 @@ impl Progress {
         Progress { bar }
     }
 
-    fn frame(&self, m: &skinpatch::export::FrameMetrics, total: usize) {
-        let [fx, fy, fz] = m.probe_force_n;
-        let msg = format!(
-            "t = {:.3} s, probe force ({fx:.3e}, {fy:.3e}, {fz:.3e}) N, {} contact nodes",
-            m.time_s, m.contact_nodes
-        );
-        self.show(m.frame, total, msg);
-    }
-
-    fn surface_frame(&self, m: &skinpatch::pipeline::surface::SurfaceMetrics, total: usize) {
-        let msg = format!(
-            "t = {:.3} s, r_s {:.4} … {:.4}, r_t {:.4} … {:.4}",
-            m.time_s, m.rs_range[0], m.rs_range[1], m.rt_range[0], m.rt_range[1]
-        );
-        self.show(m.frame, total, msg);
-    }
-
-    fn show(&self, frame: usize, total: usize, msg: String) {
+    /// Shows frame `row` of `total` (either kind of run).
+    fn frame(&self, row: &impl ProgressLine, total: usize) {
+        let (frame, msg) = (row.index(), row.line());
         match &self.bar {
             Some(bar) => {
                 bar.set_length(total as u64);

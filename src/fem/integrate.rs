@@ -487,15 +487,6 @@ impl Simulation {
         self.timings.assembly_s += start.elapsed().as_secs_f64();
     }
 
-    /// Moves every constrained direction onto its target.
-    pub fn apply_targets(&mut self) {
-        for ((x, f), t) in self.x.iter_mut().zip(&self.filters).zip(&self.targets) {
-            if *f != Filter::Free {
-                *x = t + f.apply(&(*x - t));
-            }
-        }
-    }
-
     /// Per node the stiffness of its rest diagonal block, `tr(K0_ii)/3`
     /// (N/mm): the force it takes to move the node alone by 1 mm.
     pub fn rest_node_stiffness(&self) -> Vec<f64> {

@@ -26,6 +26,7 @@ pub mod synth;
 mod vtkhdf;
 
 pub use micro::gpu_chain;
+pub use outputs::{RunKind, RunSummary};
 pub use render::{roughness_curve, texel_mm};
-pub use run::{run, Frame, RunSummary};
+pub use run::{run, FemRunSummary, Frame};
 pub use stepper::{simulate, Stepper};

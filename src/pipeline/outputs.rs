@@ -241,6 +241,33 @@ impl<'a, R: MetricsRow + Copy> FrameOutputs<'a, R> {
     }
 }
 
+/// Which kind of run a summary is of.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RunKind {
+    /// The FEM patch (`pipeline::run`).
+    Fem,
+    /// An animated surface (`pipeline::surface::run`).
+    Surface,
+}
+
+/// What a run produced, for either kind of run: `R` is its row type
+/// ([`crate::export::FrameMetrics`] or [`crate::export::SurfaceMetrics`]).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct RunSummary<R> {
+    /// The kind of run.
+    pub kind: RunKind,
+    /// Files written, in order (per-frame files are summarised by the
+    /// collection or their folder).
+    pub written: Vec<PathBuf>,
+    /// Quality of the mesh (the FEM run; `None` for a surface).
+    pub quality: Option<crate::mesh::QualityReport>,
+    /// Metrics of every frame.
+    pub frames: Vec<R>,
+    /// Where the microstructure stages ran (`None` without microstructure).
+    pub micro_device: Option<String>,
+}
+
 /// What the output stage wrote, for the run's summary.
 pub(super) struct Finished<R> {
     /// Files written before the frames, the collection, the per-frame

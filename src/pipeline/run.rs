@@ -5,9 +5,7 @@
 //! failing frame stops the run with an error naming it; everything written
 //! before stays.
 
-use std::path::PathBuf;
-
-use super::outputs::{FrameInput, FrameOutputs, MapPiece, OutputSpec};
+use super::outputs::{FrameInput, FrameOutputs, MapPiece, OutputSpec, RunKind, RunSummary};
 use super::{plan, stepper::simulate, texel_mm, vtkhdf};
 use crate::error::{Error, Result};
 use crate::export::{self, FrameMetrics};
@@ -15,18 +13,8 @@ use crate::mesh::{io, QualityReport, Vec3};
 use crate::scenario::Setup;
 use crate::strain::{ElementStrains, SurfaceField};
 
-/// What a run produced.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct RunSummary {
-    /// Files written, in order (frame files are summarised by the collection).
-    pub written: Vec<PathBuf>,
-    /// Quality of the mesh used.
-    pub quality: QualityReport,
-    /// Metrics of every frame.
-    pub frames: Vec<FrameMetrics>,
-    /// Where the microstructure stages ran (`None` without microstructure).
-    pub micro_device: Option<String>,
-}
+/// What a FEM run produced.
+pub type FemRunSummary = RunSummary<FrameMetrics>;
 
 /// One finished frame as [`run`]'s callback sees it: the metrics row and the
 /// frame's fields, borrowed for the duration of the call.
@@ -85,7 +73,7 @@ impl Frame<'_> {
 /// # Ok(())
 /// # }
 /// ```
-pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<RunSummary> {
+pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<FemRunSummary> {
     let dir = &setup.output_dir;
     let mesh = &setup.mesh;
     // Everything that can fail before the first frame is checked before
@@ -208,8 +196,9 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<RunSum
     written.extend(written_after);
     written.extend(finished.rendered);
     Ok(RunSummary {
+        kind: RunKind::Fem,
         written,
-        quality: QualityReport::of(mesh),
+        quality: Some(QualityReport::of(mesh)),
         frames: finished.rows,
         micro_device: finished.micro_device,
     })

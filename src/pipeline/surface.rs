@@ -10,10 +10,9 @@
 //! rendered frames. A failing frame stops the run with an error naming it;
 //! what was written stays.
 
-use std::path::PathBuf;
 use std::time::Instant;
 
-use super::outputs::{FrameInput, FrameOutputs, MapPiece, OutputSpec};
+use super::outputs::{FrameInput, FrameOutputs, MapPiece, OutputSpec, RunKind, RunSummary};
 use super::plan;
 use crate::error::Result;
 use crate::export;
@@ -24,15 +23,7 @@ use crate::strain::SurfaceField;
 use crate::surface::{AnimatedSurface, UvLayout};
 
 /// What a surface run produced.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct SurfaceRunSummary {
-    /// Files written, in order (per-frame files are summarised by folder).
-    pub written: Vec<PathBuf>,
-    /// Metrics of every frame.
-    pub frames: Vec<SurfaceMetrics>,
-    /// Where the microstructure stages ran (`None` without microstructure).
-    pub micro_device: Option<String>,
-}
+pub type SurfaceRunSummary = RunSummary<SurfaceMetrics>;
 
 /// One finished frame as [`run`]'s callback sees it.
 pub struct SurfaceFrame<'a> {
@@ -138,8 +129,10 @@ pub fn run(
     let mut all = finished.written;
     all.splice(0..0, written);
     all.extend(finished.rendered);
-    Ok(SurfaceRunSummary {
+    Ok(RunSummary {
+        kind: RunKind::Surface,
         written: all,
+        quality: None,
         frames: finished.rows,
         micro_device: finished.micro_device,
     })

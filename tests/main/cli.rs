@@ -1444,6 +1444,19 @@ fn surface_scenarios_run_from_the_command_line() {
         serde_json::from_slice(&std::fs::read(animated.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["run"]["frames"].as_array().unwrap().len(), 7);
     assert_eq!(summary["overrides"][0], "surface.frame_rate_hz=6.0");
+    // The same record as a FEM run's: the same fields at the top and in
+    // "run", with the kind of run named.
+    let fem_summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(fem.join("summary.json")).unwrap()).unwrap();
+    let keys = |v: &serde_json::Value| {
+        let mut k: Vec<String> = v.as_object().unwrap().keys().cloned().collect();
+        k.sort();
+        k
+    };
+    assert_eq!(keys(&summary), keys(&fem_summary));
+    assert_eq!(keys(&summary["run"]), keys(&fem_summary["run"]));
+    assert_eq!(summary["run"]["kind"], "surface");
+    assert_eq!(fem_summary["run"]["kind"], "fem");
     // The strain of the last frame is the FEM run's (same surface, exact OBJ).
     let metrics = std::fs::read_to_string(fem.join("metrics.csv")).unwrap();
     let header: Vec<&str> = metrics.lines().next().unwrap().split(',').collect();

@@ -106,7 +106,7 @@ pub fn write_tetgen_text(dir: &Path, name: &str, node: &str, ele: &str) -> PathB
 pub fn run_fixture(
     name: &str,
     edit: impl Fn(String) -> String,
-) -> (skinpatch::pipeline::RunSummary, tempfile::TempDir) {
+) -> (skinpatch::pipeline::FemRunSummary, tempfile::TempDir) {
     let fixture = root().join("tests/fixtures").join(name);
     let text = edit(std::fs::read_to_string(&fixture).unwrap());
     let scenario = skinpatch::scenario::Scenario::parse(&text, &fixture).unwrap();

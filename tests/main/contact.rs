@@ -137,7 +137,7 @@ fn deep_press_is_robust() {
 }
 
 /// Runs tests/fixtures/drag.toml with the given `[probe]` contact lines.
-fn drag(contact: &str) -> (skinpatch::pipeline::RunSummary, tempfile::TempDir) {
+fn drag(contact: &str) -> (skinpatch::pipeline::FemRunSummary, tempfile::TempDir) {
     common::run_fixture("drag.toml", |t| {
         t.replace("[time]", &format!("{contact}\n[time]"))
     })
