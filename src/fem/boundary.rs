@@ -25,21 +25,26 @@ use nalgebra::Vector3;
 use super::solve::Filter;
 use crate::mesh::{TetMesh, Vec3};
 
-/// Condition on the bottom face.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Condition on the bottom face (`boundary.bottom`: `fixed`, `rollers`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum BottomCondition {
+    #[default]
     /// All components fixed.
     Fixed,
     /// Vertical component fixed, sliding in x and y.
     Rollers,
 }
 
-/// Condition on the four side faces.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Condition on the four side faces (`boundary.sides`: `clamped`,
+/// `rollers`, `free`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum SideCondition {
     /// All components fixed.
     Clamped,
     /// Normal component fixed.
+    #[default]
     Rollers,
     /// Traction-free.
     Free,

@@ -39,8 +39,10 @@ use super::solve::{self, CgSettings, CgWorkspace, Coupling, Factor, Filter, Prec
 use crate::error::{Error, Result};
 use crate::mesh::{TetMesh, Vec3};
 
-/// Which linear solver Newton steps use.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Which linear solver Newton steps use (`solver.linear`: `cg`, `direct`,
+/// `factored-cg`, `two-level`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum LinearSolver {
     /// Block-Jacobi preconditioned conjugate gradients.
     Cg,
@@ -54,6 +56,7 @@ pub enum LinearSolver {
     /// correction on the rigid modes of node aggregates
     /// ([`super::coarse::Coarse`]), whose coarse matrix is rebuilt at the
     /// first Newton step of every solve.
+    #[default]
     TwoLevel,
 }
 

@@ -36,8 +36,8 @@ pub use micro::{
 };
 pub use render::{CameraSection, EnvironmentSection, LightSection, RenderSection};
 pub use simulation::{
-    BoundarySection, CaliperSection, MaterialSection, PrescribedSection, ProbeSection,
-    SimulationSetup, SolverSection, TimeSection,
+    BoundarySection, CaliperAxis, CaliperSection, ContactKind, Integrator, MaterialSection,
+    PrescribedSection, ProbeSection, ProbeShapeKind, SimulationSetup, SolverSection, TimeSection,
 };
 pub use surface::{SurfaceSection, SurfaceSetup};
 pub use synth::{GeneratedSection, SynthFile, SynthOutputSection, SynthSources, SynthesisSection};
@@ -117,9 +117,31 @@ pub struct OutputSection {
     pub surface_obj: bool,
     /// Float arrays and points of the VTU files: `f64` (default) or `f32`
     /// (7 significant digits, half the size before compression).
-    pub vtu_precision: String,
+    pub vtu_precision: VtuPrecision,
     /// Storage of the VTU arrays: `zlib` (default, lossless) or `none`.
-    pub vtu_compression: String,
+    pub vtu_compression: VtuCompression,
+}
+
+/// `output.vtu_precision`.
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum VtuPrecision {
+    /// Float64 arrays and points.
+    #[default]
+    F64,
+    /// Float32 (7 significant digits).
+    F32,
+}
+
+/// `output.vtu_compression`.
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum VtuCompression {
+    /// zlib blocks (lossless).
+    #[default]
+    Zlib,
+    /// Plain arrays.
+    None,
 }
 
 impl Default for OutputSection {
@@ -135,8 +157,8 @@ impl Default for OutputSection {
             strain_image_range: 0.25,
             surface_glb: false,
             surface_obj: false,
-            vtu_precision: "f64".into(),
-            vtu_compression: "zlib".into(),
+            vtu_precision: VtuPrecision::default(),
+            vtu_compression: VtuCompression::default(),
         }
     }
 }
@@ -190,28 +212,11 @@ pub struct StrainImageSettings {
 
 impl OutputSection {
     /// The VTU format of `vtu_precision` and `vtu_compression`.
-    fn vtu_format(&self) -> Result<crate::mesh::io::VtuFormat> {
-        let f32 = match self.vtu_precision.as_str() {
-            "f64" => false,
-            "f32" => true,
-            other => {
-                return Err(Error::parameter(
-                    "output.vtu_precision",
-                    format!("must be \"f64\" or \"f32\", got \"{other}\""),
-                ))
-            }
-        };
-        let compress = match self.vtu_compression.as_str() {
-            "zlib" => true,
-            "none" => false,
-            other => {
-                return Err(Error::parameter(
-                    "output.vtu_compression",
-                    format!("must be \"zlib\" or \"none\", got \"{other}\""),
-                ))
-            }
-        };
-        Ok(crate::mesh::io::VtuFormat { compress, f32 })
+    fn vtu_format(&self) -> crate::mesh::io::VtuFormat {
+        crate::mesh::io::VtuFormat {
+            compress: self.vtu_compression == VtuCompression::Zlib,
+            f32: self.vtu_precision == VtuPrecision::F32,
+        }
     }
 
     /// Whether to write `frames.vtkhdf`; an error when asked of a build
@@ -457,6 +462,18 @@ fn describe_schema_error(key: &str, e: &toml::de::Error, text: &str) -> String {
             expected.join(", ")
         );
     }
+    if let Some((value, expected)) = parse_unknown_variant(message) {
+        let hint = closest(&value, &expected)
+            .map(|s| format!("; did you mean {s}?"))
+            .unwrap_or_default();
+        let listed: Vec<String> = expected.iter().map(|e| format!("\"{e}\"")).collect();
+        let listed = match listed.split_last() {
+            Some((last, [])) => last.clone(),
+            Some((last, rest)) => format!("{} or {last}", rest.join(", ")),
+            None => String::new(),
+        };
+        return format!("{at}{key} must be {listed}, got \"{value}\"{hint}");
+    }
     if key.is_empty() || key == "." {
         format!("{at}{message}")
     } else {
@@ -476,6 +493,21 @@ fn parse_unknown_field(message: &str) -> Option<(String, Vec<String>)> {
         .map(str::to_string)
         .collect();
     Some((name.to_string(), expected))
+}
+
+/// Extracts the value and the expected names from serde's message
+/// "unknown variant `x`, expected one of `a`, `b`" (or "expected `a` or
+/// `b`"): an enum-like key given a value it does not know.
+fn parse_unknown_variant(message: &str) -> Option<(String, Vec<String>)> {
+    let rest = message.strip_prefix("unknown variant `")?;
+    let (value, rest) = rest.rsplit_once("`, expected")?;
+    let expected = rest
+        .split('`')
+        .skip(1)
+        .step_by(2)
+        .map(str::to_string)
+        .collect();
+    Some((value.to_string(), expected))
 }
 
 /// The candidate closest to `name` by edit distance, if close enough.
@@ -602,7 +634,7 @@ impl Setup {
             write_vtkhdf: scenario.output.vtkhdf()?,
             write_surface_glb: scenario.output.surface_glb,
             write_surface_obj: scenario.output.surface_obj,
-            vtu_format: scenario.output.vtu_format()?,
+            vtu_format: scenario.output.vtu_format(),
             strain_images,
             micro,
             simulation,
@@ -706,7 +738,7 @@ mod tests {
 
     #[test]
     fn vtu_options_are_checked() {
-        let format = |text: &str| parse(text).unwrap().output.vtu_format();
+        let format = |text: &str| parse(text).map(|s| s.output.vtu_format());
         assert_eq!(
             format("").unwrap(),
             crate::mesh::io::VtuFormat {

@@ -39,9 +39,9 @@ pub struct MaterialSection {
 #[serde(deny_unknown_fields, default)]
 pub struct BoundarySection {
     /// `fixed` (default) or `rollers`.
-    pub bottom: String,
+    pub bottom: BottomCondition,
     /// `clamped`, `rollers` (default) or `free`.
-    pub sides: String,
+    pub sides: SideCondition,
     /// Optional caliper on two opposite sides.
     pub caliper: Option<CaliperSection>,
     /// Prescribed displacements of named node sets.
@@ -51,8 +51,8 @@ pub struct BoundarySection {
 impl Default for BoundarySection {
     fn default() -> Self {
         BoundarySection {
-            bottom: "fixed".into(),
-            sides: "rollers".into(),
+            bottom: BottomCondition::default(),
+            sides: SideCondition::default(),
             caliper: None,
             prescribed: Vec::new(),
         }
@@ -64,10 +64,56 @@ impl Default for BoundarySection {
 #[serde(deny_unknown_fields)]
 pub struct CaliperSection {
     /// `x` or `y`.
-    pub axis: String,
+    pub axis: CaliperAxis,
     /// Rows `[time_s, stretch_ratio]`.
     #[serde(deserialize_with = "super::arrays::exact_rows")]
     pub stretch: Vec<[f64; 2]>,
+}
+
+/// The axis a caliper's jaws are normal to.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum CaliperAxis {
+    /// Jaws on the x_min and x_max sides.
+    X,
+    /// Jaws on the y_min and y_max sides.
+    Y,
+}
+
+/// `probe.shape`.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum ProbeShapeKind {
+    /// A sphere of `radius_mm`.
+    Sphere,
+    /// A capsule of `radius_mm` and `length_mm` along `axis`.
+    Capsule,
+    /// A flat cylindrical punch of `radius_mm`.
+    Punch,
+}
+
+/// `probe.contact`.
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum ContactKind {
+    /// No friction.
+    #[default]
+    Frictionless,
+    /// Coulomb friction with `probe.friction`.
+    Coulomb,
+    /// The skin sticks to the probe.
+    Bonded,
+}
+
+/// `time.integrator`.
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum Integrator {
+    /// Equilibrium at every step.
+    #[default]
+    QuasiStatic,
+    /// Backward-Euler dynamics, one step per substep.
+    ImplicitEuler,
 }
 
 /// `[[boundary.prescribed]]`: a node set moved by a displacement over time.
@@ -86,7 +132,7 @@ pub struct PrescribedSection {
 #[serde(deny_unknown_fields)]
 pub struct ProbeSection {
     /// `sphere`, `capsule` or `punch`.
-    pub shape: String,
+    pub shape: ProbeShapeKind,
     /// Radius (mm).
     pub radius_mm: f64,
     /// Capsule length between the end centres (mm).
@@ -99,7 +145,7 @@ pub struct ProbeSection {
     #[serde(default, deserialize_with = "super::arrays::exact_rows_opt")]
     pub axis: Option<Vec<[f64; 4]>>,
     /// `frictionless` (default), `coulomb` or `bonded`.
-    pub contact: Option<String>,
+    pub contact: Option<ContactKind>,
     /// Coulomb friction coefficient (with `contact = "coulomb"`).
     pub friction: Option<f64>,
 }
@@ -112,7 +158,7 @@ pub struct SolverSection {
     /// plus a coarse rigid-mode correction, default), `cg` (block-Jacobi
     /// PCG), `factored-cg` (PCG with a reused Cholesky factor) or
     /// `direct` (sparse Cholesky).
-    pub linear: String,
+    pub linear: LinearSolver,
     /// Relative residual at which a frame is in equilibrium. Default 1e-6.
     pub rel_tol: f64,
     /// Newton iterations per equilibrium solve. Default 50.
@@ -135,7 +181,7 @@ pub struct SolverSection {
 impl Default for SolverSection {
     fn default() -> Self {
         SolverSection {
-            linear: "two-level".into(),
+            linear: LinearSolver::default(),
             rel_tol: 1e-6,
             max_newton_iterations: 50,
             linear_rel_tol: 1e-4,
@@ -153,7 +199,7 @@ impl Default for SolverSection {
 pub struct TimeSection {
     /// `quasi-static` (default: equilibrium at every step) or
     /// `implicit-euler` (backward-Euler dynamics, one step per substep).
-    pub integrator: String,
+    pub integrator: Integrator,
     /// Rayleigh mass-proportional damping α (1/s). Default 0.
     pub damping_alpha_per_s: f64,
     /// Rayleigh stiffness-proportional damping β (s). Default 0.
@@ -170,7 +216,7 @@ pub struct TimeSection {
 impl Default for TimeSection {
     fn default() -> Self {
         TimeSection {
-            integrator: "quasi-static".into(),
+            integrator: Integrator::default(),
             damping_alpha_per_s: 0.0,
             damping_beta_s: 0.0,
             duration_s: 1.0,
@@ -284,39 +330,13 @@ pub fn materials(
 impl BoundarySection {
     /// Validates into boundary conditions on `mesh`'s node sets.
     pub fn conditions(&self, sets: &NodeSets) -> Result<BoundaryConditions> {
-        let bottom = match self.bottom.as_str() {
-            "fixed" => BottomCondition::Fixed,
-            "rollers" => BottomCondition::Rollers,
-            other => {
-                return Err(Error::parameter(
-                    "boundary.bottom",
-                    format!("must be \"fixed\" or \"rollers\", got \"{other}\""),
-                ))
-            }
-        };
-        let sides = match self.sides.as_str() {
-            "clamped" => SideCondition::Clamped,
-            "rollers" => SideCondition::Rollers,
-            "free" => SideCondition::Free,
-            other => {
-                return Err(Error::parameter(
-                    "boundary.sides",
-                    format!("must be \"clamped\", \"rollers\" or \"free\", got \"{other}\""),
-                ))
-            }
-        };
+        let (bottom, sides) = (self.bottom, self.sides);
         let caliper = match &self.caliper {
             None => None,
             Some(c) => {
-                let axis = match c.axis.as_str() {
-                    "x" => 0,
-                    "y" => 1,
-                    other => {
-                        return Err(Error::parameter(
-                            "boundary.caliper.axis",
-                            format!("must be \"x\" or \"y\", got \"{other}\""),
-                        ))
-                    }
+                let axis = match c.axis {
+                    CaliperAxis::X => 0,
+                    CaliperAxis::Y => 1,
                 };
                 let points = keyframes("boundary.caliper.stretch", &c.stretch)?;
                 for (i, (_, r)) in points.iter().enumerate() {
@@ -384,10 +404,10 @@ impl ProbeSection {
                 ));
             }
         }
-        let shape = match self.shape.as_str() {
-            "sphere" => ProbeShape::Sphere { radius_mm: radius },
-            "punch" => ProbeShape::Punch { radius_mm: radius },
-            "capsule" => {
+        let shape = match self.shape {
+            ProbeShapeKind::Sphere => ProbeShape::Sphere { radius_mm: radius },
+            ProbeShapeKind::Punch => ProbeShape::Punch { radius_mm: radius },
+            ProbeShapeKind::Capsule => {
                 let length = self.length_mm.ok_or_else(|| {
                     Error::parameter("probe.length_mm", "is required for shape = \"capsule\"")
                 })?;
@@ -396,12 +416,6 @@ impl ProbeSection {
                     length_mm: super::non_negative("probe.length_mm", length)?,
                 }
             }
-            other => {
-                return Err(Error::parameter(
-                    "probe.shape",
-                    format!("must be \"sphere\", \"capsule\" or \"punch\", got \"{other}\""),
-                ))
-            }
         };
         if self.length_mm.is_some() && !matches!(shape, ProbeShape::Capsule { .. }) {
             return Err(Error::parameter(
@@ -409,13 +423,10 @@ impl ProbeSection {
                 "applies to shape = \"capsule\" only",
             ));
         }
-        let mode = match (
-            self.contact.as_deref().unwrap_or("frictionless"),
-            self.friction,
-        ) {
-            ("frictionless", None) => ContactMode::Frictionless,
-            ("bonded", None) => ContactMode::Bonded,
-            ("coulomb", Some(mu)) => {
+        let mode = match (self.contact.unwrap_or_default(), self.friction) {
+            (ContactKind::Frictionless, None) => ContactMode::Frictionless,
+            (ContactKind::Bonded, None) => ContactMode::Bonded,
+            (ContactKind::Coulomb, Some(mu)) => {
                 if !(mu.is_finite() && mu >= 0.0) {
                     return Err(Error::parameter(
                         "probe.friction",
@@ -424,22 +435,16 @@ impl ProbeSection {
                 }
                 ContactMode::Coulomb(mu)
             }
-            ("coulomb", None) => {
+            (ContactKind::Coulomb, None) => {
                 return Err(Error::parameter(
                     "probe.friction",
                     "is required with contact = \"coulomb\"",
                 ))
             }
-            ("frictionless" | "bonded", Some(_)) => {
+            (ContactKind::Frictionless | ContactKind::Bonded, Some(_)) => {
                 return Err(Error::parameter(
                     "probe.friction",
                     "applies to contact = \"coulomb\" only",
-                ))
-            }
-            (other, _) => {
-                return Err(Error::parameter(
-                    "probe.contact",
-                    format!("must be \"frictionless\", \"coulomb\" or \"bonded\", got \"{other}\""),
                 ))
             }
         };
@@ -511,20 +516,7 @@ impl SolverSection {
                 Err(Error::parameter(key, "must be > 0, got 0"))
             }
         };
-        let linear = match self.linear.as_str() {
-            "direct" => LinearSolver::Direct,
-            "cg" => LinearSolver::Cg,
-            "factored-cg" => LinearSolver::FactoredCg,
-            "two-level" => LinearSolver::TwoLevel,
-            other => {
-                return Err(Error::parameter(
-                    "solver.linear",
-                    format!(
-                    "must be \"cg\", \"two-level\", \"factored-cg\" or \"direct\", got \"{other}\""
-                ),
-                ))
-            }
-        };
+        let linear = self.linear;
         Ok(NewtonSettings {
             linear,
             rel_tol: check_tol("solver.rel_tol", self.rel_tol)?,
@@ -540,8 +532,8 @@ impl SolverSection {
 impl TimeSection {
     /// The integrator: `None` for quasi-static, else backward-Euler settings.
     pub fn dynamics(&self, frame_dt: f64, substeps: usize) -> Result<Option<Dynamics>> {
-        match self.integrator.as_str() {
-            "quasi-static" => {
+        match self.integrator {
+            Integrator::QuasiStatic => {
                 for (key, v) in [
                     ("time.damping_alpha_per_s", self.damping_alpha_per_s),
                     ("time.damping_beta_s", self.damping_beta_s),
@@ -559,7 +551,7 @@ impl TimeSection {
                 }
                 Ok(None)
             }
-            "implicit-euler" => {
+            Integrator::ImplicitEuler => {
                 let a = super::non_negative("time.damping_alpha_per_s", self.damping_alpha_per_s)?;
                 let b = super::non_negative("time.damping_beta_s", self.damping_beta_s)?;
                 Ok(Some(Dynamics {
@@ -568,10 +560,6 @@ impl TimeSection {
                     beta: b,
                 }))
             }
-            other => Err(Error::parameter(
-                "time.integrator",
-                format!("must be \"quasi-static\" or \"implicit-euler\", got \"{other}\""),
-            )),
         }
     }
 

@@ -167,7 +167,7 @@ impl SurfaceSetup {
             output_dir,
             write_surface_vtu: scenario.output.mesh_vtu,
             write_frames: scenario.output.frames_vtu,
-            vtu_format: scenario.output.vtu_format()?,
+            vtu_format: scenario.output.vtu_format(),
             strain_images: scenario.output.strain_image_settings()?,
             micro,
             render,

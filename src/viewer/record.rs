@@ -35,7 +35,7 @@ pub fn recorded_scenario(
         ));
     }
     probe.path_mm = path.to_vec();
-    if probe.shape == "capsule" {
+    if probe.shape == crate::scenario::ProbeShapeKind::Capsule {
         probe.axis = Some(axis.to_vec());
     }
     if let Some(mu) = friction {
