@@ -35,7 +35,7 @@ pub struct MaterialSection {
 }
 
 /// `[boundary]`.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct BoundarySection {
     /// `fixed` (default) or `rollers`.
@@ -46,17 +46,6 @@ pub struct BoundarySection {
     pub caliper: Option<CaliperSection>,
     /// Prescribed displacements of named node sets.
     pub prescribed: Vec<PrescribedSection>,
-}
-
-impl Default for BoundarySection {
-    fn default() -> Self {
-        BoundarySection {
-            bottom: BottomCondition::default(),
-            sides: SideCondition::default(),
-            caliper: None,
-            prescribed: Vec::new(),
-        }
-    }
 }
 
 /// `[boundary.caliper]`: frictionless jaws on the sides normal to `axis`.
