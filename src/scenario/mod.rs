@@ -768,6 +768,44 @@ mod tests {
         }
     }
 
+    /// An enum-like key given a value it does not know: the line, the key,
+    /// every accepted value and the closest one, from the file and from
+    /// `--set` alike.
+    #[test]
+    fn unknown_values_name_the_key_the_values_and_the_closest() {
+        let err = parse("[solver]\nlinear = \"two-levl\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains(
+                "line 2: solver.linear must be \"cg\", \"direct\", \"factored-cg\" or \
+                 \"two-level\", got \"two-levl\"; did you mean two-level?"
+            ),
+            "{err}"
+        );
+        // Nothing close: no suggestion.
+        let err = parse("[time]\nintegrator = \"rk4\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains(
+                "time.integrator must be \"quasi-static\" or \"implicit-euler\", got \"rk4\""
+            ),
+            "{err}"
+        );
+        assert!(!err.contains("did you mean"), "{err}");
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("s.toml");
+        std::fs::write(&path, "[boundary]\nbottom = \"fixed\"\n").unwrap();
+        let err = Scenario::load_with(&path, &["boundary.sides=roller".into()])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("with --set: boundary.sides must be \"clamped\", \"rollers\" or \"free\", got \"roller\"; did you mean rollers?"),
+            "{err}"
+        );
+    }
+
     #[test]
     fn strain_image_options_are_checked() {
         let settings = |text: &str| parse(text).unwrap().output.strain_image_settings();
