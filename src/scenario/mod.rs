@@ -486,13 +486,7 @@ fn describe_schema_error(key: &str, e: &toml::de::Error, text: &str) -> String {
 fn parse_unknown_field(message: &str) -> Option<(String, Vec<String>)> {
     let rest = message.strip_prefix("unknown field `")?;
     let (name, rest) = rest.split_once('`')?;
-    let expected = rest
-        .split('`')
-        .skip(1)
-        .step_by(2)
-        .map(str::to_string)
-        .collect();
-    Some((name.to_string(), expected))
+    Some((name.to_string(), backticked(rest)))
 }
 
 /// Extracts the value and the expected names from serde's message
@@ -501,13 +495,16 @@ fn parse_unknown_field(message: &str) -> Option<(String, Vec<String>)> {
 fn parse_unknown_variant(message: &str) -> Option<(String, Vec<String>)> {
     let rest = message.strip_prefix("unknown variant `")?;
     let (value, rest) = rest.rsplit_once("`, expected")?;
-    let expected = rest
-        .split('`')
+    Some((value.to_string(), backticked(rest)))
+}
+
+/// The names between backticks in `text`, in order.
+fn backticked(text: &str) -> Vec<String> {
+    text.split('`')
         .skip(1)
         .step_by(2)
         .map(str::to_string)
-        .collect();
-    Some((value.to_string(), expected))
+        .collect()
 }
 
 /// The candidate closest to `name` by edit distance, if close enough.
