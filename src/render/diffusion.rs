@@ -6,7 +6,7 @@
 use bytemuck::{Pod, Zeroable};
 
 use super::profile::{pass_sizes, tap_weights, variance_steps};
-use super::stage::{sampler_entry, texture_entry, uniform_entry};
+use super::stage::{sampler_entry, texture_entry, uniform_entry, view};
 use crate::gpu::{buffers, dispatch, Context};
 
 /// The shader source.
@@ -112,7 +112,6 @@ impl DiffusionStage {
             | wgpu::TextureUsages::TEXTURE_BINDING
             | wgpu::TextureUsages::COPY_SRC;
         let make = |label, side| buffers::texture(ctx, label, (side, side), FORMAT, usage);
-        let view = |t: &wgpu::Texture| t.create_view(&wgpu::TextureViewDescriptor::default());
         let outputs: Vec<wgpu::Texture> = sizes
             .iter()
             .map(|&side| make("blurred irradiance", side))
@@ -216,7 +215,6 @@ pub fn diffuse_on_gpu(
         )
     };
     let (irr, st) = (upload("irradiance", irradiance), upload("stretch", stretch));
-    let view = |t: &wgpu::Texture| t.create_view(&wgpu::TextureViewDescriptor::default());
     let stage = DiffusionStage::new(ctx, &view(&irr), &view(&st), sizes);
     let mut enc = crate::gpu::encoder(ctx);
     stage.encode(&mut enc);

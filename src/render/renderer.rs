@@ -15,10 +15,10 @@ use super::moments::{MomentPyramidGpu, MomentStage};
 use super::overlay::OverlayKind;
 use super::resolve::ResolveStage;
 use super::scene::FrameGeometry;
-use super::shadow::{ShadowInfo, ShadowStage};
+use super::shadow::{ShadowInfo, ShadowMaps};
 use super::skin::{FrameBuffers, SkinStage, HDR_FORMAT};
 use super::specular::EnergyTable;
-use super::stage::{linear_sampler, texture_entry, uniform_entry, DEPTH_FORMAT};
+use super::stage::{linear_sampler, texture_entry, uniform_entry, view, DEPTH_FORMAT};
 use super::{Image, MicroFilter, Mode, RenderSetup, Roughness};
 use crate::error::Result;
 use crate::gpu::{bind_group, buffers, encoder, Context};
@@ -135,21 +135,13 @@ fn moment_sampler(ctx: &Context, filtering: bool) -> wgpu::Sampler {
     })
 }
 
-fn view(texture: &wgpu::Texture) -> wgpu::TextureView {
-    texture.create_view(&wgpu::TextureViewDescriptor::default())
-}
-
 /// The resident renderer.
 pub struct Renderer {
     setup: RenderSetup,
     table: EnergyTable,
     curve: [f32; 16],
     globals: wgpu::Buffer,
-    shadow: ShadowStage,
-    shadow_infos: Vec<wgpu::Buffer>,
-    shadow_binds: Vec<wgpu::BindGroup>,
-    shadow_layers: Vec<wgpu::TextureView>,
-    shadow_depth: wgpu::TextureView,
+    shadows: ShadowMaps,
     lighting: wgpu::BindGroup,
     irradiance: IrradianceStage,
     irradiance_views: [wgpu::TextureView; 4],
@@ -209,114 +201,9 @@ impl Renderer {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-
-        // Shadow maps: one array layer per light (at least one).
-        let layers = setup.lights.len().max(1);
-        let s = setup.shadow_map_px;
-        let shadow_maps = ctx.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("shadow maps"),
-            size: wgpu::Extent3d {
-                width: s as u32,
-                height: s as u32,
-                depth_or_array_layers: layers as u32,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: super::shadow::FORMAT,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-            view_formats: &[],
-        });
-        let shadow_layers = (0..layers as u32)
-            .map(|k| {
-                shadow_maps.create_view(&wgpu::TextureViewDescriptor {
-                    dimension: Some(wgpu::TextureViewDimension::D2),
-                    base_array_layer: k,
-                    array_layer_count: Some(1),
-                    ..Default::default()
-                })
-            })
-            .collect();
-        let shadow_array = shadow_maps.create_view(&wgpu::TextureViewDescriptor {
-            dimension: Some(wgpu::TextureViewDimension::D2Array),
-            ..Default::default()
-        });
-        let shadow_depth = view(&buffers::texture(
-            ctx,
-            "shadow depth",
-            (s, s),
-            DEPTH_FORMAT,
-            wgpu::TextureUsages::RENDER_ATTACHMENT,
-        ));
-        let shadow = ShadowStage::new(ctx);
-        let shadow_infos: Vec<wgpu::Buffer> = (0..layers)
-            .map(|_| buffers::uniform(ctx, "shadow info", &ShadowInfo::default()))
-            .collect();
-        let shadow_binds = shadow_infos
-            .iter()
-            .map(|b| bind_group(ctx, &shadow.layout, &[b.as_entire_binding()]))
-            .collect();
-
-        // Group 0: scene uniforms and lighting lookups.
-        let lighting_layout =
-            ctx.device
-                .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                    label: Some("lighting"),
-                    entries: &[
-                        uniform_entry(0),
-                        texture_entry(1, false, false),
-                        texture_entry(2, true, false),
-                        super::stage::sampler_entry(3),
-                        texture_entry(4, false, true),
-                        wgpu::BindGroupLayoutEntry {
-                            binding: 5,
-                            visibility: wgpu::ShaderStages::FRAGMENT,
-                            ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::NonFiltering),
-                            count: None,
-                        },
-                    ],
-                });
-        let energy = buffers::upload_texture(
-            ctx,
-            "energy table",
-            (table.mu_samples, table.m_samples),
-            wgpu::TextureFormat::R32Float,
-            4,
-            bytemuck::cast_slice(&table.values),
-        );
-        let albedo_bytes: Vec<u8> = albedo
-            .texels
-            .iter()
-            .flat_map(|t| {
-                let c = |x: f32| (linear_to_srgb(x) * 255.0).round() as u8;
-                [c(t[0]), c(t[1]), c(t[2]), 255]
-            })
-            .collect();
-        let albedo_tex = buffers::upload_texture(
-            ctx,
-            "albedo",
-            (albedo.width, albedo.height),
-            wgpu::TextureFormat::Rgba8UnormSrgb,
-            4,
-            &albedo_bytes,
-        );
-        let sampler = linear_sampler(ctx);
-        let nearest = ctx.device.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("nearest clamp"),
-            ..Default::default()
-        });
-        let lighting = bind_group(
-            ctx,
-            &lighting_layout,
-            &[
-                globals.as_entire_binding(),
-                wgpu::BindingResource::TextureView(&view(&energy)),
-                wgpu::BindingResource::TextureView(&view(&albedo_tex)),
-                wgpu::BindingResource::Sampler(&sampler),
-                wgpu::BindingResource::TextureView(&shadow_array),
-                wgpu::BindingResource::Sampler(&nearest),
-            ],
-        );
+        let shadows = ShadowMaps::new(ctx, setup);
+        let (lighting_layout, lighting) =
+            lighting_group(ctx, &globals, &table, albedo, &shadows.array);
 
         // Texture-space targets and the diffusion chain.
         let target_usage =
@@ -337,151 +224,32 @@ impl Renderer {
             &irradiance_views[1],
             super::profile::level_sizes(tex, texel_mm),
         );
-
-        // Group 1 of the skin pass.
-        let mut diffused_entries: Vec<wgpu::BindGroupLayoutEntry> =
-            (0..7).map(|k| texture_entry(k, true, false)).collect();
-        diffused_entries.push(texture_entry(7, false, false));
-        diffused_entries.push(texture_entry(8, true, false));
-        // The slope moments' pyramids (A and B) of the same normals, and
-        // their sampler: trilinear and wrapping where the adapter filters
-        // f32 textures, else unused (the shader filters by loads).
-        let filter_moments = ctx.features.contains(wgpu::Features::FLOAT32_FILTERABLE);
-        diffused_entries.push(texture_entry(9, filter_moments, false));
-        diffused_entries.push(texture_entry(10, filter_moments, false));
-        diffused_entries.push(wgpu::BindGroupLayoutEntry {
-            binding: 11,
-            visibility: wgpu::ShaderStages::FRAGMENT,
-            ty: wgpu::BindingType::Sampler(if filter_moments {
-                wgpu::SamplerBindingType::Filtering
-            } else {
-                wgpu::SamplerBindingType::NonFiltering
-            }),
-            count: None,
-        });
-        let moment_sampler = moment_sampler(ctx, filter_moments);
-        let diffused_layout =
-            ctx.device
-                .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                    label: Some("diffused light"),
-                    entries: &diffused_entries,
-                });
-        let flat = [[0.0f32, 0.0, 1.0]];
-        let neutral = neutral.unwrap_or(NormalMap {
-            normals: &flat,
-            width: 1,
-            height: 1,
-        });
-        let neutral_rgba: Vec<[f32; 4]> = neutral
-            .normals
-            .iter()
-            .map(|n| [n[0], n[1], n[2], 0.0])
-            .collect();
-        let neutral_tex = buffers::upload_texture(
-            ctx,
-            "neutral normals",
-            (neutral.width, neutral.height),
-            wgpu::TextureFormat::Rgba32Float,
-            16,
-            bytemuck::cast_slice(&neutral_rgba),
-        );
-        let neutral_view = view(&neutral_tex);
-        let dynamic_view = dynamic.map(view);
-        // Slope moments: the neutral map's once, the dynamic map's each
-        // time its normals change (`submit`).
         let moment_stage = MomentStage::new(ctx);
-        let neutral_moments =
-            moment_stage.pyramid(ctx, &neutral_tex, (neutral.width, neutral.height));
-        let dynamic_moments = dynamic.map(|texture| {
-            let size = (texture.width() as usize, texture.height() as usize);
-            moment_stage.pyramid(ctx, texture, size)
-        });
-        let mut enc = encoder(ctx);
-        moment_stage.encode(&mut enc, &neutral_moments);
-        ctx.queue.submit([enc.finish()]);
-        let moment_views = |p: &MomentPyramidGpu| [view(&p.a), view(&p.b)];
-        let neutral_moment_views = moment_views(&neutral_moments);
-        let dynamic_moment_views = dynamic_moments.as_ref().map(moment_views);
-        let diffused = [
-            (&neutral_view, &neutral_moment_views),
-            (
-                dynamic_view.as_ref().unwrap_or(&neutral_view),
-                dynamic_moment_views
-                    .as_ref()
-                    .unwrap_or(&neutral_moment_views),
-            ),
-        ]
-        .map(|(normals, moments)| {
-            let mut resources: Vec<wgpu::BindingResource<'_>> = diffusion
-                .outputs()
-                .iter()
-                .map(wgpu::BindingResource::TextureView)
-                .collect();
-            resources.push(wgpu::BindingResource::TextureView(&irradiance_views[2]));
-            resources.push(wgpu::BindingResource::TextureView(normals));
-            resources.push(wgpu::BindingResource::TextureView(&irradiance_views[3]));
-            resources.push(wgpu::BindingResource::TextureView(&moments[0]));
-            resources.push(wgpu::BindingResource::TextureView(&moments[1]));
-            resources.push(wgpu::BindingResource::Sampler(&moment_sampler));
-            bind_group(ctx, &diffused_layout, &resources)
-        });
-
-        // The camera pass: shaded once a pixel of `f × size`; with MSAA its
-        // samples are averaged into `hdr` at the end of the pass.
-        let camera_usage =
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
-        let samples = setup.msaa;
-        let camera_target = |label, format, usage, samples| {
-            view(&ctx.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some(label),
-                size: wgpu::Extent3d {
-                    width: (w * f) as u32,
-                    height: (h * f) as u32,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: samples,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage,
-                view_formats: &[],
-            }))
-        };
-        let hdr = camera_target("hdr", HDR_FORMAT, camera_usage, 1);
-        let multisampled = (samples > 1).then(|| {
-            camera_target(
-                "hdr samples",
-                HDR_FORMAT,
-                wgpu::TextureUsages::RENDER_ATTACHMENT,
-                samples,
-            )
-        });
-        let depth = camera_target(
-            "depth",
-            DEPTH_FORMAT,
-            wgpu::TextureUsages::RENDER_ATTACHMENT,
-            samples,
+        let normals = DiffusedGroups::new(
+            ctx,
+            &diffusion,
+            &irradiance_views,
+            &moment_stage,
+            neutral,
+            dynamic,
         );
+        let (hdr, multisampled, depth) = camera_targets(ctx, setup);
         let resolve = ResolveStage::new(ctx, &hdr, w, h, f);
         let renderer = Renderer {
             setup: setup.clone(),
             table,
             curve,
             globals,
-            shadow,
-            shadow_infos,
-            shadow_binds,
-            shadow_layers,
-            shadow_depth,
             lighting,
+            shadows,
             irradiance: IrradianceStage::new(ctx, &lighting_layout),
             irradiance_views,
             diffusion,
-            skin: SkinStage::new(ctx, [&lighting_layout, &diffused_layout], samples),
-            diffused,
+            skin: SkinStage::new(ctx, [&lighting_layout, &normals.layout], setup.msaa),
+            diffused: normals.groups,
             moment_stage,
-            dynamic_moments,
-            filter_moments,
+            dynamic_moments: normals.dynamic_moments,
+            filter_moments: normals.filter_moments,
             hdr,
             multisampled,
             depth,
@@ -595,7 +363,7 @@ impl Renderer {
         ctx.queue
             .write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
         // The shadow passes use the lights exactly as the shading sees them.
-        for (light, info) in globals.lights.iter().zip(&self.shadow_infos) {
+        for (light, info) in globals.lights.iter().zip(&self.shadows.infos) {
             let value = ShadowInfo {
                 view_proj: light.view_proj,
                 where_: light.where_,
@@ -613,16 +381,17 @@ impl Renderer {
                     (&self.probe.buffer, self.probe.count),
                 ];
                 for (k, layer) in self
-                    .shadow_layers
+                    .shadows
+                    .layers
                     .iter()
                     .enumerate()
                     .take(self.setup.lights.len())
                 {
-                    self.shadow.encode(
+                    self.shadows.stage.encode(
                         enc,
-                        &self.shadow_binds[k],
+                        &self.shadows.binds[k],
                         layer,
-                        &self.shadow_depth,
+                        &self.shadows.depth,
                         &casters,
                     );
                 }
@@ -680,6 +449,246 @@ impl Renderer {
             pixels,
         })
     }
+}
+
+/// Group 0 of the texture-space and skin passes: the scene uniforms, the
+/// specular energy table, the albedo and the shadow maps, with their
+/// samplers.
+fn lighting_group(
+    ctx: &Context,
+    globals: &wgpu::Buffer,
+    table: &EnergyTable,
+    albedo: &Albedo,
+    shadow_array: &wgpu::TextureView,
+) -> (wgpu::BindGroupLayout, wgpu::BindGroup) {
+    let layout = ctx
+        .device
+        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("lighting"),
+            entries: &[
+                uniform_entry(0),
+                texture_entry(1, false, false),
+                texture_entry(2, true, false),
+                super::stage::sampler_entry(3),
+                texture_entry(4, false, true),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 5,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::NonFiltering),
+                    count: None,
+                },
+            ],
+        });
+    let energy = buffers::upload_texture(
+        ctx,
+        "energy table",
+        (table.mu_samples, table.m_samples),
+        wgpu::TextureFormat::R32Float,
+        4,
+        bytemuck::cast_slice(&table.values),
+    );
+    let albedo_bytes: Vec<u8> = albedo
+        .texels
+        .iter()
+        .flat_map(|t| {
+            let c = |x: f32| (linear_to_srgb(x) * 255.0).round() as u8;
+            [c(t[0]), c(t[1]), c(t[2]), 255]
+        })
+        .collect();
+    let albedo_tex = buffers::upload_texture(
+        ctx,
+        "albedo",
+        (albedo.width, albedo.height),
+        wgpu::TextureFormat::Rgba8UnormSrgb,
+        4,
+        &albedo_bytes,
+    );
+    let sampler = linear_sampler(ctx);
+    let nearest = ctx.device.create_sampler(&wgpu::SamplerDescriptor {
+        label: Some("nearest clamp"),
+        ..Default::default()
+    });
+    let group = bind_group(
+        ctx,
+        &layout,
+        &[
+            globals.as_entire_binding(),
+            wgpu::BindingResource::TextureView(&view(&energy)),
+            wgpu::BindingResource::TextureView(&view(&albedo_tex)),
+            wgpu::BindingResource::Sampler(&sampler),
+            wgpu::BindingResource::TextureView(shadow_array),
+            wgpu::BindingResource::Sampler(&nearest),
+        ],
+    );
+    (layout, group)
+}
+
+/// Group 1 of the skin pass: the diffused irradiance levels, the
+/// transmitted light and shadow factors, and one set of normals with their
+/// slope-moment pyramids — the neutral normals (group 0) and the dynamic
+/// ones (group 1; the neutral again without a dynamic texture).
+struct DiffusedGroups {
+    layout: wgpu::BindGroupLayout,
+    groups: [wgpu::BindGroup; 2],
+    /// The dynamic normals' slope moments (rebuilt per dynamic frame).
+    dynamic_moments: Option<MomentPyramidGpu>,
+    /// Whether the moments are sampled with filtering (f32 filterable).
+    filter_moments: bool,
+}
+
+impl DiffusedGroups {
+    fn new(
+        ctx: &Context,
+        diffusion: &DiffusionStage,
+        irradiance_views: &[wgpu::TextureView; 4],
+        moment_stage: &MomentStage,
+        neutral: Option<NormalMap<'_>>,
+        dynamic: Option<&wgpu::Texture>,
+    ) -> DiffusedGroups {
+        let mut entries: Vec<wgpu::BindGroupLayoutEntry> =
+            (0..7).map(|k| texture_entry(k, true, false)).collect();
+        entries.push(texture_entry(7, false, false));
+        entries.push(texture_entry(8, true, false));
+        // The slope moments' pyramids (A and B) of the same normals, and
+        // their sampler: trilinear and wrapping where the adapter filters
+        // f32 textures, else unused (the shader filters by loads).
+        let filter_moments = ctx.features.contains(wgpu::Features::FLOAT32_FILTERABLE);
+        entries.push(texture_entry(9, filter_moments, false));
+        entries.push(texture_entry(10, filter_moments, false));
+        entries.push(wgpu::BindGroupLayoutEntry {
+            binding: 11,
+            visibility: wgpu::ShaderStages::FRAGMENT,
+            ty: wgpu::BindingType::Sampler(if filter_moments {
+                wgpu::SamplerBindingType::Filtering
+            } else {
+                wgpu::SamplerBindingType::NonFiltering
+            }),
+            count: None,
+        });
+        let moment_sampler = moment_sampler(ctx, filter_moments);
+        let layout = ctx
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("diffused light"),
+                entries: &entries,
+            });
+        let flat = [[0.0f32, 0.0, 1.0]];
+        let neutral = neutral.unwrap_or(NormalMap {
+            normals: &flat,
+            width: 1,
+            height: 1,
+        });
+        let neutral_rgba: Vec<[f32; 4]> = neutral
+            .normals
+            .iter()
+            .map(|n| [n[0], n[1], n[2], 0.0])
+            .collect();
+        let neutral_tex = buffers::upload_texture(
+            ctx,
+            "neutral normals",
+            (neutral.width, neutral.height),
+            wgpu::TextureFormat::Rgba32Float,
+            16,
+            bytemuck::cast_slice(&neutral_rgba),
+        );
+        let neutral_view = view(&neutral_tex);
+        let dynamic_view = dynamic.map(view);
+        // Slope moments: the neutral map's once, the dynamic map's each
+        // time its normals change (`submit`).
+        let neutral_moments =
+            moment_stage.pyramid(ctx, &neutral_tex, (neutral.width, neutral.height));
+        let dynamic_moments = dynamic.map(|texture| {
+            let size = (texture.width() as usize, texture.height() as usize);
+            moment_stage.pyramid(ctx, texture, size)
+        });
+        let mut enc = encoder(ctx);
+        moment_stage.encode(&mut enc, &neutral_moments);
+        ctx.queue.submit([enc.finish()]);
+        let moment_views = |p: &MomentPyramidGpu| [view(&p.a), view(&p.b)];
+        let neutral_moment_views = moment_views(&neutral_moments);
+        let dynamic_moment_views = dynamic_moments.as_ref().map(moment_views);
+        let groups = [
+            (&neutral_view, &neutral_moment_views),
+            (
+                dynamic_view.as_ref().unwrap_or(&neutral_view),
+                dynamic_moment_views
+                    .as_ref()
+                    .unwrap_or(&neutral_moment_views),
+            ),
+        ]
+        .map(|(normals, moments)| {
+            let mut resources: Vec<wgpu::BindingResource<'_>> = diffusion
+                .outputs()
+                .iter()
+                .map(wgpu::BindingResource::TextureView)
+                .collect();
+            resources.push(wgpu::BindingResource::TextureView(&irradiance_views[2]));
+            resources.push(wgpu::BindingResource::TextureView(normals));
+            resources.push(wgpu::BindingResource::TextureView(&irradiance_views[3]));
+            resources.push(wgpu::BindingResource::TextureView(&moments[0]));
+            resources.push(wgpu::BindingResource::TextureView(&moments[1]));
+            resources.push(wgpu::BindingResource::Sampler(&moment_sampler));
+            bind_group(ctx, &layout, &resources)
+        });
+        DiffusedGroups {
+            layout,
+            groups,
+            dynamic_moments,
+            filter_moments,
+        }
+    }
+}
+
+/// The camera pass's targets, shaded once a pixel of `supersample × size`:
+/// the HDR image, with MSAA its multisampled twin (averaged into the HDR
+/// image at the end of the pass), and the depth buffer.
+fn camera_targets(
+    ctx: &Context,
+    setup: &RenderSetup,
+) -> (
+    wgpu::TextureView,
+    Option<wgpu::TextureView>,
+    wgpu::TextureView,
+) {
+    let f = setup.supersample;
+    let samples = setup.msaa;
+    let target = |label, format, usage, samples| {
+        view(&ctx.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size: wgpu::Extent3d {
+                width: (setup.width * f) as u32,
+                height: (setup.height * f) as u32,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: samples,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage,
+            view_formats: &[],
+        }))
+    };
+    let hdr = target(
+        "hdr",
+        HDR_FORMAT,
+        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+        1,
+    );
+    let multisampled = (samples > 1).then(|| {
+        target(
+            "hdr samples",
+            HDR_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+            samples,
+        )
+    });
+    let depth = target(
+        "depth",
+        DEPTH_FORMAT,
+        wgpu::TextureUsages::RENDER_ATTACHMENT,
+        samples,
+    );
+    (hdr, multisampled, depth)
 }
 
 /// Bounding sphere of a frame's geometry.

@@ -4,8 +4,9 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::stage::{mesh_layout, render_pipeline, PipelineSpec};
-use crate::gpu::Context;
+use super::stage::{mesh_layout, render_pipeline, view, PipelineSpec, DEPTH_FORMAT};
+use super::RenderSetup;
+use crate::gpu::{bind_group, buffers, Context};
 
 /// The shader source.
 pub const SHADER: &str = include_str!("../../shaders/shadow.wgsl");
@@ -97,6 +98,77 @@ impl ShadowStage {
                 pass.set_vertex_buffer(0, buffer.slice(..));
                 pass.draw(0..*count, 0..1);
             }
+        }
+    }
+}
+
+/// The shadow pass's resources: one depth-map layer per light (at least
+/// one), each with its own uniform and bind group.
+pub struct ShadowMaps {
+    pub(crate) stage: ShadowStage,
+    pub(crate) infos: Vec<wgpu::Buffer>,
+    pub(crate) binds: Vec<wgpu::BindGroup>,
+    /// One view per layer (the render targets).
+    pub(crate) layers: Vec<wgpu::TextureView>,
+    pub(crate) depth: wgpu::TextureView,
+    /// All layers as one array (what the lighting samples).
+    pub(crate) array: wgpu::TextureView,
+}
+
+impl ShadowMaps {
+    pub fn new(ctx: &Context, setup: &RenderSetup) -> ShadowMaps {
+        let layers = setup.lights.len().max(1);
+        let s = setup.shadow_map_px;
+        let maps = ctx.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("shadow maps"),
+            size: wgpu::Extent3d {
+                width: s as u32,
+                height: s as u32,
+                depth_or_array_layers: layers as u32,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: FORMAT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        });
+        let layer_views = (0..layers as u32)
+            .map(|k| {
+                maps.create_view(&wgpu::TextureViewDescriptor {
+                    dimension: Some(wgpu::TextureViewDimension::D2),
+                    base_array_layer: k,
+                    array_layer_count: Some(1),
+                    ..Default::default()
+                })
+            })
+            .collect();
+        let array = maps.create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
+        let depth = view(&buffers::texture(
+            ctx,
+            "shadow depth",
+            (s, s),
+            DEPTH_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+        ));
+        let stage = ShadowStage::new(ctx);
+        let infos: Vec<wgpu::Buffer> = (0..layers)
+            .map(|_| buffers::uniform(ctx, "shadow info", &ShadowInfo::default()))
+            .collect();
+        let binds = infos
+            .iter()
+            .map(|b| bind_group(ctx, &stage.layout, &[b.as_entire_binding()]))
+            .collect();
+        ShadowMaps {
+            stage,
+            infos,
+            binds,
+            layers: layer_views,
+            depth,
+            array,
         }
     }
 }
