@@ -48,191 +48,21 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<AnimatedSurface> {
     };
     let node = pick_node(doc, options.node.as_deref()).map_err(&bad)?;
     let mesh = node.mesh().expect("picked nodes have a mesh");
-    let mesh_name = name_of(mesh.name(), "mesh", mesh.index());
     let skin = node.skin();
     let mut split = SplitSurface {
         origin: path.display().to_string(),
         ..SplitSurface::default()
     };
-    // Mesh-space positions, per target displacements, per vertex joints.
-    let mut raw: Vec<Vec3> = Vec::new();
-    let mut targets: Vec<Vec<Vec3>> = Vec::new();
-    let mut influences: Vec<[(usize, f64); 4]> = Vec::new();
-    let mut target_count = None;
-    for prim in mesh.primitives() {
-        let p = prim.index();
-        if prim.mode() != Mode::Triangles {
-            return Err(bad(format!(
-                "{mesh_name} primitive {p} is drawn as {:?}, not triangles",
-                prim.mode()
-            )));
-        }
-        let reader = prim.reader(|b| buffers.get(b.index()).map(|d| d.as_slice()));
-        let positions: Vec<[f32; 3]> = reader
-            .read_positions()
-            .ok_or_else(|| bad(format!("{mesh_name} primitive {p} has no POSITION")))?
-            .collect();
-        let n = positions.len();
-        let uvs: Vec<[f32; 2]> = reader
-            .read_tex_coords(0)
-            .ok_or_else(|| {
-                bad(format!(
-                    "{mesh_name} primitive {p} has no TEXCOORD_0 (UVs); unwrap the mesh \
-                     before exporting it"
-                ))
-            })?
-            .into_f32()
-            .collect();
-        if uvs.len() != n {
-            return Err(bad(format!(
-                "{mesh_name} primitive {p} has {} UVs for {n} positions",
-                uvs.len()
-            )));
-        }
-        let indices: Vec<u32> = match reader.read_indices() {
-            Some(i) => i.into_u32().collect(),
-            None => (0..n as u32).collect(),
-        };
-        if !indices.len().is_multiple_of(3) {
-            return Err(bad(format!(
-                "{mesh_name} primitive {p} has {} indices, not a multiple of 3",
-                indices.len()
-            )));
-        }
-        if let Some(&i) = indices.iter().find(|&&i| i as usize >= n) {
-            return Err(bad(format!(
-                "{mesh_name} primitive {p} has index {i}, but {n} vertices"
-            )));
-        }
-        let prim_targets: Vec<Vec<Vec3>> = reader
-            .read_morph_targets()
-            .map(|(pos, _, _)| match pos {
-                Some(d) => d
-                    .map(|d| Vec3::new(d[0] as f64, d[1] as f64, d[2] as f64))
-                    .collect(),
-                None => vec![Vec3::zeros(); n],
-            })
-            .collect();
-        match target_count {
-            None => {
-                target_count = Some(prim_targets.len());
-                targets = vec![Vec::new(); prim_targets.len()];
-            }
-            Some(count) if count != prim_targets.len() => {
-                return Err(bad(format!(
-                    "morph target count mismatch: {mesh_name} primitive {p} has {} morph \
-                     targets, primitive 0 has {count}",
-                    prim_targets.len()
-                )));
-            }
-            Some(_) => {}
-        }
-        if let Some((t, d)) = prim_targets.iter().enumerate().find(|(_, d)| d.len() != n) {
-            return Err(bad(format!(
-                "{mesh_name} primitive {p} morph target {t} has {} displacements for {n} vertices",
-                d.len()
-            )));
-        }
-        if let Some(skin) = &skin {
-            let joints: Vec<[u16; 4]> = reader
-                .read_joints(0)
-                .ok_or_else(|| {
-                    bad(format!(
-                        "{mesh_name} primitive {p} is skinned but has no JOINTS_0"
-                    ))
-                })?
-                .into_u16()
-                .collect();
-            let weights: Vec<[f32; 4]> = reader
-                .read_weights(0)
-                .ok_or_else(|| {
-                    bad(format!(
-                        "{mesh_name} primitive {p} is skinned but has no WEIGHTS_0"
-                    ))
-                })?
-                .into_f32()
-                .collect();
-            let count = skin.joints().count();
-            if joints.len() != n || weights.len() != n {
-                return Err(bad(format!(
-                    "{mesh_name} primitive {p} has {} JOINTS_0 and {} WEIGHTS_0 for {n} vertices",
-                    joints.len(),
-                    weights.len()
-                )));
-            }
-            for (i, (j, w)) in joints.iter().zip(&weights).enumerate() {
-                let total: f64 = w.iter().map(|&x| x as f64).sum();
-                let used = j.iter().zip(w).filter(|(_, &w)| w != 0.0);
-                if let Some((&j, _)) = used.clone().find(|(&j, _)| j as usize >= count) {
-                    return Err(bad(format!(
-                        "{mesh_name} primitive {p} vertex {i} uses joint {j}, but the skin has {count}"
-                    )));
-                }
-                if !(total > 0.0 && total.is_finite() && w.iter().all(|&x| x >= 0.0)) {
-                    return Err(bad(format!(
-                        "{mesh_name} primitive {p} vertex {i} has skin weights {w:?}"
-                    )));
-                }
-                influences.push(std::array::from_fn(|k| {
-                    (j[k] as usize, w[k] as f64 / total)
-                }));
-            }
-        }
-        let base = raw.len();
-        for (t, d) in prim_targets.into_iter().enumerate() {
-            targets[t].extend(d);
-        }
-        for (i, (pos, uv)) in positions.iter().zip(&uvs).enumerate() {
-            raw.push(Vec3::new(pos[0] as f64, pos[1] as f64, pos[2] as f64));
-            split.uvs.push([uv[0] as f64, 1.0 - uv[1] as f64]);
-            split
-                .labels
-                .push(format!("{mesh_name} primitive {p} vertex {i}"));
-        }
-        split.triangles.extend(
-            indices
-                .chunks_exact(3)
-                .map(|c| [0, 1, 2].map(|k| base + c[k] as usize)),
-        );
-    }
-    let n_targets = target_count.unwrap_or(0);
-    let defaults: Vec<f64> = node
-        .weights()
-        .or(mesh.weights())
-        .map(|w| w.iter().map(|&x| x as f64).collect())
-        .unwrap_or_else(|| vec![0.0; n_targets]);
-    if defaults.len() != n_targets {
-        return Err(bad(format!(
-            "morph target count mismatch: {mesh_name} has {} default morph weights for \
-             {n_targets} morph targets",
-            defaults.len()
-        )));
-    }
-    // Skinning: joint j's matrix is world(joint) · inverse bind matrix.
-    let (joints, inverse_bind): (Vec<usize>, Vec<Matrix4<f64>>) = match &skin {
-        Some(skin) => {
-            let joints: Vec<usize> = skin.joints().map(|j| j.index()).collect();
-            let ibm: Vec<Matrix4<f64>> = match skin
-                .reader(|b| buffers.get(b.index()).map(|d| d.as_slice()))
-                .read_inverse_bind_matrices()
-            {
-                Some(m) => m.map(|m| Matrix4::from_fn(|r, c| m[c][r] as f64)).collect(),
-                None => vec![Matrix4::identity(); joints.len()],
-            };
-            if ibm.len() != joints.len() {
-                return Err(bad(format!(
-                    "the skin has {} inverse bind matrices for {} joints",
-                    ibm.len(),
-                    joints.len()
-                )));
-            }
-            (joints, ibm)
-        }
-        None => (Vec::new(), Vec::new()),
+    let raw = RawMesh::read(&mesh, skin.as_ref(), &buffers, &mut split).map_err(&bad)?;
+    let defaults = default_weights(&node, &mesh, raw.targets.len()).map_err(&bad)?;
+    let binding = match &skin {
+        Some(skin) => Some(SkinBinding::read(skin, &buffers).map_err(&bad)?),
+        None => None,
     };
-    let mut movers = joints.clone();
+    let mut movers = binding.as_ref().map_or(Vec::new(), |b| b.joints.clone());
     movers.push(node.index());
     let moving = clip::with_ancestors(doc, &movers);
+    let n_targets = raw.targets.len();
     let clip = choose_clip(doc, &buffers, &node, n_targets, &moving, options).map_err(&bad)?;
     let rate = options.frame_rate_hz;
     // Keyframe times are f32: a sample within this of a key takes the key.
@@ -242,41 +72,7 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<AnimatedSurface> {
     let pose = |t: Option<f64>, weights: &[f64]| -> Vec<Vec3> {
         let local = |n: &::gltf::Node<'_>| clip.as_ref().unwrap_or(&still).local(n, t, tol);
         let world = clip::world_matrices(doc, &roots, &local);
-        let morphed = |v: usize| {
-            let mut p = raw[v];
-            for (k, &w) in weights.iter().enumerate() {
-                if w != 0.0 {
-                    p += targets[k][v] * w;
-                }
-            }
-            p.push(1.0)
-        };
-        if skin.is_some() {
-            let matrices: Vec<Matrix4<f64>> = joints
-                .iter()
-                .zip(&inverse_bind)
-                .map(|(&j, ibm)| world[j] * ibm)
-                .collect();
-            (0..raw.len())
-                .map(|v| {
-                    let p = morphed(v);
-                    let q: Vector4<f64> = influences[v]
-                        .iter()
-                        .filter(|(_, w)| *w != 0.0)
-                        .map(|&(j, w)| matrices[j] * p * w)
-                        .sum();
-                    Vec3::new(q.x, q.y, q.z)
-                })
-                .collect()
-        } else {
-            let m = world[node.index()];
-            (0..raw.len())
-                .map(|v| {
-                    let q = m * morphed(v);
-                    Vec3::new(q.x, q.y, q.z)
-                })
-                .collect()
-        }
+        raw.pose(&world, node.index(), binding.as_ref(), weights)
     };
     // Rest: the scene's own pose without morph targets.
     split.rest = pose(None, &vec![0.0; n_targets]);
@@ -313,6 +109,271 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<AnimatedSurface> {
     };
     let mm = options.mm_per_unit.unwrap_or(1000.0);
     AnimatedSurface::from_split(split, mm, options.frame_rate_hz)
+}
+
+/// The picked mesh in mesh space, gathered over its primitives (whose UVs,
+/// triangles and vertex labels go straight into the [`SplitSurface`]).
+struct RawMesh {
+    positions: Vec<Vec3>,
+    /// Per morph target, one displacement per vertex.
+    targets: Vec<Vec<Vec3>>,
+    /// Per vertex, (joint, normalised weight) pairs (skinned meshes only).
+    influences: Vec<[(usize, f64); 4]>,
+}
+
+impl RawMesh {
+    fn read(
+        mesh: &::gltf::Mesh<'_>,
+        skin: Option<&::gltf::Skin<'_>>,
+        buffers: &[Vec<u8>],
+        split: &mut SplitSurface,
+    ) -> std::result::Result<RawMesh, String> {
+        let mesh_name = name_of(mesh.name(), "mesh", mesh.index());
+        let mut raw = RawMesh {
+            positions: Vec::new(),
+            targets: Vec::new(),
+            influences: Vec::new(),
+        };
+        for (k, prim) in mesh.primitives().enumerate() {
+            let label = format!("{mesh_name} primitive {}", prim.index());
+            if prim.mode() != Mode::Triangles {
+                return Err(format!(
+                    "{label} is drawn as {:?}, not triangles",
+                    prim.mode()
+                ));
+            }
+            let reader = prim.reader(|b| buffers.get(b.index()).map(|d| d.as_slice()));
+            let positions: Vec<[f32; 3]> = reader
+                .read_positions()
+                .ok_or_else(|| format!("{label} has no POSITION"))?
+                .collect();
+            let n = positions.len();
+            let uvs: Vec<[f32; 2]> = reader
+                .read_tex_coords(0)
+                .ok_or_else(|| {
+                    format!("{label} has no TEXCOORD_0 (UVs); unwrap the mesh before exporting it")
+                })?
+                .into_f32()
+                .collect();
+            if uvs.len() != n {
+                return Err(format!("{label} has {} UVs for {n} positions", uvs.len()));
+            }
+            let indices: Vec<u32> = match reader.read_indices() {
+                Some(i) => i.into_u32().collect(),
+                None => (0..n as u32).collect(),
+            };
+            if !indices.len().is_multiple_of(3) {
+                return Err(format!(
+                    "{label} has {} indices, not a multiple of 3",
+                    indices.len()
+                ));
+            }
+            if let Some(&i) = indices.iter().find(|&&i| i as usize >= n) {
+                return Err(format!("{label} has index {i}, but {n} vertices"));
+            }
+            let prim_targets: Vec<Vec<Vec3>> = reader
+                .read_morph_targets()
+                .map(|(pos, _, _)| match pos {
+                    Some(d) => d
+                        .map(|d| Vec3::new(d[0] as f64, d[1] as f64, d[2] as f64))
+                        .collect(),
+                    None => vec![Vec3::zeros(); n],
+                })
+                .collect();
+            if k == 0 {
+                raw.targets = vec![Vec::new(); prim_targets.len()];
+            } else if raw.targets.len() != prim_targets.len() {
+                return Err(format!(
+                    "morph target count mismatch: {label} has {} morph targets, primitive 0 \
+                     has {}",
+                    prim_targets.len(),
+                    raw.targets.len()
+                ));
+            }
+            if let Some((t, d)) = prim_targets.iter().enumerate().find(|(_, d)| d.len() != n) {
+                return Err(format!(
+                    "{label} morph target {t} has {} displacements for {n} vertices",
+                    d.len()
+                ));
+            }
+            if let Some(skin) = skin {
+                raw.influences
+                    .extend(read_influences(&reader, skin, n, &label)?);
+            }
+            let base = raw.positions.len();
+            for (t, d) in prim_targets.into_iter().enumerate() {
+                raw.targets[t].extend(d);
+            }
+            for (i, (pos, uv)) in positions.iter().zip(&uvs).enumerate() {
+                raw.positions
+                    .push(Vec3::new(pos[0] as f64, pos[1] as f64, pos[2] as f64));
+                split.uvs.push([uv[0] as f64, 1.0 - uv[1] as f64]);
+                split.labels.push(format!("{label} vertex {i}"));
+            }
+            split.triangles.extend(
+                indices
+                    .chunks_exact(3)
+                    .map(|c| [0, 1, 2].map(|k| base + c[k] as usize)),
+            );
+        }
+        Ok(raw)
+    }
+
+    /// The vertices morphed by `weights` and placed by the nodes' world
+    /// matrices `world`: linear blend skinning with `binding`, else the
+    /// transform of node `node`.
+    fn pose(
+        &self,
+        world: &[Matrix4<f64>],
+        node: usize,
+        binding: Option<&SkinBinding>,
+        weights: &[f64],
+    ) -> Vec<Vec3> {
+        let morphed = |v: usize| {
+            let mut p = self.positions[v];
+            for (k, &w) in weights.iter().enumerate() {
+                if w != 0.0 {
+                    p += self.targets[k][v] * w;
+                }
+            }
+            p.push(1.0)
+        };
+        match binding {
+            Some(binding) => {
+                let matrices: Vec<Matrix4<f64>> = binding
+                    .joints
+                    .iter()
+                    .zip(&binding.inverse_bind)
+                    .map(|(&j, ibm)| world[j] * ibm)
+                    .collect();
+                (0..self.positions.len())
+                    .map(|v| {
+                        let p = morphed(v);
+                        let q: Vector4<f64> = self.influences[v]
+                            .iter()
+                            .filter(|(_, w)| *w != 0.0)
+                            .map(|&(j, w)| matrices[j] * p * w)
+                            .sum();
+                        Vec3::new(q.x, q.y, q.z)
+                    })
+                    .collect()
+            }
+            None => {
+                let m = world[node];
+                (0..self.positions.len())
+                    .map(|v| {
+                        let q = m * morphed(v);
+                        Vec3::new(q.x, q.y, q.z)
+                    })
+                    .collect()
+            }
+        }
+    }
+}
+
+/// A skinned primitive's `JOINTS_0`/`WEIGHTS_0`, checked against the skin's
+/// joint count, with each vertex's weights normalised to sum to one.
+fn read_influences<'a, 's, F>(
+    reader: &::gltf::mesh::Reader<'a, 's, F>,
+    skin: &::gltf::Skin<'_>,
+    n: usize,
+    label: &str,
+) -> std::result::Result<Vec<[(usize, f64); 4]>, String>
+where
+    F: Clone + Fn(::gltf::Buffer<'a>) -> Option<&'s [u8]>,
+{
+    let joints: Vec<[u16; 4]> = reader
+        .read_joints(0)
+        .ok_or_else(|| format!("{label} is skinned but has no JOINTS_0"))?
+        .into_u16()
+        .collect();
+    let weights: Vec<[f32; 4]> = reader
+        .read_weights(0)
+        .ok_or_else(|| format!("{label} is skinned but has no WEIGHTS_0"))?
+        .into_f32()
+        .collect();
+    let count = skin.joints().count();
+    if joints.len() != n || weights.len() != n {
+        return Err(format!(
+            "{label} has {} JOINTS_0 and {} WEIGHTS_0 for {n} vertices",
+            joints.len(),
+            weights.len()
+        ));
+    }
+    let mut influences = Vec::with_capacity(n);
+    for (i, (j, w)) in joints.iter().zip(&weights).enumerate() {
+        let total: f64 = w.iter().map(|&x| x as f64).sum();
+        let used = j.iter().zip(w).filter(|(_, &w)| w != 0.0);
+        if let Some((&j, _)) = used.clone().find(|(&j, _)| j as usize >= count) {
+            return Err(format!(
+                "{label} vertex {i} uses joint {j}, but the skin has {count}"
+            ));
+        }
+        if !(total > 0.0 && total.is_finite() && w.iter().all(|&x| x >= 0.0)) {
+            return Err(format!("{label} vertex {i} has skin weights {w:?}"));
+        }
+        influences.push(std::array::from_fn(|k| {
+            (j[k] as usize, w[k] as f64 / total)
+        }));
+    }
+    Ok(influences)
+}
+
+/// The morph weights without animation: the node's, else the mesh's, else
+/// zeros; one per morph target.
+fn default_weights(
+    node: &::gltf::Node<'_>,
+    mesh: &::gltf::Mesh<'_>,
+    n_targets: usize,
+) -> std::result::Result<Vec<f64>, String> {
+    let defaults: Vec<f64> = node
+        .weights()
+        .or(mesh.weights())
+        .map(|w| w.iter().map(|&x| x as f64).collect())
+        .unwrap_or_else(|| vec![0.0; n_targets]);
+    if defaults.len() != n_targets {
+        return Err(format!(
+            "morph target count mismatch: {} has {} default morph weights for {n_targets} \
+             morph targets",
+            name_of(mesh.name(), "mesh", mesh.index()),
+            defaults.len()
+        ));
+    }
+    Ok(defaults)
+}
+
+/// A skin's joints (node indices) and inverse bind matrices: joint j moves
+/// its vertices by world(joint) · inverse bind matrix.
+struct SkinBinding {
+    joints: Vec<usize>,
+    inverse_bind: Vec<Matrix4<f64>>,
+}
+
+impl SkinBinding {
+    fn read(
+        skin: &::gltf::Skin<'_>,
+        buffers: &[Vec<u8>],
+    ) -> std::result::Result<SkinBinding, String> {
+        let joints: Vec<usize> = skin.joints().map(|j| j.index()).collect();
+        let inverse_bind: Vec<Matrix4<f64>> = match skin
+            .reader(|b| buffers.get(b.index()).map(|d| d.as_slice()))
+            .read_inverse_bind_matrices()
+        {
+            Some(m) => m.map(|m| Matrix4::from_fn(|r, c| m[c][r] as f64)).collect(),
+            None => vec![Matrix4::identity(); joints.len()],
+        };
+        if inverse_bind.len() != joints.len() {
+            return Err(format!(
+                "the skin has {} inverse bind matrices for {} joints",
+                inverse_bind.len(),
+                joints.len()
+            ));
+        }
+        Ok(SkinBinding {
+            joints,
+            inverse_bind,
+        })
+    }
 }
 
 fn name_of(name: Option<&str>, kind: &str, index: usize) -> String {
