@@ -591,48 +591,19 @@ pub fn write_glb_animation(
     let (lo, hi) = surface.bounds();
     let centre = ((lo + hi) * 0.5).map(|c| ((c / 1000.0) as f32) as f64 * 1000.0);
     let metres = |p: &Vec3| [p.x, p.y, p.z].map(|c| (c / 1000.0) as f32);
-    let mut bin: Vec<u8> = Vec::new();
-    let mut views = Vec::new();
-    let mut accessors = Vec::new();
-    // Appends a float accessor (with min/max, which POSITION requires).
-    let mut push = |data: &[f32], kind: &str, components: usize, bounds: bool| -> usize {
-        let offset = bin.len();
-        bin.extend(data.iter().flat_map(|x| x.to_le_bytes()));
-        views.push(serde_json::json!({
-            "buffer": 0, "byteOffset": offset, "byteLength": data.len() * 4
-        }));
-        let mut acc = serde_json::json!({
-            "bufferView": views.len() - 1, "componentType": 5126,
-            "count": data.len() / components, "type": kind
-        });
-        if bounds {
-            let (lo, hi): (Vec<f32>, Vec<f32>) = (0..components)
-                .map(|c| {
-                    let col = data.iter().skip(c).step_by(components);
-                    (
-                        col.clone().copied().fold(f32::INFINITY, f32::min),
-                        col.copied().fold(f32::NEG_INFINITY, f32::max),
-                    )
-                })
-                .unzip();
-            acc["min"] = serde_json::json!(lo);
-            acc["max"] = serde_json::json!(hi);
-        }
-        accessors.push(acc);
-        accessors.len() - 1
-    };
+    let mut glb = GlbBuffers::default();
     let rest: Vec<f32> = top
         .vertices
         .iter()
         .flat_map(|&v| metres(&(surface.positions[v] - centre)))
         .collect();
-    let position = push(&rest, "VEC3", 3, true);
+    let position = glb.floats(&rest, "VEC3", 3, true);
     let uvs: Vec<f32> = top
         .uvs
         .iter()
         .flat_map(|w| [w[0] as f32, (1.0 - w[1]) as f32])
         .collect();
-    let texcoord = push(&uvs, "VEC2", 2, false);
+    let texcoord = glb.floats(&uvs, "VEC2", 2, false);
     let mut targets = Vec::new();
     for displacement in &animation.targets {
         let delta: Vec<f32> = top
@@ -640,33 +611,19 @@ pub fn write_glb_animation(
             .iter()
             .flat_map(|&v| metres(&displacement[v]))
             .collect();
-        targets.push(serde_json::json!({ "POSITION": push(&delta, "VEC3", 3, true) }));
+        targets.push(serde_json::json!({ "POSITION": glb.floats(&delta, "VEC3", 3, true) }));
     }
     let n_targets = animation.targets.len();
     let times: Vec<f32> = animation.times_s.iter().map(|&t| t as f32).collect();
-    let input = push(&times, "SCALAR", 1, true);
+    let input = glb.floats(&times, "SCALAR", 1, true);
     let weights: Vec<f32> = animation
         .weights
         .iter()
         .flat_map(|w| w.iter().map(|&x| x as f32))
         .collect();
-    let output = push(&weights, "SCALAR", 1, false);
-    // Indices (u32), after the floats so every view stays 4-byte aligned.
-    let offset = bin.len();
-    bin.extend(
-        top.triangles
-            .iter()
-            .flatten()
-            .flat_map(|&i| (i as u32).to_le_bytes()),
-    );
-    views.push(serde_json::json!({
-        "buffer": 0, "byteOffset": offset, "byteLength": top.triangles.len() * 12
-    }));
-    accessors.push(serde_json::json!({
-        "bufferView": views.len() - 1, "componentType": 5125,
-        "count": top.triangles.len() * 3, "type": "SCALAR"
-    }));
-    let indices = accessors.len() - 1;
+    let output = glb.floats(&weights, "SCALAR", 1, false);
+    // Indices after the floats, so every view stays 4-byte aligned.
+    let indices = glb.indices(&top.triangles);
     let name = Path::new(&surface.origin)
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
@@ -695,11 +652,77 @@ pub fn write_glb_animation(
             }],
             "channels": [{ "sampler": 0, "target": { "node": 0, "path": "weights" } }]
         }],
-        "buffers": [{ "byteLength": bin.len() }],
-        "bufferViews": views,
-        "accessors": accessors
+        "buffers": [{ "byteLength": glb.bin.len() }],
+        "bufferViews": glb.views,
+        "accessors": glb.accessors
     });
-    let mut text = serde_json::to_vec(&json).map_err(|e| Error::malformed(path, e.to_string()))?;
+    let text = serde_json::to_vec(&json).map_err(|e| Error::malformed(path, e.to_string()))?;
+    crate::mesh::io::write_atomically(path, &glb_container(text, glb.bin))
+}
+
+/// The binary chunk of a GLB file with its buffer views and accessors.
+#[derive(Default)]
+struct GlbBuffers {
+    bin: Vec<u8>,
+    views: Vec<serde_json::Value>,
+    accessors: Vec<serde_json::Value>,
+}
+
+impl GlbBuffers {
+    /// Appends `data` as a float accessor of `components` per element
+    /// (`kind`: "SCALAR", "VEC2", "VEC3"), with per-component min/max when
+    /// `bounds` (POSITION requires them); returns the accessor's index.
+    fn floats(&mut self, data: &[f32], kind: &str, components: usize, bounds: bool) -> usize {
+        let offset = self.bin.len();
+        self.bin.extend(data.iter().flat_map(|x| x.to_le_bytes()));
+        self.views.push(serde_json::json!({
+            "buffer": 0, "byteOffset": offset, "byteLength": data.len() * 4
+        }));
+        let mut acc = serde_json::json!({
+            "bufferView": self.views.len() - 1, "componentType": 5126,
+            "count": data.len() / components, "type": kind
+        });
+        if bounds {
+            let (lo, hi): (Vec<f32>, Vec<f32>) = (0..components)
+                .map(|c| {
+                    let col = data.iter().skip(c).step_by(components);
+                    (
+                        col.clone().copied().fold(f32::INFINITY, f32::min),
+                        col.copied().fold(f32::NEG_INFINITY, f32::max),
+                    )
+                })
+                .unzip();
+            acc["min"] = serde_json::json!(lo);
+            acc["max"] = serde_json::json!(hi);
+        }
+        self.accessors.push(acc);
+        self.accessors.len() - 1
+    }
+
+    /// Appends the triangles' vertex indices as a u32 accessor; returns its
+    /// index.
+    fn indices(&mut self, triangles: &[[usize; 3]]) -> usize {
+        let offset = self.bin.len();
+        self.bin.extend(
+            triangles
+                .iter()
+                .flatten()
+                .flat_map(|&i| (i as u32).to_le_bytes()),
+        );
+        self.views.push(serde_json::json!({
+            "buffer": 0, "byteOffset": offset, "byteLength": triangles.len() * 12
+        }));
+        self.accessors.push(serde_json::json!({
+            "bufferView": self.views.len() - 1, "componentType": 5125,
+            "count": triangles.len() * 3, "type": "SCALAR"
+        }));
+        self.accessors.len() - 1
+    }
+}
+
+/// A GLB file: the 12-byte header, the JSON chunk (padded with spaces) and
+/// the binary chunk (padded with zeros), each 4-byte aligned.
+fn glb_container(mut text: Vec<u8>, mut bin: Vec<u8>) -> Vec<u8> {
     while !text.len().is_multiple_of(4) {
         text.push(b' ');
     }
@@ -717,5 +740,5 @@ pub fn write_glb_animation(
     out.extend((bin.len() as u32).to_le_bytes());
     out.extend(b"BIN\0");
     out.extend(bin);
-    crate::mesh::io::write_atomically(path, &out)
+    out
 }
