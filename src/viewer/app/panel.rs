@@ -3,7 +3,7 @@
 
 use super::{App, PANEL_POINTS};
 use crate::viewer::keys::{self, KeyAction};
-use crate::viewer::state::{Command, Overlay, ProbeDrive, ViewMode};
+use crate::viewer::state::{Command, Overlay, ProbeControl, ProbeDrive, ViewMode};
 
 /// What the panel asked for in one frame.
 #[derive(Default)]
@@ -57,79 +57,90 @@ impl App {
             legend(ui, s.overlay, s.overlay_range);
         }
         ui.separator();
-        // Probe.
         if let Some(p) = &s.probe {
-            ui.label("Probe");
-            let status = self.worker.as_ref().map(|w| w.status()).unwrap_or_default();
-            if let Some(solved) = &self.shown {
-                let f = solved.metrics.probe_force_n;
-                ui.label(format!(
-                    "force {:.4} N (z {:.4}), contact {:.3} mm², frame {}",
-                    (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt(),
-                    f[2],
-                    solved.metrics.contact_area_mm2,
-                    solved.metrics.frame
-                ));
-            }
-            if let Some(failure) = &status.failure {
-                ui.colored_label(
-                    egui::Color32::from_rgb(230, 80, 60),
-                    format!("last solve failed, showing the last good state: {failure}"),
-                );
-            }
-            let mut depth = p.depth_mm;
-            if ui
-                .add(egui::Slider::new(&mut depth, 0.0..=p.max_depth_mm).text("depth mm"))
-                .changed()
-            {
-                out.commands.push(Command::Depth(depth));
-            }
-            ui.horizontal(|ui| {
-                if p.pressed {
-                    if ui.button("lift").clicked() {
-                        out.commands.push(Command::Release);
-                    }
-                } else if ui.button("press here").clicked() {
-                    out.commands.push(Command::Press(p.at_mm));
-                }
-                let mut tool = self.probe_tool;
-                if ui.checkbox(&mut tool, "mouse drives probe").changed() {
-                    out.toggle_probe_tool = true;
-                }
-            });
-            ui.horizontal(|ui| match p.drive {
-                ProbeDrive::Live => {
-                    if ui.button("play path").clicked() {
-                        out.commands.push(Command::Play(0.0));
-                    }
-                }
-                ProbeDrive::Path {
-                    t_s,
-                    playing,
-                    looping,
-                } => {
-                    if ui.button(if playing { "pause" } else { "play" }).clicked() {
-                        out.commands.push(Command::Pause(playing));
-                    }
-                    let mut l = looping;
-                    if ui.checkbox(&mut l, "loop").changed() {
-                        out.commands.push(Command::Loop(l));
-                    }
-                    if ui.button("live").clicked() {
-                        out.commands.push(Command::Live);
-                    }
-                    let mut t = t_s;
-                    if ui
-                        .add(egui::Slider::new(&mut t, 0.0..=p.path_duration()).text("s"))
-                        .changed()
-                    {
-                        out.commands.push(Command::Scrub(t));
-                    }
-                }
-            });
-            ui.separator();
+            self.probe_section(ui, p, out);
         }
-        // Lights.
+        self.light_and_material_section(ui, out);
+        ui.separator();
+        self.status_section(ui, out);
+    }
+
+    /// The probe: force and contact, depth, press/lift, path playback.
+    fn probe_section(&self, ui: &mut egui::Ui, p: &ProbeControl, out: &mut PanelOutput) {
+        ui.label("Probe");
+        let status = self.worker.as_ref().map(|w| w.status()).unwrap_or_default();
+        if let Some(solved) = &self.shown {
+            let f = solved.metrics.probe_force_n;
+            ui.label(format!(
+                "force {:.4} N (z {:.4}), contact {:.3} mm², frame {}",
+                (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt(),
+                f[2],
+                solved.metrics.contact_area_mm2,
+                solved.metrics.frame
+            ));
+        }
+        if let Some(failure) = &status.failure {
+            ui.colored_label(
+                egui::Color32::from_rgb(230, 80, 60),
+                format!("last solve failed, showing the last good state: {failure}"),
+            );
+        }
+        let mut depth = p.depth_mm;
+        if ui
+            .add(egui::Slider::new(&mut depth, 0.0..=p.max_depth_mm).text("depth mm"))
+            .changed()
+        {
+            out.commands.push(Command::Depth(depth));
+        }
+        ui.horizontal(|ui| {
+            if p.pressed {
+                if ui.button("lift").clicked() {
+                    out.commands.push(Command::Release);
+                }
+            } else if ui.button("press here").clicked() {
+                out.commands.push(Command::Press(p.at_mm));
+            }
+            let mut tool = self.probe_tool;
+            if ui.checkbox(&mut tool, "mouse drives probe").changed() {
+                out.toggle_probe_tool = true;
+            }
+        });
+        ui.horizontal(|ui| match p.drive {
+            ProbeDrive::Live => {
+                if ui.button("play path").clicked() {
+                    out.commands.push(Command::Play(0.0));
+                }
+            }
+            ProbeDrive::Path {
+                t_s,
+                playing,
+                looping,
+            } => {
+                if ui.button(if playing { "pause" } else { "play" }).clicked() {
+                    out.commands.push(Command::Pause(playing));
+                }
+                let mut l = looping;
+                if ui.checkbox(&mut l, "loop").changed() {
+                    out.commands.push(Command::Loop(l));
+                }
+                if ui.button("live").clicked() {
+                    out.commands.push(Command::Live);
+                }
+                let mut t = t_s;
+                if ui
+                    .add(egui::Slider::new(&mut t, 0.0..=p.path_duration()).text("s"))
+                    .changed()
+                {
+                    out.commands.push(Command::Scrub(t));
+                }
+            }
+        });
+        ui.separator();
+    }
+
+    /// The key light, the lights' intensity, materials and friction.
+    fn light_and_material_section(&self, ui: &mut egui::Ui, out: &mut PanelOutput) {
+        let s = &self.state;
         ui.label("Light");
         if let Some((az, el)) = s.key_light {
             let (mut a, mut e) = (az, el);
@@ -187,8 +198,11 @@ impl App {
                 out.commands.push(Command::Friction(m));
             }
         }
-        ui.separator();
-        // Rates.
+    }
+
+    /// Rates, recording and screenshots, messages and the key reference.
+    fn status_section(&self, ui: &mut egui::Ui, out: &mut PanelOutput) {
+        let s = &self.state;
         let status = self.worker.as_ref().map(|w| w.status()).unwrap_or_default();
         ui.label(format!("display {:.1} frames/s", self.rates.display_fps));
         ui.label(format!(
