@@ -9,6 +9,9 @@ use std::path::PathBuf;
 use clap::Args;
 use skinpatch::error::{Error, Result};
 use skinpatch::mesh::io;
+use skinpatch::micro::fit::HistogramSettings;
+use skinpatch::micro::{DisplacementMap, NormalHistogram};
+use skinpatch::scenario::{FitSample, FitSamples};
 
 use super::print_stdout;
 
@@ -157,34 +160,18 @@ fn fit_on_gpu(ctx: &skinpatch::gpu::Context) -> bool {
     ctx.info.device_type != wgpu::DeviceType::Cpu || skinpatch::gpu::gpu_required()
 }
 
-/// Runs a `skinpatch fit` samples file (see [`skinpatch::scenario::FitSamples`]).
-/// `progress(sample, samples, fraction)` follows each sample's search.
+/// Reads the samples file at `path`, fits its map samples (`progress`
+/// gets the sample, the count and the fraction of its search done), fits
+/// the kernel model to all points and writes it where the file says.
 pub fn fit(
     path: &std::path::Path,
     mut progress: impl FnMut(usize, usize, f64),
 ) -> Result<FitReport> {
-    use skinpatch::micro::fit::{fit_model, Axis, FittedPoint, HistogramSettings, Objective};
+    use skinpatch::micro::fit::{fit_model, FittedPoint};
     use skinpatch::micro::io::{read_map, MapDefaults, TexelSize};
-    use skinpatch::micro::NormalHistogram;
-    let samples: skinpatch::scenario::FitSamples = skinpatch::scenario::read_toml_file(path)?;
+    let samples: FitSamples = skinpatch::scenario::read_toml_file(path)?;
     let base = path.parent().unwrap_or(std::path::Path::new("."));
-    let bins = samples
-        .bins
-        .unwrap_or(skinpatch::micro::normals::HISTOGRAM_BINS);
-    if !(2..=1024).contains(&bins) {
-        return Err(Error::parameter(
-            "bins",
-            format!("must be in 2..=1024, got {bins}"),
-        ));
-    }
-    if let Some(range) = samples.range {
-        if !(range.is_finite() && range > 0.0 && range <= 1.0) {
-            return Err(Error::parameter(
-                "range",
-                format!("must be in (0, 1] (a normal's tangent component), got {range}"),
-            ));
-        }
-    }
+    let bins = checked_bins(&samples)?;
     let defaults = MapDefaults {
         texel: TexelSize::Um(samples.texel_um.unwrap_or(1.0)),
         height_unit_um: 1.0,
@@ -205,98 +192,16 @@ pub fn fit(
         });
         let total = samples.sample.len();
         for (k, s) in samples.sample.iter().enumerate() {
-            let axis = match s.axis.as_str() {
-                "u" => Axis::U,
-                "v" => Axis::V,
-                other => {
-                    return Err(Error::parameter(
-                        format!("sample[{k}].axis"),
-                        format!("must be \"u\" or \"v\", got \"{other}\""),
-                    ))
-                }
-            };
             if !(s.r.is_finite() && s.r >= 0.1 && s.r <= 10.0) {
                 return Err(Error::parameter(
                     format!("sample[{k}].r"),
                     format!("must be in [0.1, 10], got {}", s.r),
                 ));
             }
-            let (target, range, source) = match (&s.map, &s.histogram) {
-                (Some(map), None) => {
-                    let deformed = read_map(&base.join(map), &defaults)?;
-                    let range = samples.range.unwrap_or_else(|| {
-                        skinpatch::micro::fit::auto_range(&[
-                            &skinpatch::micro::fit::resample(&neutral, axis, s.r),
-                            &deformed,
-                        ])
-                    });
-                    let h = NormalHistogram::of(&deformed, bins, range, [1.0, 1.0]);
-                    (h, range, map.display().to_string())
-                }
-                (None, Some(file)) => {
-                    let range = samples.range.ok_or_else(|| {
-                        Error::parameter(
-                            format!("sample[{k}].histogram"),
-                            "needs `range` in the samples file: the half range its cells cover",
-                        )
-                    })?;
-                    let hist = HistogramSettings { bins, range };
-                    (
-                        read_histogram(&base.join(file), hist)?,
-                        range,
-                        file.display().to_string(),
-                    )
-                }
-                _ => {
-                    return Err(Error::parameter(
-                        format!("sample[{k}]"),
-                        "needs exactly one of map and histogram",
-                    ))
-                }
-            };
-            let hist = HistogramSettings { bins, range };
-            let objective = Objective::new(&neutral, &target, axis, s.r, hist);
-            let start = std::time::Instant::now();
-            let on_gpu = match &ctx {
-                Some(c) => skinpatch::gpu::or_cpu(skinpatch::gpu::fit::GpuFit::new(
-                    c,
-                    &objective.base,
-                    bins,
-                ))?,
-                None => None,
-            };
-            let result = match &on_gpu {
-                Some(f) => f.fit_params(&objective, |x| progress(k, total, x))?,
-                None => skinpatch::micro::fit::search(
-                    &objective,
-                    |b, d, alphas| {
-                        Ok(skinpatch::micro::fit::count_histograms(
-                            b, d, alphas, bins, range,
-                        ))
-                    },
-                    |x| progress(k, total, x),
-                )?,
-            };
-            let seconds = start.elapsed().as_secs_f64();
-            log::info!(
-                "fitted {source}: α {:.2}, σ {:.1} µm, TV {:.4} ({} candidates, {seconds:.1} s)",
-                result.alpha,
-                result.sigma_um,
-                result.distance,
-                result.evaluations
-            );
-            rows.push(FitRow {
-                source,
-                r: s.r,
-                alpha: result.alpha,
-                sigma_um: result.sigma_um,
-                fit: Some(SampleFit {
-                    axis,
-                    range,
-                    result,
-                    seconds,
-                }),
-            });
+            let target = SampleTarget::read(k, s, &samples, base, &neutral, &defaults, bins)?;
+            rows.push(fit_sample(s, target, &neutral, ctx.as_ref(), bins, |x| {
+                progress(k, total, x)
+            })?);
         }
     }
     for p in &samples.point {
@@ -320,45 +225,7 @@ pub fn fit(
     let written = match &samples.output {
         Some(out) => {
             let out = base.join(out);
-            let section = skinpatch::scenario::KernelSection::of(&model);
-            let body =
-                toml::to_string(&section).map_err(|e| Error::io(&out, std::io::Error::other(e)))?;
-            let mut fitted = String::new();
-            for row in &rows {
-                match &row.fit {
-                    Some(f) => {
-                        let v = &f.result;
-                        fitted += &format!(
-                            "#   {}: r {}, axis {:?}, bins {bins}, range {}: α {:.2}, σ {:.1} µm, \
-                             TV {:.4}; within {:.4}: α {:.2}…{:.2}, σ {:.1}…{:.1} µm\n",
-                            row.source,
-                            row.r,
-                            f.axis,
-                            f.range,
-                            v.alpha,
-                            v.sigma_um,
-                            v.distance,
-                            skinpatch::micro::fit::valley_margin(v.distance),
-                            v.alpha_range.0,
-                            v.alpha_range.1,
-                            v.sigma_range_um.0,
-                            v.sigma_range_um.1
-                        )
-                    }
-                    None => {
-                        fitted += &format!(
-                            "#   point: r {}, α {}, σ {} µm\n",
-                            row.r, row.alpha, row.sigma_um
-                        )
-                    }
-                }
-            }
-            let text = format!(
-                "# Kernel model fitted by `skinpatch fit` from {}:\n{fitted}\
-                 # Use it with [microstructure] kernel_file = \"…\".\n{body}",
-                path.display()
-            );
-            io::write_atomically(&out, text.as_bytes())?;
+            write_kernel_file(path, &out, &rows, &model, bins)?;
             Some(out)
         }
         None => None,
@@ -372,12 +239,191 @@ pub fn fit(
     })
 }
 
+/// The histogram cells per side, with `range` checked too.
+fn checked_bins(samples: &FitSamples) -> Result<usize> {
+    let bins = samples
+        .bins
+        .unwrap_or(skinpatch::micro::normals::HISTOGRAM_BINS);
+    if !(2..=1024).contains(&bins) {
+        return Err(Error::parameter(
+            "bins",
+            format!("must be in 2..=1024, got {bins}"),
+        ));
+    }
+    if let Some(range) = samples.range {
+        if !(range.is_finite() && range > 0.0 && range <= 1.0) {
+            return Err(Error::parameter(
+                "range",
+                format!("must be in (0, 1] (a normal's tangent component), got {range}"),
+            ));
+        }
+    }
+    Ok(bins)
+}
+
+/// A sample's target histogram, its half range and where it came from.
+struct SampleTarget {
+    histogram: NormalHistogram,
+    range: f64,
+    source: String,
+}
+
+impl SampleTarget {
+    /// The histogram of sample `k`'s deformed map (its range from the file
+    /// or the data) or its histogram file (the range from the file).
+    fn read(
+        k: usize,
+        s: &FitSample,
+        samples: &FitSamples,
+        base: &std::path::Path,
+        neutral: &DisplacementMap,
+        defaults: &skinpatch::micro::io::MapDefaults,
+        bins: usize,
+    ) -> Result<SampleTarget> {
+        match (&s.map, &s.histogram) {
+            (Some(map), None) => {
+                let deformed = skinpatch::micro::io::read_map(&base.join(map), defaults)?;
+                let range = samples.range.unwrap_or_else(|| {
+                    skinpatch::micro::fit::auto_range(&[
+                        &skinpatch::micro::fit::resample(neutral, s.axis, s.r),
+                        &deformed,
+                    ])
+                });
+                Ok(SampleTarget {
+                    histogram: NormalHistogram::of(&deformed, bins, range, [1.0, 1.0]),
+                    range,
+                    source: map.display().to_string(),
+                })
+            }
+            (None, Some(file)) => {
+                let range = samples.range.ok_or_else(|| {
+                    Error::parameter(
+                        format!("sample[{k}].histogram"),
+                        "needs `range` in the samples file: the half range its cells cover",
+                    )
+                })?;
+                Ok(SampleTarget {
+                    histogram: read_histogram(&base.join(file), HistogramSettings { bins, range })?,
+                    range,
+                    source: file.display().to_string(),
+                })
+            }
+            _ => Err(Error::parameter(
+                format!("sample[{k}]"),
+                "needs exactly one of map and histogram",
+            )),
+        }
+    }
+}
+
+/// Fits one sample's (α, σ): on the GPU of `ctx` when it has one that
+/// takes the problem, else on the CPU.
+fn fit_sample(
+    s: &FitSample,
+    target: SampleTarget,
+    neutral: &DisplacementMap,
+    ctx: Option<&skinpatch::gpu::Context>,
+    bins: usize,
+    mut progress: impl FnMut(f64),
+) -> Result<FitRow> {
+    use skinpatch::micro::fit::Objective;
+    let range = target.range;
+    let hist = HistogramSettings { bins, range };
+    let objective = Objective::new(neutral, &target.histogram, s.axis, s.r, hist);
+    let start = std::time::Instant::now();
+    let on_gpu = match ctx {
+        Some(c) => {
+            skinpatch::gpu::or_cpu(skinpatch::gpu::fit::GpuFit::new(c, &objective.base, bins))?
+        }
+        None => None,
+    };
+    let result = match &on_gpu {
+        Some(f) => f.fit_params(&objective, &mut progress)?,
+        None => skinpatch::micro::fit::search(
+            &objective,
+            |b, d, alphas| {
+                Ok(skinpatch::micro::fit::count_histograms(
+                    b, d, alphas, bins, range,
+                ))
+            },
+            &mut progress,
+        )?,
+    };
+    let seconds = start.elapsed().as_secs_f64();
+    log::info!(
+        "fitted {}: α {:.2}, σ {:.1} µm, TV {:.4} ({} candidates, {seconds:.1} s)",
+        target.source,
+        result.alpha,
+        result.sigma_um,
+        result.distance,
+        result.evaluations
+    );
+    Ok(FitRow {
+        source: target.source,
+        r: s.r,
+        alpha: result.alpha,
+        sigma_um: result.sigma_um,
+        fit: Some(SampleFit {
+            axis: s.axis,
+            range,
+            result,
+            seconds,
+        }),
+    })
+}
+
+/// Writes the fitted model as a `[microstructure.kernel]` table to `out`,
+/// headed by comments that list every row it was fitted to.
+fn write_kernel_file(
+    samples_path: &std::path::Path,
+    out: &std::path::Path,
+    rows: &[FitRow],
+    model: &skinpatch::micro::KernelModel,
+    bins: usize,
+) -> Result<()> {
+    let section = skinpatch::scenario::KernelSection::of(model);
+    let body = toml::to_string(&section).map_err(|e| Error::io(out, std::io::Error::other(e)))?;
+    let mut fitted = String::new();
+    for row in rows {
+        match &row.fit {
+            Some(f) => {
+                let v = &f.result;
+                fitted += &format!(
+                    "#   {}: r {}, axis {:?}, bins {bins}, range {}: α {:.2}, σ {:.1} µm, \
+                     TV {:.4}; within {:.4}: α {:.2}…{:.2}, σ {:.1}…{:.1} µm\n",
+                    row.source,
+                    row.r,
+                    f.axis,
+                    f.range,
+                    v.alpha,
+                    v.sigma_um,
+                    v.distance,
+                    skinpatch::micro::fit::valley_margin(v.distance),
+                    v.alpha_range.0,
+                    v.alpha_range.1,
+                    v.sigma_range_um.0,
+                    v.sigma_range_um.1
+                )
+            }
+            None => {
+                fitted += &format!(
+                    "#   point: r {}, α {}, σ {} µm\n",
+                    row.r, row.alpha, row.sigma_um
+                )
+            }
+        }
+    }
+    let text = format!(
+        "# Kernel model fitted by `skinpatch fit` from {}:\n{fitted}\
+         # Use it with [microstructure] kernel_file = \"…\".\n{body}",
+        samples_path.display()
+    );
+    io::write_atomically(out, text.as_bytes())
+}
+
 /// Reads a target histogram: `bins` lines of `bins` comma-separated
 /// non-negative weights, normalised to sum 1.
-fn read_histogram(
-    path: &std::path::Path,
-    hist: skinpatch::micro::fit::HistogramSettings,
-) -> Result<skinpatch::micro::NormalHistogram> {
+fn read_histogram(path: &std::path::Path, hist: HistogramSettings) -> Result<NormalHistogram> {
     let text = io::read_input_text(path)?;
     let bad = |line: usize, message: String| Error::Parse {
         path: path.to_path_buf(),
@@ -424,7 +470,7 @@ fn read_histogram(
         return Err(bad(0, "the histogram is empty (all weights 0)".into()));
     }
     cells.iter_mut().for_each(|c| *c /= total);
-    Ok(skinpatch::micro::NormalHistogram {
+    Ok(NormalHistogram {
         bins: hist.bins,
         range: hist.range,
         cells,

@@ -499,7 +499,7 @@ pub struct FitSample {
     /// Stretch ratio along `axis`.
     pub r: f64,
     /// `u` or `v`.
-    pub axis: String,
+    pub axis: crate::micro::fit::Axis,
 }
 
 /// `[[point]]`.

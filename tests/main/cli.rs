@@ -860,6 +860,22 @@ fn fit_prints_the_table_and_writes_a_usable_kernel_file() {
     assert!(!o.status.success());
     let err = text(&o.stderr);
     assert!(err.contains("bad.toml:3"), "{err}");
+    // An unknown axis names the line, the key and the accepted values.
+    std::fs::write(
+        dir.path().join("axis.toml"),
+        "neutral = \"neutral.png\"\n[[sample]]\nmap = \"blurred.png\"\nr = 1.0\naxis = \"w\"\n",
+    )
+    .unwrap();
+    let o = skinpatch(&["fit", dir.path().join("axis.toml").to_str().unwrap()]);
+    let err = text(&o.stderr);
+    assert!(
+        !o.status.success()
+            && err.contains("axis.toml:5")
+            && err.contains("axis")
+            && err.contains("\"u\" or \"v\"")
+            && err.contains("\"w\""),
+        "{err}"
+    );
 }
 
 /// Runs the small press with a microstructure, the GPU variables cleared
