@@ -417,10 +417,15 @@ fn set_key(
 /// errors name the file and line.
 pub fn read_toml_file<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
     let text = crate::mesh::io::read_input_text(path)?;
-    toml::from_str(&text).map_err(|e| Error::Parse {
+    let fail = |e: &toml::de::Error, message: String| Error::Parse {
         path: path.to_path_buf(),
         line: e.span().map_or(0, |s| line_of(&text, s.start)),
-        message: e.message().trim().to_string(),
+        message,
+    };
+    let de = toml::Deserializer::parse(&text).map_err(|e| fail(&e, e.message().trim().into()))?;
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let key = e.path().to_string();
+        fail(e.inner(), schema_message(&key, e.inner().message().trim()))
     })
 }
 
@@ -442,7 +447,12 @@ fn describe_schema_error(key: &str, e: &toml::de::Error, text: &str) -> String {
         .span()
         .map(|s| format!("line {}: ", line_of(text, s.start)))
         .unwrap_or_default();
-    let message = e.message().trim();
+    format!("{at}{}", schema_message(key, e.message().trim()))
+}
+
+/// A schema error's message at `key`: unknown keys with the valid ones and
+/// the closest, unknown values of enum-like keys with the accepted ones.
+fn schema_message(key: &str, message: &str) -> String {
     if let Some((unknown, expected)) = parse_unknown_field(message) {
         let full = if key.is_empty() || key == "." || key.ends_with(&unknown) {
             key.trim_start_matches('.').to_string()
@@ -458,7 +468,7 @@ fn describe_schema_error(key: &str, e: &toml::de::Error, text: &str) -> String {
             .map(|s| format!("; did you mean {s}?"))
             .unwrap_or_default();
         return format!(
-            "{at}unknown key {full}{hint} (valid keys here: {})",
+            "unknown key {full}{hint} (valid keys here: {})",
             expected.join(", ")
         );
     }
@@ -472,12 +482,12 @@ fn describe_schema_error(key: &str, e: &toml::de::Error, text: &str) -> String {
             Some((last, rest)) => format!("{} or {last}", rest.join(", ")),
             None => String::new(),
         };
-        return format!("{at}{key} must be {listed}, got \"{value}\"{hint}");
+        return format!("{key} must be {listed}, got \"{value}\"{hint}");
     }
     if key.is_empty() || key == "." {
-        format!("{at}{message}")
+        message.to_string()
     } else {
-        format!("{at}{key}: {message}")
+        format!("{key}: {message}")
     }
 }
 
