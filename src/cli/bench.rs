@@ -179,26 +179,11 @@ fn bench_micro(
     (texel_um, cpu_up_to, tile): (Option<f64>, usize, Option<usize>),
     (bandwidth_gbs, raster_step): (Option<f64>, usize),
 ) -> anyhow::Result<()> {
-    if !(1..=64).contains(&raster_step) {
-        bail!("--raster-step must be in 1 … 64 map texels per raster texel, got {raster_step}");
-    }
-    if sizes.is_empty() || sizes.contains(&0) {
-        bail!("--sizes needs positive map sides, e.g. 1024,2048,4096");
-    }
-    if let Some(b) = bandwidth_gbs.filter(|b| !(b.is_finite() && *b > 0.0)) {
-        bail!("--bandwidth-gbs must be a positive number of GB/s, got {b}");
-    }
-    let layout = match (texel_um, tile) {
-        (None, Some(_)) => bail!("--tile needs --texel-um (tiles hold a map of fixed texels)"),
-        (_, Some(t)) if t < 16 => bail!("--tile must be ≥ 16 texels, got {t}"),
-        (None, None) => skinpatch::bench::MapLayout::FixedPatch,
-        (Some(t), _) if t.is_finite() && t > 0.0 => skinpatch::bench::MapLayout::FixedTexel {
-            texel_um: t,
-            cpu_up_to,
-            tile,
-        },
-        (Some(t), _) => bail!("--texel-um must be > 0, got {t}"),
-    };
+    let layout = micro_layout(
+        sizes,
+        (texel_um, cpu_up_to, tile),
+        (bandwidth_gbs, raster_step),
+    )?;
     let setup = Setup::load(path).with_context(|| format!("scenario {}", path.display()))?;
     let model = setup
         .micro
@@ -221,44 +206,20 @@ fn bench_micro(
         "{:>6} {:>9} {:>12} {:>12} {:>16} {:>10} {:>12} {:>8}",
         "size", "texel µm", "CPU ms", "GPU ms", "GPU+readback ms", "CPU/GPU", "max |Δ|", "tiles %"
     );
-    let fmt = |x: Option<f64>, p: usize| x.map_or("-".to_string(), |v| format!("{v:.p$}"));
     if raster_step > 1 {
         println!(
             "strain raster: one texel per {raster_step} × {raster_step} map texels, read bilinearly"
         );
     }
     let stepped = (layout, raster_step);
-    let bench = skinpatch::bench::bench_micro(&setup.mesh, &model, sizes, frames, stepped, |r| {
-        println!(
-            "{:>6} {:>9.3} {:>12} {:>12} {:>16} {:>10} {:>12} {:>8}",
-            r.size,
-            r.texel_um,
-            fmt(r.cpu_ms, 1),
-            fmt(r.gpu_ms, 2),
-            fmt(r.gpu_readback_ms, 1),
-            fmt(r.cpu_ms.zip(r.gpu_ms).map(|(c, g)| c / g), 1),
-            r.max_difference
-                .map_or("-".to_string(), |d| format!("{d:.1e}")),
-            fmt(r.pass_tile_share.map(|s| 100.0 * s), 1),
-        );
-        if let Some(why) = &r.untiled_skipped {
-            println!("{:>6} untiled GPU chain skipped: {why}", r.size);
-        }
-        if let Some(t) = &r.tiled {
-            println!(
-                "{:>6} tiled ({} texels, halo {}): {} of {} tiles convolved, GPU {:.2} ms{}",
-                r.size,
-                t.tile,
-                t.halo,
-                t.active,
-                t.total,
-                t.gpu_ms,
-                t.max_difference.map_or(String::new(), |d| format!(
-                    ", max |tiled − untiled| {d:.1e}"
-                )),
-            );
-        }
-    })?;
+    let bench = skinpatch::bench::bench_micro(
+        &setup.mesh,
+        &model,
+        sizes,
+        frames,
+        stepped,
+        print_micro_row,
+    )?;
     println!(
         "tiles %: share of the map's tiles the GPU passes ran on (the others keep the neutral map)"
     );
@@ -266,6 +227,74 @@ fn bench_micro(
         Some(a) => println!("GPU: {a}; GPU ms is the mean of {} frames", frames.max(1)),
         None => println!("no GPU adapter: CPU figures only"),
     }
+    print_stage_tables(&bench, bandwidth_gbs);
+    Ok(())
+}
+
+/// The map layout of `bench micro`'s flags, each checked.
+fn micro_layout(
+    sizes: &[usize],
+    (texel_um, cpu_up_to, tile): (Option<f64>, usize, Option<usize>),
+    (bandwidth_gbs, raster_step): (Option<f64>, usize),
+) -> anyhow::Result<skinpatch::bench::MapLayout> {
+    if !(1..=64).contains(&raster_step) {
+        bail!("--raster-step must be in 1 … 64 map texels per raster texel, got {raster_step}");
+    }
+    if sizes.is_empty() || sizes.contains(&0) {
+        bail!("--sizes needs positive map sides, e.g. 1024,2048,4096");
+    }
+    if let Some(b) = bandwidth_gbs.filter(|b| !(b.is_finite() && *b > 0.0)) {
+        bail!("--bandwidth-gbs must be a positive number of GB/s, got {b}");
+    }
+    Ok(match (texel_um, tile) {
+        (None, Some(_)) => bail!("--tile needs --texel-um (tiles hold a map of fixed texels)"),
+        (_, Some(t)) if t < 16 => bail!("--tile must be ≥ 16 texels, got {t}"),
+        (None, None) => skinpatch::bench::MapLayout::FixedPatch,
+        (Some(t), _) if t.is_finite() && t > 0.0 => skinpatch::bench::MapLayout::FixedTexel {
+            texel_um: t,
+            cpu_up_to,
+            tile,
+        },
+        (Some(t), _) => bail!("--texel-um must be > 0, got {t}"),
+    })
+}
+
+/// One size's line of `bench micro` (and its tiled line).
+fn print_micro_row(r: &skinpatch::bench::MicroRow) {
+    let fmt = |x: Option<f64>, p: usize| x.map_or("-".to_string(), |v| format!("{v:.p$}"));
+    println!(
+        "{:>6} {:>9.3} {:>12} {:>12} {:>16} {:>10} {:>12} {:>8}",
+        r.size,
+        r.texel_um,
+        fmt(r.cpu_ms, 1),
+        fmt(r.gpu_ms, 2),
+        fmt(r.gpu_readback_ms, 1),
+        fmt(r.cpu_ms.zip(r.gpu_ms).map(|(c, g)| c / g), 1),
+        r.max_difference
+            .map_or("-".to_string(), |d| format!("{d:.1e}")),
+        fmt(r.pass_tile_share.map(|s| 100.0 * s), 1),
+    );
+    if let Some(why) = &r.untiled_skipped {
+        println!("{:>6} untiled GPU chain skipped: {why}", r.size);
+    }
+    if let Some(t) = &r.tiled {
+        println!(
+            "{:>6} tiled ({} texels, halo {}): {} of {} tiles convolved, GPU {:.2} ms{}",
+            r.size,
+            t.tile,
+            t.halo,
+            t.active,
+            t.total,
+            t.gpu_ms,
+            t.max_difference.map_or(String::new(), |d| format!(
+                ", max |tiled − untiled| {d:.1e}"
+            )),
+        );
+    }
+}
+
+/// `bench micro`'s per-stage tables, when the GPU chain was profiled.
+fn print_stage_tables(bench: &skinpatch::bench::MicroBench, bandwidth_gbs: Option<f64>) {
     let profiled: Vec<_> = bench
         .rows
         .iter()
@@ -354,7 +383,6 @@ fn bench_micro(
             ),
         }
     }
-    Ok(())
 }
 
 fn bench_render(path: &Path, frames: usize, width: usize, height: usize) -> anyhow::Result<()> {
