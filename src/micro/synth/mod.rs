@@ -55,6 +55,7 @@
 //! without a seam.
 
 pub mod ann;
+mod level;
 
 use std::time::Instant;
 
@@ -62,9 +63,8 @@ use rayon::prelude::*;
 
 use super::convolve::blur_along_axis;
 use super::map::{DisplacementMap, Edge};
-use super::procedural::mix;
 use crate::error::{shown, Error, Result};
-use ann::{squared_distance, KdTree};
+use level::LevelData;
 
 /// Parameters of the synthesis.
 #[derive(Clone, Debug, PartialEq)]
@@ -385,20 +385,48 @@ pub fn synthesize(
     let (b_low, b_h) = high(&guide);
 
     // 4. Pyramids, finest first.
-    let pyramid = |m: DisplacementMap| -> Vec<DisplacementMap> {
-        let mut levels = vec![m];
-        for _ in 1..params.levels {
-            let next = reduce(levels.last().expect("one level at least"));
-            levels.push(next);
-        }
-        levels
-    };
+    let pyramid = |m| pyramid(m, params.levels);
     let (pa, pa1, pb) = (pyramid(a_h), pyramid(a1_h), pyramid(b_h));
+    check_levels(&pa1, exemplar.edge, params)?;
+
+    let (s, reports) = match_levels(&pa, &pa1, &pb, exemplar.edge, params, on_level);
+
+    // 7. Recombined.
+    let a1_h = &pa1[0];
+    let detail = resolve(&s, &b_low, a1_h, params.blend_radius);
+    let data: Vec<f32> = detail
+        .iter()
+        .zip(&b_low.data)
+        .map(|(&d, &l)| l + d)
+        .collect();
+    let mut map = DisplacementMap {
+        texel_um: texel,
+        height_unit_um: 1.0,
+        edge,
+        ..guide.with_data(data)
+    };
+    restore_mesostructure(&mut map, &guide, sigma_m / texel, params.restore_passes);
+    let source = exemplar_sources(s, (a1_h.width, a1_h.height), exemplar);
+    Ok(Synthesis {
+        map,
+        guide,
+        exemplar: a1,
+        guided: inputs.mesostructure.is_some(),
+        source,
+        sigmas_um: (sigma_m, sigma_l),
+        levels: reports,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// Every pyramid level's exemplar must hold the level's window (inside it,
+/// for an exemplar that does not wrap) and be at least 2 × 2 texels.
+fn check_levels(pa1: &[DisplacementMap], exemplar_edge: Edge, params: &SynthParams) -> Result<()> {
     let top = params.levels - 1;
     for level in 0..params.levels {
         let ex = &pa1[top - level];
         let n = params.window(level);
-        if exemplar.edge == Edge::Clamp && (ex.width <= n || ex.height <= n)
+        if exemplar_edge == Edge::Clamp && (ex.width <= n || ex.height <= n)
             || ex.width < 2
             || ex.height < 2
         {
@@ -409,7 +437,7 @@ pub fn synthesize(
                      is {n} × {n}{}; use fewer levels, smaller windows or a larger exemplar",
                     ex.width,
                     ex.height,
-                    if exemplar.edge == Edge::Clamp {
+                    if exemplar_edge == Edge::Clamp {
                         " and must fit inside it (the exemplar does not wrap)"
                     } else {
                         ""
@@ -418,13 +446,27 @@ pub fn synthesize(
             ));
         }
     }
+    Ok(())
+}
 
+/// Steps 4–6, coarse to fine: S started (or upsampled from the coarser
+/// level) and corrected `passes` times per level; `pa`, `pa1`, `pb` are the
+/// pyramids of A_h, A′_h and B_h, finest first.
+fn match_levels(
+    pa: &[DisplacementMap],
+    pa1: &[DisplacementMap],
+    pb: &[DisplacementMap],
+    exemplar_edge: Edge,
+    params: &SynthParams,
+    on_level: &mut dyn FnMut(&LevelReport),
+) -> (Vec<u32>, Vec<LevelReport>) {
+    let top = params.levels - 1;
     let mut s: Vec<u32> = Vec::new();
     let mut reports = Vec::new();
     for level in 0..params.levels {
         let t0 = Instant::now();
         let k = top - level;
-        let lv = LevelData::new(&pa[k], &pa1[k], &pb[k], exemplar.edge, params, level);
+        let lv = LevelData::new(&pa[k], &pa1[k], &pb[k], exemplar_edge, params, level);
         s = if level == 0 {
             lv.start(params.seed)
         } else {
@@ -447,34 +489,31 @@ pub fn synthesize(
         on_level(&report);
         reports.push(report);
     }
+    (s, reports)
+}
 
-    // 7. Recombined.
-    let a1_h = &pa1[0];
-    let detail = resolve(&s, &b_low, a1_h, params.blend_radius);
-    let data: Vec<f32> = detail
-        .iter()
-        .zip(&b_low.data)
-        .map(|(&d, &low)| low + d)
-        .collect();
-    let mut map = DisplacementMap {
-        texel_um: texel,
-        height_unit_um: 1.0,
-        edge,
-        ..guide.with_data(data)
-    };
-    // 8. The mesostructure restored: B′ += G_m * (B − B′), repeated.
-    let guide_low = (params.restore_passes > 0).then(|| gauss(&guide, sigma_m / texel));
-    for guide_low in std::iter::repeat_n(guide_low.as_ref(), params.restore_passes).flatten() {
-        let low = gauss(&map, sigma_m / texel);
+/// Step 8: B′ += G_m * (B − B′), `passes` times (σ_m in texels).
+fn restore_mesostructure(
+    map: &mut DisplacementMap,
+    guide: &DisplacementMap,
+    sigma_texels: f64,
+    passes: usize,
+) {
+    let guide_low = (passes > 0).then(|| gauss(guide, sigma_texels));
+    for guide_low in std::iter::repeat_n(guide_low.as_ref(), passes).flatten() {
+        let low = gauss(map, sigma_texels);
         map.data
             .par_iter_mut()
             .zip(&guide_low.data)
             .zip(&low.data)
             .for_each(|((x, b), l)| *x += b - l);
     }
-    // Sources in the exemplar as given.
-    let (ew, eh) = (a1_h.width, a1_h.height);
-    let source = if (ew, eh) == (exemplar.width, exemplar.height) {
+}
+
+/// S's exemplar texels (on the grid of `size`, the exemplar at the output
+/// texel) as texels of the exemplar as given.
+fn exemplar_sources(s: Vec<u32>, (ew, eh): (usize, usize), exemplar: &DisplacementMap) -> Vec<u32> {
+    if (ew, eh) == (exemplar.width, exemplar.height) {
         s
     } else {
         let (fx, fy) = (
@@ -489,17 +528,7 @@ pub fn synthesize(
                 (yo * exemplar.width + xo) as u32
             })
             .collect()
-    };
-    Ok(Synthesis {
-        map,
-        guide,
-        exemplar: a1,
-        guided: inputs.mesostructure.is_some(),
-        source,
-        sigmas_um: (sigma_m, sigma_l),
-        levels: reports,
-        seconds: start.elapsed().as_secs_f64(),
-    })
+    }
 }
 
 /// The synthesized detail B′_h: per output texel q, the exemplar detail at
@@ -694,6 +723,16 @@ pub fn gauss(m: &DisplacementMap, sigma: f64) -> DisplacementMap {
     blur_along_axis(&blur_along_axis(m, true, s), false, s)
 }
 
+/// A Gaussian pyramid of `levels` levels, finest (`m`) first.
+fn pyramid(m: DisplacementMap, levels: usize) -> Vec<DisplacementMap> {
+    let mut pyramid = vec![m];
+    for _ in 1..levels {
+        let next = reduce(pyramid.last().expect("one level at least"));
+        pyramid.push(next);
+    }
+    pyramid
+}
+
 /// One pyramid step: blurred by σ = 1 texel, every second texel kept.
 fn reduce(m: &DisplacementMap) -> DisplacementMap {
     let b = gauss(m, 1.0);
@@ -703,401 +742,4 @@ fn reduce(m: &DisplacementMap) -> DisplacementMap {
     });
     out.height_unit_um = m.height_unit_um;
     out
-}
-
-/// The feature projection: PCA (mean, then rows of the basis) or none.
-struct Projection {
-    input: usize,
-    mean: Vec<f32>,
-    /// `dims × input`, row-major; empty: the identity.
-    basis: Vec<f32>,
-}
-
-impl Projection {
-    fn dims(&self) -> usize {
-        if self.basis.is_empty() {
-            self.input
-        } else {
-            self.basis.len() / self.input
-        }
-    }
-
-    fn apply(&self, x: &[f32], out: &mut [f32]) {
-        if self.basis.is_empty() {
-            out.copy_from_slice(x);
-            return;
-        }
-        for (o, row) in out.iter_mut().zip(self.basis.chunks(self.input)) {
-            let mut sum = 0.0f32;
-            for ((r, xi), m) in row.iter().zip(x).zip(&self.mean) {
-                sum += r * (xi - m);
-            }
-            *o = sum;
-        }
-    }
-
-    /// The `dims` leading principal axes of `features` (rows of `input`
-    /// values), from at most `MAX_SAMPLES` rows taken at a fixed stride.
-    fn pca(
-        input: usize,
-        dims: usize,
-        rows: usize,
-        feature: impl Fn(usize, &mut [f32]) + Sync,
-    ) -> Projection {
-        const MAX_SAMPLES: usize = 8192;
-        const CHUNK: usize = 256;
-        let stride = rows.div_ceil(MAX_SAMPLES).max(1);
-        let samples: Vec<usize> = (0..rows).step_by(stride).collect();
-        // Mean and second moments per chunk of samples (f64), added in
-        // chunk order: the same sums on any thread count.
-        let partial: Vec<(Vec<f64>, Vec<f64>)> = samples
-            .par_chunks(CHUNK)
-            .map(|chunk| {
-                let mut x = vec![0.0f32; input];
-                let mut sum = vec![0.0f64; input];
-                let mut outer = vec![0.0f64; input * input];
-                for &r in chunk {
-                    feature(r, &mut x);
-                    for a in 0..input {
-                        let xa = x[a] as f64;
-                        sum[a] += xa;
-                        let row = &mut outer[a * input..(a + 1) * input];
-                        for (o, &xb) in row[a..].iter_mut().zip(&x[a..]) {
-                            *o += xa * xb as f64;
-                        }
-                    }
-                }
-                (sum, outer)
-            })
-            .collect();
-        let n = samples.len() as f64;
-        let mut sum = vec![0.0f64; input];
-        let mut outer = vec![0.0f64; input * input];
-        for (s, o) in partial {
-            sum.iter_mut().zip(s).for_each(|(a, b)| *a += b);
-            outer.iter_mut().zip(o).for_each(|(a, b)| *a += b);
-        }
-        let mean: Vec<f64> = sum.iter().map(|s| s / n).collect();
-        let cov = nalgebra::DMatrix::from_fn(input, input, |a, b| {
-            let (a, b) = (a.min(b), a.max(b));
-            outer[a * input + b] / n - mean[a] * mean[b]
-        });
-        let eig = nalgebra::SymmetricEigen::new(cov);
-        let mut order: Vec<usize> = (0..input).collect();
-        order.sort_by(|&a, &b| {
-            eig.eigenvalues[b]
-                .total_cmp(&eig.eigenvalues[a])
-                .then(a.cmp(&b))
-        });
-        let mut basis = Vec::with_capacity(dims * input);
-        for &c in order.iter().take(dims) {
-            basis.extend(eig.eigenvectors.column(c).iter().map(|&v| v as f32));
-        }
-        Projection {
-            input,
-            mean: mean.iter().map(|&m| m as f32).collect(),
-            basis,
-        }
-    }
-}
-
-/// One pyramid level's images, exemplar features and search tree.
-struct LevelData<'a> {
-    ex_a1: &'a DisplacementMap,
-    guide: &'a DisplacementMap,
-    window: usize,
-    /// Window offsets and the square roots of their Gaussian weights.
-    taps: Vec<(isize, isize, f32)>,
-    /// √(1 − α), √α.
-    weights: (f32, f32),
-    projection: Projection,
-    /// Exemplar texels that can be matched.
-    candidates: Vec<u32>,
-    /// Exemplar texel → index into `candidates` (`u32::MAX`: none).
-    candidate_of: Vec<u32>,
-    /// Projected features of the candidates, `dims` each.
-    features: Vec<f32>,
-    tree: KdTree,
-    ann_leaves: usize,
-    /// `(1 + 2^(l − L) κ)²`.
-    coherence_factor: f32,
-}
-
-impl<'a> LevelData<'a> {
-    fn new(
-        ex_a: &'a DisplacementMap,
-        ex_a1: &'a DisplacementMap,
-        guide: &'a DisplacementMap,
-        exemplar_edge: Edge,
-        params: &SynthParams,
-        level: usize,
-    ) -> LevelData<'a> {
-        let n = params.window(level);
-        let r = (n / 2) as isize;
-        let sigma = r.max(1) as f32;
-        let mut taps = Vec::with_capacity(n * n);
-        for dy in -r..=r {
-            for dx in -r..=r {
-                let g = (-((dx * dx + dy * dy) as f32) / (2.0 * sigma * sigma)).exp();
-                taps.push((dx, dy, g.sqrt()));
-            }
-        }
-        let weights = (
-            (1.0 - params.alpha).sqrt() as f32,
-            params.alpha.sqrt() as f32,
-        );
-        let (ew, eh) = (ex_a1.width, ex_a1.height);
-        let inside = |x: usize, y: usize| match exemplar_edge {
-            Edge::Wrap => true,
-            Edge::Clamp => {
-                let r = r as usize;
-                x >= r && y >= r && x + r < ew && y + r < eh
-            }
-        };
-        let candidates: Vec<u32> = (0..ew * eh)
-            .filter(|&p| inside(p % ew, p / ew))
-            .map(|p| p as u32)
-            .collect();
-        let mut candidate_of = vec![u32::MAX; ew * eh];
-        for (k, &p) in candidates.iter().enumerate() {
-            candidate_of[p as usize] = k as u32;
-        }
-        let input = 2 * taps.len();
-        let exemplar_feature = |k: usize, out: &mut [f32]| {
-            let p = candidates[k] as usize;
-            let (x, y) = ((p % ew) as isize, (p / ew) as isize);
-            let (a_half, a1_half) = out.split_at_mut(taps.len());
-            for (t, &(dx, dy, g)) in taps.iter().enumerate() {
-                a_half[t] = weights.0 * g * ex_a.texel(x + dx, y + dy);
-                a1_half[t] = weights.1 * g * ex_a1.texel(x + dx, y + dy);
-            }
-        };
-        let dims = params.pca_dims.unwrap_or(n).min(input);
-        let projection = if dims == 0 {
-            Projection {
-                input,
-                mean: vec![0.0; input],
-                basis: Vec::new(),
-            }
-        } else {
-            Projection::pca(input, dims, candidates.len(), exemplar_feature)
-        };
-        let d = projection.dims();
-        let mut features = vec![0.0f32; candidates.len() * d];
-        features
-            .par_chunks_mut(d * 1024)
-            .enumerate()
-            .for_each(|(c, chunk)| {
-                let mut x = vec![0.0f32; input];
-                for (o, out) in chunk.chunks_mut(d).enumerate() {
-                    exemplar_feature(c * 1024 + o, &mut x);
-                    projection.apply(&x, out);
-                }
-            });
-        let ids: Vec<u32> = (0..candidates.len() as u32).collect();
-        let tree = KdTree::new(d, &features, &ids);
-        let finest = (params.levels - 1) as i32;
-        let f = 1.0 + 2f64.powi(level as i32 - finest) * params.kappa;
-        LevelData {
-            ex_a1,
-            guide,
-            window: n,
-            taps,
-            weights,
-            projection,
-            candidates,
-            candidate_of,
-            features,
-            tree,
-            ann_leaves: params.ann_leaves,
-            coherence_factor: (f * f) as f32,
-        }
-    }
-
-    /// The coarsest level's start: blocks of `window × window` output
-    /// texels, each a piece of the exemplar at an offset drawn from (seed,
-    /// block). Coherent pieces from the start: a start of independent
-    /// random texels leaves the coarse levels, where the coherence rule
-    /// favours the approximate match, as a patchwork of single texels.
-    fn start(&self, seed: u64) -> Vec<u32> {
-        let (w, h) = (self.guide.width, self.guide.height);
-        let (ew, eh) = (self.ex_a1.width, self.ex_a1.height);
-        let b = self.window;
-        (0..w * h)
-            .map(|q| {
-                let (i, j) = (q % w, q / w);
-                let block = ((j / b) * w.div_ceil(b) + i / b) as u64;
-                let offset = mix(seed ^ mix(block + 0x5157_4e54));
-                let (ox, oy) = (
-                    (offset % ew as u64) as usize,
-                    ((offset >> 32) % eh as u64) as usize,
-                );
-                self.nearest_candidate((ox + i % b) as isize, (oy + j % b) as isize, ew, eh)
-            })
-            .collect()
-    }
-
-    /// The coarser level's sources carried to this level: texel (i, j)
-    /// takes child (i mod 2, j mod 2) of its parent's source.
-    fn upsample(
-        &self,
-        coarse: &[u32],
-        coarse_width: usize,
-        coarse_exemplar_width: usize,
-    ) -> Vec<u32> {
-        let (w, h) = (self.guide.width, self.guide.height);
-        let (ew, eh) = (self.ex_a1.width, self.ex_a1.height);
-        (0..w * h)
-            .map(|q| {
-                let (i, j) = (q % w, q / w);
-                let p = coarse[(j / 2) * coarse_width + i / 2] as usize;
-                let (px, py) = (p % coarse_exemplar_width, p / coarse_exemplar_width);
-                let (x, y) = (2 * px + i % 2, 2 * py + j % 2);
-                self.nearest_candidate(x as isize, y as isize, ew, eh)
-            })
-            .collect()
-    }
-
-    /// The exemplar texel (x, y), wrapped, or moved to the nearest candidate.
-    fn nearest_candidate(&self, x: isize, y: isize, ew: usize, eh: usize) -> u32 {
-        let (x, y) = (
-            x.rem_euclid(ew as isize) as usize,
-            y.rem_euclid(eh as isize) as usize,
-        );
-        let p = y * ew + x;
-        if self.candidate_of[p] != u32::MAX {
-            return p as u32;
-        }
-        // Clamped exemplar: into the interior.
-        let r = self.window / 2;
-        let cx = x.clamp(r, ew - 1 - r);
-        let cy = y.clamp(r, eh - 1 - r);
-        (cy * ew + cx) as u32
-    }
-
-    /// One correction pass (four parity sub-passes); returns how many
-    /// texels took the coherence match.
-    fn correct(&self, s: &mut [u32]) -> usize {
-        let (w, h) = (self.guide.width, self.guide.height);
-        let mut coherent = 0;
-        for parity in 0..4 {
-            let (px, py) = (parity % 2, parity / 2);
-            let rows: Vec<usize> = (py..h).step_by(2).collect();
-            let current: &[u32] = s;
-            let updates: Vec<(Vec<u32>, usize)> = rows
-                .par_iter()
-                .map_init(
-                    || Scratch::new(2 * self.taps.len(), self.projection.dims()),
-                    |scratch, &j| {
-                        let mut row = Vec::with_capacity(w / 2 + 1);
-                        let mut count = 0;
-                        for i in (px..w).step_by(2) {
-                            let (p, c) = self.best_match(current, i, j, scratch);
-                            row.push(p);
-                            count += c as usize;
-                        }
-                        (row, count)
-                    },
-                )
-                .collect();
-            for (&j, (row, count)) in rows.iter().zip(updates) {
-                coherent += count;
-                for (k, p) in row.into_iter().enumerate() {
-                    s[j * w + px + 2 * k] = p;
-                }
-            }
-        }
-        coherent
-    }
-
-    /// Output texel `q + (dx, dy)` by the output's edge rule.
-    #[inline]
-    fn output_index(&self, i: usize, j: usize, dx: isize, dy: isize) -> usize {
-        let (w, h) = (self.guide.width as isize, self.guide.height as isize);
-        let (x, y) = (i as isize + dx, j as isize + dy);
-        let (x, y) = match self.guide.edge {
-            Edge::Wrap => (x.rem_euclid(w), y.rem_euclid(h)),
-            Edge::Clamp => (x.clamp(0, w - 1), y.clamp(0, h - 1)),
-        };
-        (y * w + x) as usize
-    }
-
-    /// The exemplar texel for output texel (i, j) and whether it is the
-    /// coherence match.
-    fn best_match(&self, s: &[u32], i: usize, j: usize, scratch: &mut Scratch) -> (u32, bool) {
-        let n = self.taps.len();
-        {
-            let (b_half, b1_half) = scratch.x.split_at_mut(n);
-            for (t, &(dx, dy, g)) in self.taps.iter().enumerate() {
-                let q = self.output_index(i, j, dx, dy);
-                b_half[t] = self.weights.0 * g * self.guide.data[q];
-                b1_half[t] = self.weights.1 * g * self.ex_a1.data[s[q] as usize];
-            }
-        }
-        self.projection.apply(&scratch.x, &mut scratch.y);
-        let y = &scratch.y;
-        let d = y.len();
-        let (k_app, d_app) = self
-            .tree
-            .nearest(y, self.ann_leaves)
-            .expect("a level has candidates");
-        // Coherence candidates: S(q) and S(r) + (q − r) for the 8 neighbours.
-        let (ew, eh) = (self.ex_a1.width as isize, self.ex_a1.height as isize);
-        let wraps = self.candidates.len() == (ew * eh) as usize;
-        let mut best_coh = (u32::MAX, f32::INFINITY);
-        for (dx, dy) in NEIGHBOURS {
-            let r = self.output_index(i, j, dx, dy);
-            let p = s[r] as isize;
-            let (mut x, mut y0) = (p % ew - dx, p / ew - dy);
-            if wraps {
-                x = x.rem_euclid(ew);
-                y0 = y0.rem_euclid(eh);
-            } else if x < 0 || y0 < 0 || x >= ew || y0 >= eh {
-                continue;
-            }
-            let c = self.candidate_of[(y0 * ew + x) as usize];
-            if c == u32::MAX {
-                continue;
-            }
-            let f = &self.features[c as usize * d..(c as usize + 1) * d];
-            let dist = squared_distance(y, f, best_coh.1);
-            if dist < best_coh.1 {
-                best_coh = (c, dist);
-            }
-        }
-        if best_coh.0 != u32::MAX && best_coh.1 <= d_app * self.coherence_factor {
-            (self.candidates[best_coh.0 as usize], true)
-        } else {
-            (self.candidates[k_app as usize], false)
-        }
-    }
-}
-
-/// The coherence candidates' offsets: the texel itself, then its eight
-/// neighbours.
-const NEIGHBOURS: [(isize, isize); 9] = [
-    (0, 0),
-    (-1, -1),
-    (0, -1),
-    (1, -1),
-    (-1, 0),
-    (1, 0),
-    (-1, 1),
-    (0, 1),
-    (1, 1),
-];
-
-/// Per-thread buffers of a pass.
-struct Scratch {
-    x: Vec<f32>,
-    y: Vec<f32>,
-}
-
-impl Scratch {
-    fn new(input: usize, dims: usize) -> Scratch {
-        Scratch {
-            x: vec![0.0; input],
-            y: vec![0.0; dims],
-        }
-    }
 }
