@@ -32,6 +32,18 @@ pub(super) struct ScriptRun {
     pub(super) waiting: Option<Waiting>,
 }
 
+/// What a step leaves the runner to do.
+enum After {
+    /// Go on with the next step.
+    Next,
+    /// Wait for this before the next step (checked from the next redraw on,
+    /// after this one has handed the step's target to the simulation).
+    Wait(Waiting),
+    /// Stop until the next redraw (a screenshot is taken after this
+    /// redraw's render, so it shows every step before it) or for good.
+    Yield,
+}
+
 impl App {
     /// Runs script steps until one has to wait.
     pub(super) fn run_script(&mut self, event_loop: &ActiveEventLoop) -> Result<()> {
@@ -39,9 +51,33 @@ impl App {
         if self.shown.is_none() {
             return Ok(());
         }
+        while self.script_may_go_on()? {
+            let run = self.script.as_mut().expect("checked");
+            let Some(step) = run.steps.get(run.next).cloned() else {
+                return Ok(());
+            };
+            run.next += 1;
+            let index = run.next;
+            log::info!("script step {index}: {}", step.name());
+            self.dirty = true;
+            match self.perform_step(&step, index, event_loop)? {
+                After::Next => {}
+                After::Yield => return Ok(()),
+                After::Wait(wait) => {
+                    self.script.as_mut().expect("checked").waiting = Some(wait);
+                    return Ok(());
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether the script may take its next step: what it waits for has
+    /// happened (the next move of a drag is handed on here).
+    fn script_may_go_on(&mut self) -> Result<bool> {
         loop {
             let Some(run) = self.script.as_mut() else {
-                return Ok(());
+                return Ok(false);
             };
             match run.waiting.take() {
                 Some(Waiting::Fem(since, mut moves)) => {
@@ -61,151 +97,142 @@ impl App {
                             )));
                         }
                         run.waiting = Some(Waiting::Fem(since, moves));
-                        return Ok(());
+                        return Ok(false);
                     }
                     if !moves.is_empty() {
                         let at = moves.remove(0);
                         run.waiting = Some(Waiting::Fem(Instant::now(), moves));
                         self.state.apply(Command::MoveTo(at));
                         self.dirty = true;
-                        return Ok(());
+                        return Ok(false);
                     }
+                    return Ok(true);
                 }
                 Some(Waiting::Until(t)) => {
                     if Instant::now() < t {
                         run.waiting = Some(Waiting::Until(t));
-                        return Ok(());
+                        return Ok(false);
                     }
                     run.waiting = Some(Waiting::Fem(Instant::now(), Vec::new()));
-                    continue;
                 }
-                None => {}
-            }
-            let run = self.script.as_mut().expect("checked");
-            let Some(step) = run.steps.get(run.next).cloned() else {
-                return Ok(());
-            };
-            run.next += 1;
-            let index = run.next;
-            log::info!("script step {index}: {}", step.name());
-            self.dirty = true;
-            if let Some(commands) = step.commands() {
-                for c in commands {
-                    self.state.apply(c);
-                }
-                if let Some(why) = self.state.rejected.take() {
-                    return Err(Error::Scenario {
-                        path: self.options.script.clone().unwrap_or_default(),
-                        message: format!("step {index} ({}): {why}", step.name()),
-                    });
-                }
-            }
-            let wait = match &step {
-                Step::Drag { to_mm, moves } => {
-                    let Some(p) = &self.state.probe else {
-                        return Err(Error::Scenario {
-                            path: self.options.script.clone().unwrap_or_default(),
-                            message: format!("step {index} (drag): the scenario has no [probe]"),
-                        });
-                    };
-                    let n = moves.unwrap_or(1);
-                    let from = p.at_mm;
-                    let points = (1..=n)
-                        .map(|k| {
-                            let a = k as f64 / n as f64;
-                            [
-                                from[0] + (to_mm[0] - from[0]) * a,
-                                from[1] + (to_mm[1] - from[1]) * a,
-                            ]
-                        })
-                        .collect();
-                    Some(Waiting::Fem(Instant::now(), points))
-                }
-                Step::Play { from_s, seconds } => {
-                    self.state.apply(Command::Play(from_s.unwrap_or(0.0)));
-                    let length = self
-                        .state
-                        .probe
-                        .as_ref()
-                        .map_or(0.0, |p| p.path_duration() - from_s.unwrap_or(0.0));
-                    let s = seconds.unwrap_or(length).max(0.0);
-                    Some(Waiting::Until(Instant::now() + Duration::from_secs_f64(s)))
-                }
-                Step::Scrub { t_s } => {
-                    self.state.apply(Command::Scrub(*t_s));
-                    Some(Waiting::Fem(Instant::now(), Vec::new()))
-                }
-                Step::Wait { seconds } => Some(Waiting::Until(
-                    Instant::now() + Duration::from_secs_f64(seconds.unwrap_or(0.0)),
-                )),
-                Step::Key { key } => {
-                    let action = keys::from_name(key).expect("checked when loaded");
-                    self.key_action(action)?;
-                    None
-                }
-                Step::Light {
-                    azimuth_deg,
-                    elevation_deg,
-                    intensity,
-                } => {
-                    if let Some((az, el)) = self.state.key_light {
-                        self.state.apply(Command::LightDirection(
-                            azimuth_deg.unwrap_or(az),
-                            elevation_deg.unwrap_or(el),
-                        ));
-                    }
-                    if let Some(i) = intensity {
-                        self.state.apply(Command::LightIntensity(*i));
-                    }
-                    None
-                }
-                Step::Screenshot { file, window } => {
-                    // Taken after this redraw's render, so it shows every
-                    // step before it.
-                    if *window {
-                        self.window_shots.push(file.clone());
-                    } else {
-                        self.screenshots.push(file.clone());
-                    }
-                    return Ok(());
-                }
-                Step::RecordStart {} => {
-                    if self.recorder.is_none() {
-                        self.toggle_record()?;
-                    }
-                    None
-                }
-                Step::RecordStop {} => {
-                    if self.recorder.is_some() {
-                        self.toggle_record()?;
-                    }
-                    None
-                }
-                Step::SavePath { file } => {
-                    self.save_path(file)?;
-                    if let Some(why) = self.state.rejected.take() {
-                        return Err(Error::Scenario {
-                            path: self.options.script.clone().unwrap_or_default(),
-                            message: format!("step {index} (save_path): {why}"),
-                        });
-                    }
-                    None
-                }
-                Step::Quit {} => {
-                    self.summary.quit = true;
-                    event_loop.exit();
-                    return Ok(());
-                }
-                _ if step.moves_the_simulation() => Some(Waiting::Fem(Instant::now(), Vec::new())),
-                _ => None,
-            };
-            let run = self.script.as_mut().expect("checked");
-            if wait.is_some() {
-                // Checked from the next redraw on, after this one has
-                // handed the step's target to the simulation.
-                run.waiting = wait;
-                return Ok(());
+                None => return Ok(true),
             }
         }
     }
+
+    /// An error of script step `index`.
+    fn step_error(&self, index: usize, what: &str, why: impl std::fmt::Display) -> Error {
+        Error::Scenario {
+            path: self.options.script.clone().unwrap_or_default(),
+            message: format!("step {index} ({what}): {why}"),
+        }
+    }
+
+    /// Performs one step (the `index`th).
+    fn perform_step(
+        &mut self,
+        step: &Step,
+        index: usize,
+        event_loop: &ActiveEventLoop,
+    ) -> Result<After> {
+        if let Some(commands) = step.commands() {
+            for c in commands {
+                self.state.apply(c);
+            }
+            if let Some(why) = self.state.rejected.take() {
+                return Err(self.step_error(index, step.name(), why));
+            }
+        }
+        let now = Instant::now();
+        Ok(match step {
+            Step::Drag { to_mm, moves } => {
+                let Some(p) = &self.state.probe else {
+                    return Err(self.step_error(index, "drag", "the scenario has no [probe]"));
+                };
+                After::Wait(Waiting::Fem(
+                    now,
+                    drag_moves(p.at_mm, *to_mm, moves.unwrap_or(1)),
+                ))
+            }
+            Step::Play { from_s, seconds } => {
+                self.state.apply(Command::Play(from_s.unwrap_or(0.0)));
+                let length = self
+                    .state
+                    .probe
+                    .as_ref()
+                    .map_or(0.0, |p| p.path_duration() - from_s.unwrap_or(0.0));
+                let s = seconds.unwrap_or(length).max(0.0);
+                After::Wait(Waiting::Until(now + Duration::from_secs_f64(s)))
+            }
+            Step::Scrub { t_s } => {
+                self.state.apply(Command::Scrub(*t_s));
+                After::Wait(Waiting::Fem(now, Vec::new()))
+            }
+            Step::Wait { seconds } => After::Wait(Waiting::Until(
+                now + Duration::from_secs_f64(seconds.unwrap_or(0.0)),
+            )),
+            Step::Key { key } => {
+                self.key_action(keys::from_name(key).expect("checked when loaded"))?;
+                After::Next
+            }
+            Step::Light {
+                azimuth_deg,
+                elevation_deg,
+                intensity,
+            } => {
+                if let Some((az, el)) = self.state.key_light {
+                    self.state.apply(Command::LightDirection(
+                        azimuth_deg.unwrap_or(az),
+                        elevation_deg.unwrap_or(el),
+                    ));
+                }
+                if let Some(i) = intensity {
+                    self.state.apply(Command::LightIntensity(*i));
+                }
+                After::Next
+            }
+            Step::Screenshot { file, window } => {
+                if *window {
+                    self.window_shots.push(file.clone());
+                } else {
+                    self.screenshots.push(file.clone());
+                }
+                After::Yield
+            }
+            Step::RecordStart {} | Step::RecordStop {} => {
+                if self.recorder.is_none() == matches!(step, Step::RecordStart {}) {
+                    self.toggle_record()?;
+                }
+                After::Next
+            }
+            Step::SavePath { file } => {
+                self.save_path(file)?;
+                if let Some(why) = self.state.rejected.take() {
+                    return Err(self.step_error(index, "save_path", why));
+                }
+                After::Next
+            }
+            Step::Quit {} => {
+                self.summary.quit = true;
+                event_loop.exit();
+                After::Yield
+            }
+            _ if step.moves_the_simulation() => After::Wait(Waiting::Fem(now, Vec::new())),
+            _ => After::Next,
+        })
+    }
+}
+
+/// The `n` probe positions of a drag from `from` to `to`, evenly spaced,
+/// `to` last.
+fn drag_moves(from: [f64; 2], to: [f64; 2], n: usize) -> Vec<[f64; 2]> {
+    (1..=n)
+        .map(|k| {
+            let a = k as f64 / n as f64;
+            [
+                from[0] + (to[0] - from[0]) * a,
+                from[1] + (to[1] - from[1]) * a,
+            ]
+        })
+        .collect()
 }
