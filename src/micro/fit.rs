@@ -34,6 +34,8 @@
 //! and another over the stretch points (a jump at r = 1 is allowed), floored
 //! at 1 µm.
 
+use std::collections::HashMap;
+
 use rayon::prelude::*;
 
 use super::convolve::{blur_along_axis, convolve_pass, PassParams};
@@ -451,78 +453,44 @@ pub fn search(
     mut count: impl FnMut(&Slopes, &Slopes, &[f32]) -> Result<Vec<Vec<u32>>>,
     mut progress: impl FnMut(f64),
 ) -> Result<FitResult> {
-    use std::collections::{BTreeMap, HashMap};
-    // α = 0 makes every σ equal: one key for all.
-    let key = |a: usize, s: usize| if a == ALPHA_ZERO { (a, 0) } else { (a, s) };
-    let mut scores: HashMap<(usize, usize), f64> = HashMap::new();
+    use std::collections::BTreeMap;
+    let key = grid_key;
+    let mut scores: Scores = HashMap::new();
     let mut directions: BTreeMap<usize, Slopes> = BTreeMap::new();
-    let mut evaluate = |s: usize,
-                        alphas: &mut dyn Iterator<Item = usize>,
-                        scores: &mut HashMap<(usize, usize), f64>|
-     -> Result<()> {
-        let mut fresh: Vec<usize> = Vec::new();
-        for a in alphas {
-            if !scores.contains_key(&key(a, s)) && !fresh.contains(&a) {
-                fresh.push(a);
+    let mut evaluate =
+        |s: usize, alphas: &mut dyn Iterator<Item = usize>, scores: &mut Scores| -> Result<()> {
+            let mut fresh: Vec<usize> = Vec::new();
+            for a in alphas {
+                if !scores.contains_key(&key(a, s)) && !fresh.contains(&a) {
+                    fresh.push(a);
+                }
             }
-        }
-        if fresh.is_empty() {
-            return Ok(());
-        }
-        if !directions.contains_key(&s) {
-            if directions.len() >= 4 * WINDOW.1 {
-                directions.clear();
+            if fresh.is_empty() {
+                return Ok(());
             }
-            directions.insert(s, objective.direction(s));
-        }
-        let alphas: Vec<f32> = fresh
-            .iter()
-            .map(|&a| grid_params(a, s).alpha as f32)
-            .collect();
-        let counts = count(&objective.base, &directions[&s], &alphas)?;
-        for (a, c) in fresh.into_iter().zip(counts) {
-            scores.insert(key(a, s), objective.distance(&c));
-        }
-        Ok(())
-    };
+            if !directions.contains_key(&s) {
+                if directions.len() >= 4 * WINDOW.1 {
+                    directions.clear();
+                }
+                directions.insert(s, objective.direction(s));
+            }
+            let alphas: Vec<f32> = fresh
+                .iter()
+                .map(|&a| grid_params(a, s).alpha as f32)
+                .collect();
+            let counts = count(&objective.base, &directions[&s], &alphas)?;
+            for (a, c) in fresh.into_iter().zip(counts) {
+                scores.insert(key(a, s), objective.distance(&c));
+            }
+            Ok(())
+        };
     // Stage 1: every σ, every tenth α.
     for s in 0..=SIGMA_STEPS {
         evaluate(s, &mut (0..=ALPHA_STEPS).step_by(COARSE_ALPHA), &mut scores)?;
         progress((s + 1) as f64 / (SIGMA_STEPS + 1) as f64);
     }
-    let score = |scores: &HashMap<(usize, usize), f64>, a: usize, s: usize| scores[&key(a, s)];
-    // Its local minima (no neighbour strictly better), best first.
-    let (na, ns) = (ALPHA_STEPS / COARSE_ALPHA, SIGMA_STEPS);
-    let mut minima: Vec<(f64, usize, usize)> = Vec::new();
-    for ca in 0..=na {
-        for s in 0..=ns {
-            let v = score(&scores, ca * COARSE_ALPHA, s);
-            let mut lowest = true;
-            for (da, ds) in [
-                (-1, -1),
-                (-1, 0),
-                (-1, 1),
-                (0, -1),
-                (0, 1),
-                (1, -1),
-                (1, 0),
-                (1, 1),
-            ] {
-                let (qa, qs) = (ca as i64 + da, s as i64 + ds);
-                if qa < 0 || qs < 0 || qa > na as i64 || qs > ns as i64 {
-                    continue;
-                }
-                if score(&scores, qa as usize * COARSE_ALPHA, qs as usize) < v {
-                    lowest = false;
-                    break;
-                }
-            }
-            if lowest {
-                minima.push((v, ca * COARSE_ALPHA, s));
-            }
-        }
-    }
-    minima.sort_by(|x, y| x.0.total_cmp(&y.0).then((x.1, x.2).cmp(&(y.1, y.2))));
+    let score = |scores: &Scores, a: usize, s: usize| scores[&grid_key(a, s)];
+    let minima = coarse_minima(&scores);
     // Stage 2: a full-resolution window from each of the best minima, moved
     // to its best candidate until that is its centre.
     let mut starts: Vec<(usize, usize)> = Vec::new();
@@ -557,6 +525,64 @@ pub fn search(
             (a, s) = (best.1, best.2);
         }
     }
+    Ok(optimum(&scores))
+}
+
+/// The objective of every candidate scored so far, by grid key.
+type Scores = std::collections::HashMap<(usize, usize), f64>;
+
+/// The key of candidate `(a, s)`: α = 0 makes every σ equal, so one key
+/// stands for all of them.
+fn grid_key(a: usize, s: usize) -> (usize, usize) {
+    if a == ALPHA_ZERO {
+        (a, 0)
+    } else {
+        (a, s)
+    }
+}
+
+/// The local minima of the first stage's grid (no neighbour strictly
+/// better), best first: (objective, α index, σ index).
+fn coarse_minima(scores: &Scores) -> Vec<(f64, usize, usize)> {
+    let score = |a: usize, s: usize| scores[&grid_key(a, s)];
+    // Its local minima (no neighbour strictly better), best first.
+    let (na, ns) = (ALPHA_STEPS / COARSE_ALPHA, SIGMA_STEPS);
+    let mut minima: Vec<(f64, usize, usize)> = Vec::new();
+    for ca in 0..=na {
+        for s in 0..=ns {
+            let v = score(ca * COARSE_ALPHA, s);
+            let mut lowest = true;
+            for (da, ds) in [
+                (-1, -1),
+                (-1, 0),
+                (-1, 1),
+                (0, -1),
+                (0, 1),
+                (1, -1),
+                (1, 0),
+                (1, 1),
+            ] {
+                let (qa, qs) = (ca as i64 + da, s as i64 + ds);
+                if qa < 0 || qs < 0 || qa > na as i64 || qs > ns as i64 {
+                    continue;
+                }
+                if score(qa as usize * COARSE_ALPHA, qs as usize) < v {
+                    lowest = false;
+                    break;
+                }
+            }
+            if lowest {
+                minima.push((v, ca * COARSE_ALPHA, s));
+            }
+        }
+    }
+    minima.sort_by(|x, y| x.0.total_cmp(&y.0).then((x.1, x.2).cmp(&(y.1, y.2))));
+    minima
+}
+
+/// The optimum over everything scored (ties to the first in (α, σ) order)
+/// with its valley.
+fn optimum(scores: &Scores) -> FitResult {
     // The optimum over everything scored, ties to the first in (α, σ) order.
     let mut all: Vec<((usize, usize), f64)> = scores.iter().map(|(&k, &v)| (k, v)).collect();
     all.sort_by(|x, y| x.1.total_cmp(&y.1).then(x.0.cmp(&y.0)));
@@ -580,14 +606,14 @@ pub fn search(
         };
         sigma_range = (sigma_range.0.min(lo), sigma_range.1.max(hi));
     }
-    Ok(FitResult {
+    FitResult {
         alpha: p.alpha,
         sigma_um: p.sigma_um,
         distance,
         evaluations: scores.len(),
         alpha_range,
         sigma_range_um: sigma_range,
-    })
+    }
 }
 
 /// One fitted sample: stretch ratio and parameters.
