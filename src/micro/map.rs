@@ -8,8 +8,9 @@
 
 use rayon::prelude::*;
 
-/// What reads outside the grid return.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// What reads outside the grid return (`wrap` or `clamp` in files).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Edge {
     /// Periodic: the map tiles.
     Wrap,

@@ -48,7 +48,7 @@ struct TiledIndex {
     tile: usize,
     texel_um: f64,
     height_unit_um: f64,
-    edge: String,
+    edge: Edge,
 }
 
 /// A tiled map on disk (its index; tiles are read on demand).
@@ -110,15 +110,7 @@ impl TiledMap {
                 return Err(bad(format!("{key} must be finite and > 0, got {v}")));
             }
         }
-        let edge = match index.edge.as_str() {
-            "wrap" => Edge::Wrap,
-            "clamp" => Edge::Clamp,
-            other => {
-                return Err(bad(format!(
-                    "edge must be \"wrap\" or \"clamp\", got \"{other}\""
-                )))
-            }
-        };
+        let edge = index.edge;
         Ok(TiledMap {
             dir,
             width: index.width,
@@ -146,10 +138,7 @@ impl TiledMap {
             tile,
             texel_um: like.texel_um,
             height_unit_um: like.height_unit_um,
-            edge: match like.edge {
-                Edge::Wrap => "wrap".into(),
-                Edge::Clamp => "clamp".into(),
-            },
+            edge: like.edge,
         };
         let text = toml::to_string(&index).expect("the index serialises");
         crate::mesh::io::write_atomically(&dir.join(INDEX_FILE), text.as_bytes())?;

@@ -24,7 +24,7 @@ pub struct MicrostructureSection {
     /// Micrometres per height unit of a map file without metadata. Default 1.
     pub height_unit_um: f64,
     /// Edge handling of a map file without metadata: `wrap` or `clamp`. Default `wrap`.
-    pub edge: String,
+    pub edge: Edge,
     /// The procedural generator's parameters (used when `map` is not set).
     pub procedural: ProceduralSection,
     /// A neutral map synthesized from an exemplar (Graham et al. 2013 §4) instead of
@@ -38,7 +38,7 @@ pub struct MicrostructureSection {
     /// `[microstructure.kernel]`), relative to the scenario file.
     pub kernel_file: Option<PathBuf>,
     /// Per-frame map formats: any of `png16`, `exr`. Default `["png16"]`.
-    pub formats: Vec<String>,
+    pub formats: Vec<MapFormat>,
     /// Also write the normal map of each deformed map. Default true.
     pub normal_maps: bool,
     /// Write the maps of every n-th frame (frame 0 always). Default 1.
@@ -68,12 +68,12 @@ impl Default for MicrostructureSection {
             map: None,
             texel_um: None,
             height_unit_um: 1.0,
-            edge: "wrap".into(),
+            edge: Edge::Wrap,
             procedural: ProceduralSection::default(),
             synthesis: None,
             kernel: None,
             kernel_file: None,
-            formats: vec!["png16".into()],
+            formats: vec![MapFormat::Png16],
             normal_maps: true,
             frame_stride: 1,
             roughness_table: false,
@@ -196,16 +196,14 @@ pub struct MicroSetup {
     pub raster_step: usize,
 }
 
-/// An edge rule named by the scenario key `key`: `wrap` or `clamp`.
-pub(super) fn edge_of(key: &str, text: &str) -> Result<Edge> {
-    match text {
-        "wrap" => Ok(Edge::Wrap),
-        "clamp" => Ok(Edge::Clamp),
-        other => Err(Error::parameter(
-            key,
-            format!("must be \"wrap\" or \"clamp\", got \"{other}\""),
-        )),
-    }
+/// A map file format of `formats` lists.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum MapFormat {
+    /// 16-bit grey PNG.
+    Png16,
+    /// OpenEXR, one f32 channel.
+    Exr,
 }
 
 fn table(points: &[[f64; 2]]) -> PiecewiseLinear {
@@ -220,20 +218,27 @@ impl MicrostructureSection {
     /// default texel size of a loaded one; `cache` is the folder for a
     /// synthesized map.
     pub fn setup(&self, base: &Path, patch_width_mm: f64, cache: &Path) -> Result<MicroSetup> {
-        let edge = edge_of("microstructure.edge", &self.edge)?;
-        let (mut png16, mut exr) = (false, false);
-        for (k, f) in self.formats.iter().enumerate() {
-            match f.as_str() {
-                "png16" => png16 = true,
-                "exr" => exr = true,
-                other => {
-                    return Err(Error::parameter(
-                        format!("microstructure.formats[{k}]"),
-                        format!("must be \"png16\" or \"exr\", got \"{other}\""),
-                    ))
-                }
-            }
-        }
+        self.check_frame_settings()?;
+        let model = self.kernel_model(base)?;
+        let neutral = self.neutral_map(base, patch_width_mm, cache)?;
+        let png16 = self.formats.contains(&MapFormat::Png16);
+        let exr = self.formats.contains(&MapFormat::Exr);
+        Ok(MicroSetup {
+            neutral,
+            model,
+            png16,
+            exr,
+            normal_maps: self.normal_maps,
+            frame_stride: self.frame_stride,
+            roughness_table: self.roughness_table,
+            incremental_tolerance: self.incremental_tolerance,
+            raster_step: self.strain_raster_step,
+        })
+    }
+
+    /// The per-frame settings: stride, incremental tolerance, raster step
+    /// and the height unit.
+    fn check_frame_settings(&self) -> Result<()> {
         if self.frame_stride == 0 {
             return Err(Error::parameter(
                 "microstructure.frame_stride",
@@ -264,6 +269,11 @@ impl MicrostructureSection {
                 format!("must be finite and > 0, got {unit}"),
             ));
         }
+        Ok(())
+    }
+
+    /// The kernel model: the table, the kernel file or the forehead's.
+    fn kernel_model(&self, base: &Path) -> Result<KernelModel> {
         let (model, key) = match (&self.kernel, &self.kernel_file) {
             (Some(_), Some(_)) => {
                 return Err(Error::parameter(
@@ -280,7 +290,14 @@ impl MicrostructureSection {
             }
         };
         model.validate(&key)?;
-        let neutral = match &self.map {
+        Ok(model)
+    }
+
+    /// The neutral map: synthesized (and cached), a tiled or whole map
+    /// file, or generated.
+    fn neutral_map(&self, base: &Path, patch_width_mm: f64, cache: &Path) -> Result<NeutralMap> {
+        let (edge, unit) = (self.edge, self.height_unit_um);
+        Ok(match &self.map {
             _ if self.synthesis.is_some() => {
                 if self.map.is_some() {
                     return Err(Error::parameter(
@@ -347,17 +364,6 @@ impl MicrostructureSection {
                 crate::gpu::precheck_map(params.size_px, params.size_px)?;
                 NeutralMap::Whole(generate(&params)?)
             }
-        };
-        Ok(MicroSetup {
-            neutral,
-            model,
-            png16,
-            exr,
-            normal_maps: self.normal_maps,
-            frame_stride: self.frame_stride,
-            roughness_table: self.roughness_table,
-            incremental_tolerance: self.incremental_tolerance,
-            raster_step: self.strain_raster_step,
         })
     }
 
@@ -377,7 +383,7 @@ impl MicrostructureSection {
                 "has no effect with a tiled map: its index.toml gives the texel size",
             ));
         }
-        if self.formats != ["exr"] {
+        if self.formats != [MapFormat::Exr] {
             return Err(Error::parameter(
                 "microstructure.formats",
                 format!(

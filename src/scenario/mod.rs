@@ -31,8 +31,8 @@ mod synth;
 
 pub use mesh::{MeshSection, RefineSection, ZoneKind};
 pub use micro::{
-    FitPoint, FitSample, FitSamples, KernelSection, MicroSetup, MicrostructureSection, NeutralMap,
-    ProceduralSection,
+    FitPoint, FitSample, FitSamples, KernelSection, MapFormat, MicroSetup, MicrostructureSection,
+    NeutralMap, ProceduralSection,
 };
 pub use render::{CameraSection, EnvironmentSection, LightSection, RenderSection};
 pub use simulation::{

@@ -22,7 +22,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::micro::{edge_of, ProceduralSection};
+use super::micro::{MapFormat, ProceduralSection};
 use crate::error::{shown, Error, Result};
 use crate::micro::io::{read_map, MapDefaults, TexelSize};
 use crate::micro::procedural::generate;
@@ -48,7 +48,7 @@ pub struct SynthOutputSection {
     /// `out/<file stem>`.
     pub dir: Option<PathBuf>,
     /// Map formats: any of `exr`, `png16`. Default both.
-    pub formats: Vec<String>,
+    pub formats: Vec<MapFormat>,
     /// Also write the normal map of the result. Default true.
     pub normal_maps: bool,
     /// Write `preview.png`: exemplar, mesostructure, result and a render of
@@ -62,7 +62,7 @@ impl Default for SynthOutputSection {
     fn default() -> Self {
         SynthOutputSection {
             dir: None,
-            formats: vec!["exr".into(), "png16".into()],
+            formats: vec![MapFormat::Exr, MapFormat::Png16],
             normal_maps: true,
             preview: true,
             preview_px: 384,
@@ -73,19 +73,8 @@ impl Default for SynthOutputSection {
 impl SynthOutputSection {
     /// (EXR, PNG16) from `formats`, checked.
     pub fn formats(&self) -> Result<(bool, bool)> {
-        let (mut exr, mut png) = (false, false);
-        for (k, f) in self.formats.iter().enumerate() {
-            match f.as_str() {
-                "exr" => exr = true,
-                "png16" => png = true,
-                other => {
-                    return Err(Error::parameter(
-                        format!("output.formats[{k}]"),
-                        format!("must be \"exr\" or \"png16\", got \"{other}\""),
-                    ))
-                }
-            }
-        }
+        let exr = self.formats.contains(&MapFormat::Exr);
+        let png = self.formats.contains(&MapFormat::Png16);
         if !(exr || png) {
             return Err(Error::parameter(
                 "output.formats",
@@ -116,7 +105,7 @@ pub struct SynthesisSection {
     pub exemplar_height_unit_um: f64,
     /// Edge rule of an exemplar file without metadata: `clamp` (a measured
     /// patch; default) or `wrap` (a tileable one).
-    pub exemplar_edge: String,
+    pub exemplar_edge: Edge,
     /// The exemplar's specular albedo (PNG, the exemplar's size): the
     /// output borrows the pixels its heights came from.
     pub exemplar_albedo: Option<PathBuf>,
@@ -130,7 +119,7 @@ pub struct SynthesisSection {
     /// Micrometres per height unit of a mesostructure file without metadata. Default 1.
     pub mesostructure_height_unit_um: f64,
     /// Edge rule of a mesostructure file without metadata. Default `clamp`.
-    pub mesostructure_edge: String,
+    pub mesostructure_edge: Edge,
     /// A generated mesostructure map instead of a file.
     pub mesostructure_generated: Option<GeneratedSection>,
     /// Output texel (µm). Default: the exemplar's.
@@ -139,7 +128,7 @@ pub struct SynthesisSection {
     pub size_px: Option<usize>,
     /// Output edge rule: `wrap` (a torus, tiles without a seam) or `clamp`.
     /// Default: the mesostructure map's, else `wrap`.
-    pub edge: Option<String>,
+    pub edge: Option<Edge>,
     /// σ (µm) that takes the exemplar to the mesostructure's detail.
     /// Default: one mesostructure texel.
     pub mesostructure_sigma_um: Option<f64>,
@@ -175,13 +164,13 @@ impl Default for SynthesisSection {
             exemplar: None,
             exemplar_texel_um: None,
             exemplar_height_unit_um: 1.0,
-            exemplar_edge: "clamp".into(),
+            exemplar_edge: Edge::Clamp,
             exemplar_albedo: None,
             exemplar_generated: None,
             mesostructure: None,
             mesostructure_texel_um: None,
             mesostructure_height_unit_um: 1.0,
-            mesostructure_edge: "clamp".into(),
+            mesostructure_edge: Edge::Clamp,
             mesostructure_generated: None,
             texel_um: None,
             size_px: None,
@@ -306,7 +295,7 @@ impl SynthesisSection {
                 &self.exemplar_generated,
                 self.exemplar_texel_um,
                 self.exemplar_height_unit_um,
-                &self.exemplar_edge,
+                self.exemplar_edge,
             )?
             .ok_or_else(|| {
                 Error::parameter(
@@ -322,7 +311,7 @@ impl SynthesisSection {
             &self.mesostructure_generated,
             self.mesostructure_texel_um,
             self.mesostructure_height_unit_um,
-            &self.mesostructure_edge,
+            self.mesostructure_edge,
         )?;
         let albedo = match &self.exemplar_albedo {
             None => None,
@@ -381,11 +370,7 @@ impl SynthesisSection {
             }
             (None, Some(_)) => None,
         };
-        let edge = self
-            .edge
-            .as_deref()
-            .map(|e| edge_of(&format!("{key}.edge"), e))
-            .transpose()?;
+        let edge = self.edge;
         Ok(SynthSources {
             exemplar,
             mesostructure,
@@ -407,9 +392,8 @@ impl SynthesisSection {
         generated: &Option<GeneratedSection>,
         texel_um: Option<f64>,
         unit: f64,
-        edge: &str,
+        edge: Edge,
     ) -> Result<Option<DisplacementMap>> {
-        let edge = edge_of(&format!("{key}.{name}_edge"), edge)?;
         if !(unit.is_finite() && unit > 0.0) {
             return Err(Error::parameter(
                 format!("{key}.{name}_height_unit_um"),
