@@ -20,8 +20,9 @@ pub struct Image {
     pub pixels: Vec<[f32; 4]>,
 }
 
-/// Frame file format.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Frame file format (`png8`, `png16`, `exr` in scenario files).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
 pub enum FrameFormat {
     /// 8-bit sRGB PNG.
     Png8,

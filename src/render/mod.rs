@@ -44,8 +44,9 @@ use std::path::PathBuf;
 pub use crate::imaging::{FrameFormat, Image};
 pub use renderer::{FrameStage, NormalMap, Renderer};
 
-/// A comparison mode.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+/// A comparison mode (`none`, `static`, `dynamic` in scenario files).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Mode {
     /// No microstructure: mesoscale normals and lobes.
     None = 0,
@@ -76,7 +77,8 @@ pub enum AlbedoSource {
 }
 
 /// Specular detail in the static and dynamic modes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Roughness {
     /// Normals of the displacement map.
     Microgeometry,
@@ -87,7 +89,8 @@ pub enum Roughness {
 
 /// How the skin pass reads the microstructure in the static and dynamic
 /// modes (with `Roughness::Microgeometry`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
 pub enum MicroFilter {
     /// The normal map looked up bilinearly at the pixel's centre: aliases
     /// where a pixel covers several texels (supersampling hides it).

@@ -83,9 +83,6 @@ pub fn region_lobes(region: &str, subject: usize, microscale: bool) -> Option<Lo
     Some(Lobes { m1, m2, w })
 }
 
-/// Region names accepted by [`region_lobes`].
-pub const REGIONS: [&str; 5] = ["forehead", "temple", "cheek", "nose", "chin"];
-
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }

@@ -10,7 +10,7 @@ use super::{non_negative, positive};
 use crate::error::{shown, Error, Result};
 use crate::render::camera::{Camera, Projection};
 use crate::render::light::{Environment, Light, LightKind, GRACE_CATHEDRAL, MAX_LIGHTS};
-use crate::render::specular::{region_lobes, Lobes, REGIONS};
+use crate::render::specular::{region_lobes, Lobes};
 use crate::render::{AlbedoSource, FrameFormat, MicroFilter, Mode, RenderSetup, Roughness};
 
 /// `[render]`.
@@ -37,10 +37,10 @@ pub struct RenderSection {
     /// (mesoscale surface, mesoscale BRDF), `static` (neutral
     /// microstructure), `dynamic` (deformed microstructure D′). Default
     /// `["dynamic"]`.
-    pub modes: Vec<String>,
+    pub modes: Vec<Mode>,
     /// Frame files: `png8` (sRGB), `png16` (sRGB, 16 bits) or `exr` (linear
     /// 32-bit floats). Default `png8`.
-    pub format: String,
+    pub format: FrameFormat,
     /// Render every n-th frame (frame 0 always). Default 1.
     pub frame_stride: usize,
     /// Also encode `render/<mode>.mp4` with ffmpeg (must be installed). Default false.
@@ -62,7 +62,7 @@ pub struct RenderSection {
     pub albedo: String,
     /// Facial region of the measured specular lobes (Graham et al. 2013 Tables 1–2):
     /// forehead, temple, cheek, nose, chin. Default `forehead`.
-    pub region: String,
+    pub region: Region,
     /// Subject of the measured lobes, 1 or 2. Default 1.
     pub subject: usize,
     /// Explicit two-lobe microscale fit `[m1, m2, w]` in place of the region's.
@@ -74,13 +74,13 @@ pub struct RenderSection {
     /// of the displacement map) or `anisotropic` (mesoscale normals with
     /// Beckmann roughness along the strain axes following the map's m(r),
     /// Nagano et al. 2014). Default `microgeometry`.
-    pub roughness: String,
+    pub roughness: Roughness,
     /// How `microgeometry` specular reads the map: `moments` (the slope
     /// moments' mip pyramid over each pixel's footprint, LEAN mapping:
     /// antialiased, no sparkle) or `none` (the normal map looked up
     /// bilinearly at the pixel centre, which aliases unless supersampled).
     /// Default `moments`.
-    pub microstructure_filter: String,
+    pub microstructure_filter: MicroFilter,
     /// The camera.
     pub camera: CameraSection,
     /// Up to four lights. Default: one directional light from above-left-front.
@@ -96,9 +96,9 @@ impl Default for RenderSection {
             height_px: 360,
             supersample: 1,
             msaa: 4,
-            modes: vec!["dynamic".into()],
+            modes: vec![Mode::Dynamic],
             difference: false,
-            format: "png8".into(),
+            format: FrameFormat::Png8,
             frame_stride: 1,
             mp4: false,
             texture_px: 1024,
@@ -108,12 +108,12 @@ impl Default for RenderSection {
             draw_probe: true,
             translucency: true,
             albedo: "procedural".into(),
-            region: "forehead".into(),
+            region: Region::Forehead,
             subject: 1,
             lobes: None,
             specular_intensity: 1.0,
-            roughness: "microgeometry".into(),
-            microstructure_filter: "moments".into(),
+            roughness: Roughness::Microgeometry,
+            microstructure_filter: MicroFilter::Moments,
             camera: CameraSection::default(),
             lights: None,
             environment: EnvironmentSection::default(),
@@ -121,12 +121,71 @@ impl Default for RenderSection {
     }
 }
 
+/// `render.region`: the facial region of the measured specular lobes.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum Region {
+    /// Forehead.
+    Forehead,
+    /// Temple.
+    Temple,
+    /// Cheek.
+    Cheek,
+    /// Nose.
+    Nose,
+    /// Chin.
+    Chin,
+}
+
+impl Region {
+    /// The name of the lobe tables ([`region_lobes`]).
+    pub fn name(self) -> &'static str {
+        match self {
+            Region::Forehead => "forehead",
+            Region::Temple => "temple",
+            Region::Cheek => "cheek",
+            Region::Nose => "nose",
+            Region::Chin => "chin",
+        }
+    }
+}
+
+/// `render.camera.projection`.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum ProjectionKind {
+    /// Perspective with `fov_deg`.
+    Perspective,
+    /// Orthographic with `height_mm`.
+    Orthographic,
+}
+
+/// `render.lights[k].kind`.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum LightType {
+    /// Parallel light along `direction`.
+    Directional,
+    /// A point light at `position_mm`.
+    Point,
+}
+
+/// `render.environment.preset`.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum EnvironmentPreset {
+    /// Grace Cathedral's irradiance (Ramamoorthi & Hanrahan 2001).
+    GraceCathedral,
+    /// No environment light.
+    None,
+}
+
 /// `[render.camera]`.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct CameraSection {
     /// `perspective` or `orthographic`. Default `perspective`.
-    pub projection: String,
+    pub projection: ProjectionKind,
     /// Eye position (mm). Default `[0, -14, 12]`.
     #[serde(deserialize_with = "super::arrays::exact")]
     pub eye_mm: [f64; 3],
@@ -145,7 +204,7 @@ pub struct CameraSection {
 impl Default for CameraSection {
     fn default() -> Self {
         CameraSection {
-            projection: "perspective".into(),
+            projection: ProjectionKind::Perspective,
             eye_mm: [0.0, -14.0, 12.0],
             target_mm: [0.0, 0.0, -0.5],
             up: [0.0, 0.0, 1.0],
@@ -160,7 +219,7 @@ impl Default for CameraSection {
 #[serde(deny_unknown_fields)]
 pub struct LightSection {
     /// `directional` or `point`.
-    pub kind: String,
+    pub kind: LightType,
     /// Direction the light travels (directional).
     #[serde(default, deserialize_with = "super::arrays::exact_opt")]
     pub direction: Option<[f64; 3]>,
@@ -185,7 +244,7 @@ fn white() -> [f64; 3] {
 pub struct EnvironmentSection {
     /// `grace_cathedral` (Ramamoorthi & Hanrahan 2001) or `none`; not
     /// together with `coefficients`. Default `grace_cathedral`.
-    pub preset: Option<String>,
+    pub preset: Option<EnvironmentPreset>,
     /// Nine RGB SH radiance coefficients L00, L1−1, L10, L11, L2−2, L2−1,
     /// L20, L21, L22 (z up).
     #[serde(default, deserialize_with = "super::arrays::exact_rows_opt")]
@@ -277,16 +336,6 @@ fn in_range(key: &str, v: usize, lo: usize, hi: usize) -> Result<usize> {
     }
 }
 
-fn one_of<'a>(key: &str, v: &str, allowed: &[&'a str]) -> Result<&'a str> {
-    allowed.iter().find(|a| **a == v).copied().ok_or_else(|| {
-        let list: Vec<String> = allowed.iter().map(|a| format!("\"{a}\"")).collect();
-        Error::parameter(
-            key,
-            format!("must be one of {}, got \"{v}\"", list.join(", ")),
-        )
-    })
-}
-
 impl CameraSection {
     fn camera(&self) -> Result<Camera> {
         let eye = finite_vec("render.camera.eye_mm", self.eye_mm)?;
@@ -305,12 +354,8 @@ impl CameraSection {
                 format!("must not be parallel to the view direction {view}"),
             ));
         }
-        let projection = match one_of(
-            "render.camera.projection",
-            &self.projection,
-            &["perspective", "orthographic"],
-        )? {
-            "perspective" => {
+        let projection = match self.projection {
+            ProjectionKind::Perspective => {
                 let fov = self.fov_deg;
                 if !(fov.is_finite() && fov > 0.0 && fov < 170.0) {
                     return Err(Error::parameter(
@@ -322,7 +367,7 @@ impl CameraSection {
                     fov_deg: fov as f32,
                 }
             }
-            _ => Projection::Orthographic {
+            ProjectionKind::Orthographic => Projection::Orthographic {
                 height_mm: positive("render.camera.height_mm", self.height_mm)? as f32,
             },
         };
@@ -338,26 +383,25 @@ impl CameraSection {
 impl LightSection {
     fn light(&self, k: usize) -> Result<Light> {
         let key = |field: &str| format!("render.lights[{k}].{field}");
-        let kind = one_of(&key("kind"), &self.kind, &["directional", "point"])?;
         // A key of the other kind of light would be silently ignored.
-        let (unused, used_by) = match kind {
-            "directional" => ("position_mm", self.position_mm.is_some()),
-            _ => ("direction", self.direction.is_some()),
+        let (unused, used_by, name) = match self.kind {
+            LightType::Directional => ("position_mm", self.position_mm.is_some(), "directional"),
+            LightType::Point => ("direction", self.direction.is_some(), "point"),
         };
         if used_by {
             return Err(Error::parameter(
                 key(unused),
-                format!("has no effect on a {kind} light; remove it"),
+                format!("has no effect on a {name} light; remove it"),
             ));
         }
-        let kind = match kind {
-            "directional" => {
+        let kind = match self.kind {
+            LightType::Directional => {
                 let d = self.direction.ok_or_else(|| {
                     Error::parameter(key("direction"), "is required for a directional light")
                 })?;
                 LightKind::Directional(unit_vec(&key("direction"), d)?)
             }
-            _ => {
+            LightType::Point => {
                 let p = self.position_mm.ok_or_else(|| {
                     Error::parameter(key("position_mm"), "is required for a point light")
                 })?;
@@ -397,13 +441,9 @@ impl EnvironmentSection {
                 }
                 c
             }
-            None => match one_of(
-                "render.environment.preset",
-                self.preset.as_deref().unwrap_or("grace_cathedral"),
-                &["grace_cathedral", "none"],
-            )? {
-                "none" => return Ok(None),
-                _ => GRACE_CATHEDRAL,
+            None => match self.preset.unwrap_or(EnvironmentPreset::GraceCathedral) {
+                EnvironmentPreset::None => return Ok(None),
+                EnvironmentPreset::GraceCathedral => GRACE_CATHEDRAL,
             },
         };
         Ok(Some(Environment {
@@ -417,13 +457,9 @@ impl RenderSection {
     /// `modes`: known, needing a microstructure where they do, each once.
     fn modes(&self, has_micro: bool) -> Result<Vec<Mode>> {
         let mut modes = Vec::new();
-        for (k, m) in self.modes.iter().enumerate() {
+        for (k, &mode) in self.modes.iter().enumerate() {
             let key = format!("render.modes[{k}]");
-            let mode = match one_of(&key, m, &["none", "static", "dynamic"])? {
-                "none" => Mode::None,
-                "static" => Mode::Static,
-                _ => Mode::Dynamic,
-            };
+            let m = mode.name();
             if mode != Mode::None && !has_micro {
                 return Err(Error::parameter(
                     key,
@@ -440,7 +476,7 @@ impl RenderSection {
 
     /// Microscale lobes (explicit or the region's) and mesoscale lobes.
     fn lobes(&self) -> Result<(Lobes, Lobes)> {
-        let region = one_of("render.region", &self.region, &REGIONS)?;
+        let region = self.region.name();
         if !(1..=2).contains(&self.subject) {
             return Err(Error::parameter(
                 "render.subject",
@@ -547,11 +583,7 @@ impl RenderSection {
                 "needs both \"static\" and \"dynamic\" in render.modes",
             ));
         }
-        let format = match one_of("render.format", &self.format, &["png8", "png16", "exr"])? {
-            "png8" => FrameFormat::Png8,
-            "png16" => FrameFormat::Png16,
-            _ => FrameFormat::Exr,
-        };
+        let format = self.format;
         if self.frame_stride == 0 {
             return Err(Error::parameter(
                 "render.frame_stride",
@@ -579,22 +611,6 @@ impl RenderSection {
             ));
         }
         let (micro_lobes, meso_lobes) = self.lobes()?;
-        let roughness = match one_of(
-            "render.roughness",
-            &self.roughness,
-            &["microgeometry", "anisotropic"],
-        )? {
-            "microgeometry" => Roughness::Microgeometry,
-            _ => Roughness::Anisotropic,
-        };
-        let microstructure_filter = match one_of(
-            "render.microstructure_filter",
-            &self.microstructure_filter,
-            &["moments", "none"],
-        )? {
-            "moments" => MicroFilter::Moments,
-            _ => MicroFilter::None,
-        };
         let albedo = self.albedo(base)?;
         let lights = self.lights()?;
         Ok(RenderSetup {
@@ -617,8 +633,8 @@ impl RenderSection {
             micro_lobes,
             meso_lobes,
             specular_intensity: rho_s as f32,
-            roughness,
-            microstructure_filter,
+            roughness: self.roughness,
+            microstructure_filter: self.microstructure_filter,
             camera: self.camera.camera()?,
             lights,
             environment: self.environment.environment()?,

@@ -94,7 +94,7 @@ fn load(options: &ViewOptions) -> Result<Loaded> {
             let base = path.parent().unwrap_or(Path::new("."));
             let mut section = crate::scenario::RenderSection::default();
             if setup.micro.is_none() {
-                section.modes = vec!["none".into()];
+                section.modes = vec![crate::render::Mode::None];
             }
             section.setup(base, setup.micro.is_some())?
         }
