@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{Scenario, StrainImageSettings};
 use crate::error::{Error, Result};
-use crate::surface::{AnimatedSurface, ReadOptions, UvLayout, UvPiece};
+use crate::surface::{AnimatedSurface, LengthUnit, ReadOptions, UvLayout, UvPiece};
 
 /// `[surface]`: the rest mesh with UVs and its animation.
 #[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
@@ -28,13 +28,13 @@ pub struct SurfaceSection {
     pub animation: Option<String>,
     /// Length unit of the file: `"mm"`, `"cm"`, `"m"` or `"in"`. Default
     /// `"m"` for glTF (the format's unit); required for OBJ.
-    pub units: Option<String>,
+    pub units: Option<LengthUnit>,
     /// Frames per second: the sampling of a glTF animation, the rate of an
     /// OBJ sequence. Default 30.
     pub frame_rate_hz: Option<f64>,
     /// UVs outside [0, 1]: `"unit"` (refused, default), `"udim"` (UDIM
     /// tiles, maps per tile) or `"wrap"` (one repeating texture).
-    pub uv_layout: Option<String>,
+    pub uv_layout: Option<UvLayout>,
 }
 
 /// A validated surface scenario, ready to run.
@@ -95,16 +95,9 @@ impl SurfaceSetup {
                 format!("must be > 0, got {rate}"),
             ));
         }
-        let layout = UvLayout::parse(
-            "surface.uv_layout",
-            section.uv_layout.as_deref().unwrap_or("unit"),
-        )?;
+        let layout = section.uv_layout.unwrap_or_default();
         let options = ReadOptions {
-            mm_per_unit: section
-                .units
-                .as_deref()
-                .map(|u| crate::surface::unit_mm("surface.units", u))
-                .transpose()?,
+            mm_per_unit: section.units.map(LengthUnit::mm),
             frame_rate_hz: rate,
             node: section.node.clone(),
             animation: section.animation.clone(),
@@ -155,7 +148,7 @@ impl SurfaceSetup {
                 format!(
                     "is \"{}\", but [render] draws surfaces whose UVs lie in [0, 1] only; \
                      remove [render] or lay the UVs out in the unit square",
-                    section.uv_layout.as_deref().unwrap_or_default()
+                    layout.name()
                 ),
             ));
         }

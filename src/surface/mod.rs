@@ -42,8 +42,10 @@ pub struct AnimatedSurface {
     pub frame_rate_hz: f64,
 }
 
-/// How UVs outside the unit square are read.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// How UVs outside the unit square are read (`unit`, `udim` or `wrap` in
+/// scenario files).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
 pub enum UvLayout {
     /// Every UV lies in [0, 1]² (an error otherwise).
     #[default]
@@ -57,16 +59,12 @@ pub enum UvLayout {
 }
 
 impl UvLayout {
-    /// Parses `unit`, `udim` or `wrap` (the key names the setting in errors).
-    pub fn parse(key: &str, text: &str) -> Result<UvLayout> {
-        match text {
-            "unit" => Ok(UvLayout::Unit),
-            "udim" => Ok(UvLayout::Udim),
-            "wrap" => Ok(UvLayout::Wrap),
-            other => Err(Error::parameter(
-                key,
-                format!("must be \"unit\", \"udim\" or \"wrap\", got \"{other}\""),
-            )),
+    /// Its name in scenario files.
+    pub fn name(self) -> &'static str {
+        match self {
+            UvLayout::Unit => "unit",
+            UvLayout::Udim => "udim",
+            UvLayout::Wrap => "wrap",
         }
     }
 }
@@ -455,17 +453,30 @@ impl Default for ReadOptions {
     }
 }
 
-/// Millimetres per unit for `units` = `"mm"`, `"cm"`, `"m"`, `"in"`.
-pub fn unit_mm(key: &str, units: &str) -> Result<f64> {
-    match units {
-        "mm" => Ok(1.0),
-        "cm" => Ok(10.0),
-        "m" => Ok(1000.0),
-        "in" => Ok(25.4),
-        other => Err(Error::parameter(
-            key,
-            format!("must be \"mm\", \"cm\", \"m\" or \"in\", got \"{other}\""),
-        )),
+/// The length unit of a surface file (`mm`, `cm`, `m` or `in` in
+/// scenario files).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LengthUnit {
+    /// Millimetres.
+    Mm,
+    /// Centimetres.
+    Cm,
+    /// Metres.
+    M,
+    /// Inches.
+    In,
+}
+
+impl LengthUnit {
+    /// Millimetres per unit.
+    pub fn mm(self) -> f64 {
+        match self {
+            LengthUnit::Mm => 1.0,
+            LengthUnit::Cm => 10.0,
+            LengthUnit::M => 1000.0,
+            LengthUnit::In => 25.4,
+        }
     }
 }
 

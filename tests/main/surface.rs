@@ -581,7 +581,10 @@ fn surface_scenarios_refuse_fem_sections_and_bad_keys() {
     let e = load("units = \"mm\"\nframe_rate_hz = -3\n").unwrap_err();
     assert!(e.contains("surface.frame_rate_hz"), "{e}");
     let e = load("units = \"furlong\"\n").unwrap_err();
-    assert!(e.contains("units"), "{e}");
+    assert!(
+        e.contains("surface.units must be \"mm\", \"cm\", \"m\" or \"in\", got \"furlong\""),
+        "{e}"
+    );
     let e = load("units = \"mm\"\nnod = \"x\"\n").unwrap_err();
     assert!(e.contains("surface.nod") && e.contains("node"), "{e}");
     let e = load("units = \"mm\"\nnode = \"x\"\n").unwrap_err();
