@@ -111,6 +111,39 @@ pub struct BoundaryConditions {
     pub prescribed: Vec<Prescribed>,
 }
 
+/// One of the geometric node sets (`top`, `bottom`, `x_min`, `x_max`,
+/// `y_min`, `y_max` in scenario files).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NodeSet {
+    /// Nodes at z_max.
+    Top,
+    /// Nodes at z_min.
+    Bottom,
+    /// Nodes at x_min.
+    XMin,
+    /// Nodes at x_max.
+    XMax,
+    /// Nodes at y_min.
+    YMin,
+    /// Nodes at y_max.
+    YMax,
+}
+
+impl NodeSet {
+    /// Its name in scenario files.
+    pub fn name(self) -> &'static str {
+        match self {
+            NodeSet::Top => "top",
+            NodeSet::Bottom => "bottom",
+            NodeSet::XMin => "x_min",
+            NodeSet::XMax => "x_max",
+            NodeSet::YMin => "y_min",
+            NodeSet::YMax => "y_max",
+        }
+    }
+}
+
 /// The geometric node sets of a box mesh.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct NodeSets {
@@ -147,17 +180,16 @@ impl NodeSets {
         }
     }
 
-    /// A set by name: `bottom`, `top`, `x_min`, `x_max`, `y_min`, `y_max`.
-    pub fn by_name(&self, name: &str) -> Option<&[usize]> {
-        Some(match name {
-            "bottom" => &self.bottom,
-            "top" => &self.top,
-            "x_min" => &self.sides[0],
-            "x_max" => &self.sides[1],
-            "y_min" => &self.sides[2],
-            "y_max" => &self.sides[3],
-            _ => return None,
-        })
+    /// The nodes of the set `set`.
+    pub fn get(&self, set: NodeSet) -> &[usize] {
+        match set {
+            NodeSet::Bottom => &self.bottom,
+            NodeSet::Top => &self.top,
+            NodeSet::XMin => &self.sides[0],
+            NodeSet::XMax => &self.sides[1],
+            NodeSet::YMin => &self.sides[2],
+            NodeSet::YMax => &self.sides[3],
+        }
     }
 }
 

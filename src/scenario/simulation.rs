@@ -110,7 +110,7 @@ pub enum Integrator {
 #[serde(deny_unknown_fields)]
 pub struct PrescribedSection {
     /// `top`, `bottom`, `x_min`, `x_max`, `y_min` or `y_max`.
-    pub set: String,
+    pub set: crate::fem::boundary::NodeSet,
     /// Rows `[time_s, dx_mm, dy_mm, dz_mm]`.
     #[serde(deserialize_with = "super::arrays::exact_rows")]
     pub displacement_mm: Vec<[f64; 4]>,
@@ -342,18 +342,9 @@ impl BoundarySection {
         let mut prescribed = Vec::new();
         for (i, p) in self.prescribed.iter().enumerate() {
             let key = format!("boundary.prescribed[{i}]");
-            let nodes = sets.by_name(&p.set).ok_or_else(|| {
-                Error::parameter(
-                    format!("{key}.set"),
-                    format!(
-                        "must be top, bottom, x_min, x_max, y_min or y_max, got \"{}\"",
-                        p.set
-                    ),
-                )
-            })?;
             prescribed.push(Prescribed {
-                name: p.set.clone(),
-                nodes: nodes.to_vec(),
+                name: p.set.name().to_string(),
+                nodes: sets.get(p.set).to_vec(),
                 displacement: vector_keyframes(
                     &format!("{key}.displacement_mm"),
                     &p.displacement_mm,
