@@ -94,7 +94,7 @@ pub fn bench_render(
     };
     let mesh = &setup.mesh;
     simulate(&setup, |m, sim| {
-        let field = SurfaceField::new(&mesh.top, &mesh.positions, &sim.x);
+        let field = SurfaceField::new(&mesh.top, &mesh.positions, sim.positions());
         let start = Instant::now();
         if let Some(chain) = chain.as_mut() {
             chain.run(&field)?;
@@ -103,8 +103,13 @@ pub fn bench_render(
         let ctx = device(chain.as_ref(), own.as_ref());
         let start = Instant::now();
         let probe = setup.simulation.probe.as_ref().map(|p| p.pose(m.time_s));
-        let geometry =
-            crate::render::scene::build(mesh, &sim.x, &field, probe.as_ref(), render.tessellate);
+        let geometry = crate::render::scene::build(
+            mesh,
+            sim.positions(),
+            &field,
+            probe.as_ref(),
+            render.tessellate,
+        );
         renderer.set_geometry(ctx, &geometry);
         let geometry_ms = start.elapsed().as_secs_f64() * 1e3;
         // Warm-up (pipelines, first use of the resources).

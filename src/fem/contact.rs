@@ -499,10 +499,10 @@ pub fn solve_with_contact(
     }
     let previous = state.last_pose.unwrap_or(*pose);
     if state.solved.len() != sim.num_nodes() {
-        state.solved = sim.x.clone();
+        state.solved = sim.state.x.clone();
     }
     for &v in &state.candidates {
-        sim.x[v] = state.solved[v];
+        sim.state.x[v] = state.solved[v];
     }
     // A new solve: every active node's slip reference rides along with the
     // probe from where the node is; sticking nodes are held there, sliding
@@ -558,7 +558,7 @@ pub fn solve_with_contact(
         changed
     })?;
     state.last_pose = Some(*pose);
-    state.solved.clone_from(&sim.x);
+    state.solved.clone_from(&sim.state.x);
     let mut report = ContactReport {
         newton_iterations: stats.iterations,
         cg_iterations: stats.cg_iterations,
@@ -610,7 +610,7 @@ fn update_active_set(
     let largest = forces.iter().map(|(_, f)| f.norm()).fold(0.0, f64::max);
     let release_below = if settled { -1e-3 } else { -1e-9 } * largest;
     for (v, f) in forces {
-        let (gap, n) = frame.pose.distance(&sim.x[v]);
+        let (gap, n) = frame.pose.distance(&sim.state.x[v]);
         let normal = f.dot(&n);
         let c = state.stiffness[v];
         // A sliding Coulomb node whose normal reaction vanishes is released
@@ -637,7 +637,7 @@ fn update_active_set(
         let reference = state.reference[&v];
         let next = match state.active[&v] {
             NodeContact::Stick { anchor } => {
-                let xi = tangential(&(c * (sim.x[v] - anchor) - f), &n);
+                let xi = tangential(&(c * (sim.state.x[v] - anchor) - f), &n);
                 if xi.norm() > limit * (1.0 + 1e-9) + 1e-12 * largest {
                     changed = true;
                     counts[1] += 1;
@@ -651,7 +651,7 @@ fn update_active_set(
             NodeContact::Slide { friction } => {
                 // Against the friction of the last step: a node that now
                 // moves along its friction force (or not at all) sticks.
-                let xi = tangential(&(c * (sim.x[v] - reference) - friction), &n);
+                let xi = tangential(&(c * (sim.state.x[v] - reference) - friction), &n);
                 if xi.norm() <= limit {
                     changed = true;
                     counts[2] += 1;
@@ -665,7 +665,7 @@ fn update_active_set(
                     // current value, for the stick test above.
                     let dir = -state
                         .slip_load(v, n, friction, mu)
-                        .force(&sim.x[v])
+                        .force(&sim.state.x[v])
                         .try_normalize(1e-300)
                         .unwrap_or_else(Vec3::zeros);
                     NodeContact::Slide {
@@ -681,9 +681,9 @@ fn update_active_set(
         if state.active.contains_key(&v) {
             continue;
         }
-        let (gap, _) = frame.pose.distance(&sim.x[v]);
+        let (gap, _) = frame.pose.distance(&sim.state.x[v]);
         if gap < -activate_below * state.tolerance[v] {
-            let q = frame.pose.project(&sim.x[v]).0;
+            let q = frame.pose.project(&sim.state.x[v]).0;
             let (c, reference) = match frame.mode {
                 ContactMode::Frictionless => (
                     NodeContact::Slide {
@@ -744,7 +744,7 @@ fn drop_tilted_planes(
     let before = state.planes.len();
     state
         .planes
-        .retain(|&v, plane| (plane.1 - frame.pose.distance(&sim.x[v]).1).norm() <= MAX_TILT);
+        .retain(|&v, plane| (plane.1 - frame.pose.distance(&sim.state.x[v]).1).norm() <= MAX_TILT);
     state.planes.len() != before
 }
 
@@ -752,34 +752,36 @@ fn drop_tilted_planes(
 /// sticking nodes fixed at their anchors, sliding nodes held along the
 /// normal at their closest probe point with their friction force.
 fn apply_contact(sim: &mut super::integrate::Simulation, frame: &Frame, state: &mut ContactState) {
-    sim.filters.copy_from_slice(frame.base_filters);
-    sim.targets.copy_from_slice(frame.base_targets);
-    sim.f_ext.copy_from_slice(frame.base_ext);
-    sim.slip_loads.clear();
+    sim.loads.filters.copy_from_slice(frame.base_filters);
+    sim.loads.targets.copy_from_slice(frame.base_targets);
+    sim.loads.f_ext.copy_from_slice(frame.base_ext);
+    sim.loads.slip_loads.clear();
     state.planes.retain(|v, _| state.active.contains_key(v));
     for (&v, c) in &state.active {
         match *c {
             NodeContact::Stick { anchor } => {
-                sim.filters[v] = super::solve::Filter::Fixed;
-                sim.targets[v] = anchor;
+                sim.loads.filters[v] = super::solve::Filter::Fixed;
+                sim.loads.targets[v] = anchor;
             }
             NodeContact::Slide { friction } => {
                 let (q, n) = match state.planes.get(&v) {
                     Some(&plane)
-                        if frame.pose.distance(&sim.x[v]).0.abs() <= sim.position_tol() =>
+                        if frame.pose.distance(&sim.state.x[v]).0.abs() <= sim.position_tol() =>
                     {
                         plane
                     }
                     _ => {
-                        let plane = frame.pose.project(&sim.x[v]);
+                        let plane = frame.pose.project(&sim.state.x[v]);
                         state.planes.insert(v, plane);
                         plane
                     }
                 };
-                sim.filters[v] = sim.filters[v].constrain(&n);
-                sim.targets[v] = q;
+                sim.loads.filters[v] = sim.loads.filters[v].constrain(&n);
+                sim.loads.targets[v] = q;
                 if let ContactMode::Coulomb(mu) = frame.mode {
-                    sim.slip_loads.push(state.slip_load(v, n, friction, mu));
+                    sim.loads
+                        .slip_loads
+                        .push(state.slip_load(v, n, friction, mu));
                 }
             }
         }
@@ -807,12 +809,12 @@ fn finish_report(
             if touching == 0 {
                 return 0.0;
             }
-            let [a, b, c] = tri.map(|v| sim.x[v]);
+            let [a, b, c] = tri.map(|v| sim.state.x[v]);
             (b - a).cross(&(c - a)).norm() / 2.0 * touching as f64 / 3.0
         })
         .sum();
     for &v in &state.candidates {
-        let pen = (-pose.distance(&sim.x[v]).0).max(0.0);
+        let pen = (-pose.distance(&sim.state.x[v]).0).max(0.0);
         report.max_penetration_mm = report.max_penetration_mm.max(pen);
         report.max_penetration_ratio = report
             .max_penetration_ratio

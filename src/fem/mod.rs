@@ -11,6 +11,7 @@ pub mod corotation;
 pub mod integrate;
 pub mod load_steps;
 pub mod material;
+mod newton;
 pub mod solve;
 
 pub use corotation::{Corotation, RestElement, TangentKind};

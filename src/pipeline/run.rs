@@ -132,23 +132,27 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<FemRun
     }
     let result = simulate(setup, |m, sim| {
         let mut m = *m;
-        let field = SurfaceField::new(&mesh.top, &mesh.positions, &sim.x);
+        let field = SurfaceField::new(&mesh.top, &mesh.positions, sim.positions());
         let (rs, rt, folded) = field.extremes();
         m.rs_range = [rs.0, rs.1];
         m.rt_range = [rt.0, rt.1];
         m.folded_vertices = folded;
         let strains = std::cell::OnceCell::new();
         let grid = (outputs.wants_grid() || setup.write_vtkhdf).then(|| {
-            let strains = strains.get_or_init(|| ElementStrains::compute(mesh, &sim.x));
-            export::frame_grid(mesh, &sim.x, strains, &field)
+            let strains = strains.get_or_init(|| ElementStrains::compute(mesh, sim.positions()));
+            export::frame_grid(mesh, sim.positions(), strains, &field)
         });
         if let (true, Some(grid)) = (setup.write_vtkhdf, &grid) {
             vtkhdf::push(&mut hdf, dir, setup, m.time_s, grid)?;
         }
         if let Some(surface) = exported.as_mut() {
-            surface
-                .frames
-                .push(mesh.top.vertices.iter().map(|&v| sim.x[v]).collect());
+            surface.frames.push(
+                mesh.top
+                    .vertices
+                    .iter()
+                    .map(|&v| sim.positions()[v])
+                    .collect(),
+            );
             if setup.write_surface_obj {
                 let path = dir
                     .join("surface")
@@ -158,7 +162,7 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<FemRun
         }
         let probe = setup.simulation.probe.as_ref().map(|p| p.pose(m.time_s));
         let geometry = |tessellate: usize| {
-            crate::render::scene::build(mesh, &sim.x, &field, probe.as_ref(), tessellate)
+            crate::render::scene::build(mesh, sim.positions(), &field, probe.as_ref(), tessellate)
         };
         outputs.frame(&FrameInput {
             frame: m.frame,
@@ -172,7 +176,7 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<FemRun
             metrics: &m,
             total_frames: setup.simulation.frames + 1,
             mesh,
-            positions: &sim.x,
+            positions: sim.positions(),
             surface: &field,
             strains: &strains,
         });

@@ -155,7 +155,7 @@ impl Stepper {
             // (constant velocity), scaled to this step's length (the contact
             // solve starts its candidates where they were solved).
             if s.predict {
-                let solved = sim.x.clone();
+                let solved = sim.positions().to_vec();
                 let t_solved = t_prev + (t - t_prev) * (k - 1) as f64 / substeps as f64;
                 if let Some((before, t_before)) = &self.last_solved {
                     if t_solved > *t_before {
@@ -186,8 +186,7 @@ impl Stepper {
                     m.rel_residual = r.rel_residual;
                 }
                 None => {
-                    sim.filters = filters;
-                    sim.targets = targets;
+                    sim.set_constraints(filters, targets);
                     let st = sim.solve_static(&context)?;
                     m.newton_iterations += st.iterations;
                     m.linear_iterations += st.cg_iterations;

@@ -245,7 +245,7 @@ fn run(shared: &Shared, setup: SimulationSetup, mesh: TetMesh, notify: Box<dyn F
                 lock(&shared.metrics).push(metrics);
                 let solved = Solved {
                     metrics,
-                    positions: stepper.simulation().x.clone(),
+                    positions: stepper.simulation().positions().to_vec(),
                     pose: probe.as_ref().map(|p| p.pose(t)),
                 };
                 *lock(&shared.latest) = Some(Arc::new(solved));

@@ -234,7 +234,7 @@ fn frictionless_forces_are_normal_node_by_node() {
         if f.norm() < 0.01 * largest {
             continue;
         }
-        let (gap, n) = pose.distance(&r.sim.x[v]);
+        let (gap, n) = pose.distance(&r.sim.positions()[v]);
         let normal = f.dot(&n);
         worst_ratio = worst_ratio.max((f - n * normal).norm() / normal);
         worst_gap = worst_gap.max(gap.abs());
@@ -417,7 +417,7 @@ fn press_capsule(axis: Vector3<f64>) -> (skinpatch::fem::contact::ContactReport,
     assert_force_balance(&r, &rep);
     let contact: Vec<usize> = r.state.active.keys().copied().collect();
     let extent = |k: usize| {
-        let values = contact.iter().map(|&v| r.sim.x[v][k]);
+        let values = contact.iter().map(|&v| r.sim.positions()[v][k]);
         values.clone().fold(f64::MIN, f64::max) - values.fold(f64::MAX, f64::min)
     };
     (rep, [extent(0), extent(1)])

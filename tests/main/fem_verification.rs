@@ -35,8 +35,8 @@ fn patch_test(a: Matrix3<f64>) {
     let c = Vec3::new(0.3, -0.2, 0.1);
     for f in &mesh.boundary {
         for &v in &f.nodes {
-            sim.filters[v] = Filter::Fixed;
-            sim.targets[v] = a * mesh.positions[v] + c;
+            sim.loads_mut().filters[v] = Filter::Fixed;
+            sim.loads_mut().targets[v] = a * mesh.positions[v] + c;
         }
     }
     let stats = sim.solve_static("patch test").unwrap();
@@ -66,7 +66,7 @@ fn rigid_rotation_by_ninety_degrees_has_no_force_or_strain() {
     let material: Vec<Material> = mesh.tet_region.iter().map(|&r| skin(r)).collect();
     let mut sim = Simulation::new(&mesh, &material);
     let rot = Rotation3::from_axis_angle(&Vector3::y_axis(), std::f64::consts::FRAC_PI_2);
-    for (x, p) in sim.x.iter_mut().zip(&mesh.positions) {
+    for (x, p) in sim.positions_mut().iter_mut().zip(&mesh.positions) {
         *x = rot * p + Vec3::new(1.0, 2.0, 3.0);
     }
     sim.evaluate_forces();
@@ -90,7 +90,7 @@ fn global_stiffness_is_symmetric_and_forces_balance() {
     let material: Vec<Material> = mesh.tet_region.iter().map(|&r| skin(r)).collect();
     let mut sim = Simulation::new(&mesh, &material);
     // A smooth, large deformation.
-    for (x, p) in sim.x.iter_mut().zip(&mesh.positions) {
+    for (x, p) in sim.positions_mut().iter_mut().zip(&mesh.positions) {
         *x = p + Vec3::new(
             0.2 * (p.y * 0.5).sin(),
             0.1 * p.z * p.x * 0.1,
@@ -134,8 +134,7 @@ fn caliper_stretch_is_homogeneous() {
     };
     let sets = NodeSets::of(&mesh);
     let (filters, targets) = bc.constraints(&sets, &mesh.positions, 1.0);
-    sim.filters = filters;
-    sim.targets = targets;
+    sim.set_constraints(filters, targets);
     sim.solve_static("caliper").unwrap();
     for (t, m) in material.iter().enumerate() {
         let c = Corotation::of(&sim.deformation_gradient(t));
@@ -168,9 +167,9 @@ fn inverted_element_recovers() {
     let mut sim = Simulation::new(&mesh, &[skin(1)]);
     tight(&mut sim);
     for v in 0..3 {
-        sim.filters[v] = Filter::Fixed;
+        sim.loads_mut().filters[v] = Filter::Fixed;
     }
-    sim.x[3] = Vec3::new(0.2, 0.1, 0.6);
+    sim.positions_mut()[3] = Vec3::new(0.2, 0.1, 0.6);
     let j = sim.deformation_gradient(0).determinant();
     assert!(j < 0.0);
     let inversion = sim.inversion();
@@ -180,9 +179,9 @@ fn inverted_element_recovers() {
     assert_eq!(inversion.inverted, 0);
     assert!((inversion.min_volume_ratio - 1.0).abs() < 1e-9);
     assert!(
-        (sim.x[3] - rest[3]).norm() < 1e-9,
+        (sim.positions()[3] - rest[3]).norm() < 1e-9,
         "vertex ended at {}",
-        sim.x[3]
+        sim.positions()[3]
     );
 }
 
@@ -204,10 +203,9 @@ fn static_solves_are_deterministic() {
             prescribed: vec![],
         };
         let (f, t) = bc.constraints(&NodeSets::of(&mesh), &mesh.positions, 0.0);
-        sim.filters = f;
-        sim.targets = t;
+        sim.set_constraints(f, t);
         sim.solve_static("compress").unwrap();
-        sim.x
+        sim.positions()
             .iter()
             .flat_map(|p| p.iter().map(|c| c.to_bits()).collect::<Vec<_>>())
             .collect::<Vec<u64>>()
@@ -232,27 +230,27 @@ fn implicit_euler_has_inertia_and_damping() {
         let mut sim = Simulation::new(&mesh, &[skin(1)]);
         tight(&mut sim);
         for v in 0..3 {
-            sim.filters[v] = Filter::Fixed;
+            sim.loads_mut().filters[v] = Filter::Fixed;
         }
         let apex = (0..4).find(|&v| mesh.positions[v].z < 0.0).unwrap();
         // Period of the apex's vertical oscillation: 2π √(m/k).
         let k = sim.stiffness(TangentKind::Exact).clone();
         let kzz = nalgebra::DMatrix::from(&k)[(3 * apex + 2, 3 * apex + 2)];
-        let period = 2.0 * std::f64::consts::PI * (sim.mass[apex] / kzz).sqrt();
+        let period = 2.0 * std::f64::consts::PI * (sim.model().mass[apex] / kzz).sqrt();
         sim.dynamics = Some(Dynamics {
             dt: period / 100.0,
             alpha,
             beta: 0.0,
         });
-        sim.x[apex].z = -1.2;
+        sim.positions_mut()[apex].z = -1.2;
         let (mut highest, mut lowest_after) = (f64::NEG_INFINITY, f64::INFINITY);
         for step in 0..100 {
             sim.begin_step();
             sim.solve_static("step").unwrap();
             sim.end_step();
-            highest = highest.max(sim.x[apex].z);
+            highest = highest.max(sim.positions()[apex].z);
             if step > 50 {
-                lowest_after = lowest_after.min(sim.x[apex].z);
+                lowest_after = lowest_after.min(sim.positions()[apex].z);
             }
         }
         (highest, lowest_after)

@@ -1,0 +1,398 @@
+//! The Newton solve of a [`Simulation`] step: residual and convergence
+//! test, the linear solve of each iteration (conjugate gradients with the
+//! configured preconditioner, a factored matrix, or both) and the
+//! backtracking line search. The equations and the convergence rule are in
+//! [`super::integrate`]'s documentation.
+
+use super::corotation::TangentKind;
+use super::integrate::{
+    LinearSolver, NewtonStats, Simulation, MAX_REFINEMENTS, REFACTOR_AFTER, REFINE_BELOW,
+};
+use super::solve::{self, CgSettings, Filter, Preconditioner};
+use crate::error::{Error, Result};
+use crate::mesh::Vec3;
+
+impl Simulation {
+    /// Residual norms after [`Simulation::evaluate_forces`]: (‖S r‖, scale).
+    /// Leaves `S r` in `rhs`.
+    fn residual(&mut self) -> (f64, f64) {
+        let mut free = 0.0;
+        let mut reaction = 0.0;
+        let mut external = 0.0;
+        self.work.f_slip.iter_mut().for_each(|f| *f = Vec3::zeros());
+        self.work.f_slip.resize(self.num_nodes(), Vec3::zeros());
+        for load in &mut self.loads.slip_loads {
+            let i = load.node;
+            if load.mu > 0.0 {
+                // Coulomb: the magnitude follows the current normal reaction.
+                let normal = -load.normal.dot(&(self.work.f_int[i] + self.loads.f_ext[i]));
+                load.magnitude = load.mu * normal.max(0.0);
+            }
+            self.work.f_slip[i] += load.force(&self.state.x[i]);
+        }
+        for i in 0..self.num_nodes() {
+            let r = self.work.f_int[i] + self.loads.f_ext[i] + self.work.f_slip[i];
+            let s = self.loads.filters[i].apply(&r);
+            self.work.rhs[3 * i..3 * i + 3].copy_from_slice(s.as_slice());
+            free += s.norm_squared();
+            reaction += (self.work.f_int[i] - self.loads.filters[i].apply(&self.work.f_int[i]))
+                .norm_squared();
+            external += (self.loads.f_ext[i] + self.work.f_slip[i]).norm_squared();
+        }
+        let scale = reaction
+            .sqrt()
+            .max(external.sqrt())
+            .max(self.model.force_floor);
+        (free.sqrt(), scale)
+    }
+
+    /// Fills `prescribed` with each node's move onto its targets along its
+    /// constrained directions, `(I − S)(target − x)`, and returns the
+    /// largest such distance (mm).
+    fn constraint_violation(&mut self) -> f64 {
+        let mut largest: f64 = 0.0;
+        for i in 0..self.num_nodes() {
+            let f = &self.loads.filters[i];
+            let d = if *f == Filter::Free {
+                Vec3::zeros()
+            } else {
+                let gap = self.loads.targets[i] - self.state.x[i];
+                gap - f.apply(&gap)
+            };
+            largest = largest.max(d.norm());
+            self.work.prescribed[3 * i..3 * i + 3].copy_from_slice(d.as_slice());
+        }
+        largest
+    }
+
+    /// The reported relative residual: 0 for a load-free state at round-off
+    /// (there is no load to be relative to).
+    fn relative(&self, norm: f64, scale: f64) -> f64 {
+        if scale <= self.model.force_floor && norm <= self.model.force_floor {
+            0.0
+        } else {
+            norm / scale
+        }
+    }
+
+    /// Whether `norm` is converged against `scale` (or at round-off).
+    fn converged(&self, norm: f64, scale: f64) -> bool {
+        norm <= self.settings.rel_tol * scale || norm <= self.model.force_floor
+    }
+
+    /// Solves for static equilibrium with the current constraints and loads.
+    /// `context` names the step in errors (e.g. `frame 12`).
+    pub fn solve_static(&mut self, context: &str) -> Result<NewtonStats> {
+        self.solve_with(context, |_, _, _| false)
+    }
+
+    /// Solves for equilibrium while `update` may change the problem: it is
+    /// called at the start of every Newton iteration, with the forces
+    /// evaluated at the current positions, may set new filters, targets and
+    /// loads, and returns whether it changed anything that decides the
+    /// solution (a contact set, a stick/slip state); its third argument is
+    /// then `false`. The solve converges on an iteration whose update
+    /// changed nothing, whose residual is within tolerance and whose nodes
+    /// sit on their targets (within 1e-7 of the mesh size). An iterate
+    /// whose update changed nothing, whose nodes sit on their targets and
+    /// whose residual is within [`REFINE_BELOW`] times the tolerance is
+    /// offered to `update` once more with `true`: it may refine the
+    /// constraints (re-project contact planes) and return `true`; the
+    /// convergence test then applies to the refined problem (at most
+    /// [`MAX_REFINEMENTS`] refinements per solve). Each Newton step moves
+    /// the constrained directions onto their targets and solves the free
+    /// ones with that move's coupling
+    /// (`S K S y = S (r − K d)`), so a target that moves every iteration —
+    /// a contact node re-projected onto a curved probe — costs no extra solve.
+    pub fn solve_with<U>(&mut self, context: &str, mut update: U) -> Result<NewtonStats>
+    where
+        U: FnMut(&mut Simulation, usize, bool) -> bool,
+    {
+        self.evaluate_forces();
+        let mut stats = NewtonStats::default();
+        self.work.tangent_kind = TangentKind::Exact;
+        self.work.coarse_stale = true;
+        let mut refinements = 0;
+        for it in 0..=self.settings.max_iterations {
+            let changed = update(self, it, false);
+            if changed {
+                // A new contact problem: start again from the exact tangent.
+                self.work.tangent_kind = TangentKind::Exact;
+            }
+            let (mut norm, mut scale) = self.residual();
+            let mut violation = self.constraint_violation();
+            stats.iterations = it;
+            stats.rel_residual = self.relative(norm, scale);
+            stats.scale = scale;
+            if !stats.rel_residual.is_finite() || !violation.is_finite() {
+                return Err(not_converged(context, it, stats.rel_residual));
+            }
+            let settled = !changed && violation <= self.model.position_tol;
+            if settled
+                && refinements < MAX_REFINEMENTS
+                && stats.rel_residual <= REFINE_BELOW * self.settings.rel_tol
+                && update(self, it, true)
+            {
+                refinements += 1;
+                (norm, scale) = self.residual();
+                violation = self.constraint_violation();
+                stats.rel_residual = self.relative(norm, scale);
+            }
+            if settled && violation <= self.model.position_tol && self.converged(norm, scale) {
+                return Ok(stats);
+            }
+            if it == self.settings.max_iterations {
+                break;
+            }
+            self.work.r_free.clone_from(&self.work.rhs);
+            self.assemble_tangent();
+            let forcing = self.forcing(norm / scale);
+            let (mut iterations, solved) = self.linear_solve(forcing);
+            if !solved && self.work.tangent_kind == TangentKind::Exact {
+                log::debug!(
+                    "{context}: Newton {it}: exact tangent not positive definite; projecting"
+                );
+                self.work.tangent_kind = TangentKind::Projected;
+                self.assemble_tangent();
+                let (more, _) = self.linear_solve(forcing);
+                iterations += more;
+            }
+            stats.cg_iterations += iterations;
+            let (new_norm, new_scale, descended) = self.line_search(norm);
+            if !descended && self.work.tangent_kind == TangentKind::Exact {
+                // The exact step was no descent direction: project from now on.
+                log::debug!(
+                    "{context}: Newton {it}: no descent with the exact tangent; projecting"
+                );
+                self.work.tangent_kind = TangentKind::Projected;
+            }
+            log::debug!(
+                "{context}: Newton {it}: {iterations} linear iterations, residual {:.3e} ({new_norm:.3e} N of {new_scale:.3e} N), constraints {violation:.2e} mm",
+                new_norm / new_scale
+            );
+        }
+        Err(not_converged(
+            context,
+            self.settings.max_iterations,
+            stats.rel_residual,
+        ))
+    }
+
+    /// Relative tolerance of the linear solve at relative residual `rel`
+    /// (inexact Newton). Far from equilibrium a rough step does as well as an
+    /// exact one; in the middle the tolerance follows the residual, which
+    /// keeps the convergence quadratic; near the target it only has to bring
+    /// the residual below the target. Bounded by `[cg.rel_tol, 0.1]`.
+    fn forcing(&self, rel: f64) -> f64 {
+        let target = self.settings.rel_tol;
+        rel.max(0.5 * target / rel)
+            .clamp(self.settings.cg.rel_tol, 0.1)
+    }
+
+    /// The right-hand side of the free directions, `S (r − K d)` plus the
+    /// couplings' `g nᵀ (K d)_i`, from the filtered residual `r_free` and
+    /// the prescribed move `d`.
+    fn step_rhs(&mut self) {
+        self.work.rhs.clone_from(&self.work.r_free);
+        if self.work.prescribed.iter().all(|&d| d == 0.0) {
+            return;
+        }
+        self.work
+            .assembly
+            .multiply(&self.work.prescribed, &mut self.work.kd);
+        let kd = |k: &[f64], i: usize| Vec3::new(k[3 * i], k[3 * i + 1], k[3 * i + 2]);
+        for (i, f) in self.loads.filters.iter().enumerate() {
+            let s = f.apply(&kd(&self.work.kd, i));
+            for c in 0..3 {
+                self.work.rhs[3 * i + c] -= s[c];
+            }
+        }
+        for c in &self.work.couplings {
+            let w = c.g * c.n.dot(&kd(&self.work.kd, c.node));
+            for k in 0..3 {
+                self.work.rhs[3 * c.node + k] += w[k];
+            }
+        }
+    }
+
+    /// Solves for the free part of the Newton step into `dx`; returns the
+    /// linear iterations (1 for a direct solve) and whether the solve
+    /// succeeded: a factorisation or a conjugate-gradient run that met no
+    /// non-positive curvature and reached its tolerance.
+    fn linear_solve(&mut self, forcing: f64) -> (usize, bool) {
+        let start = std::time::Instant::now();
+        self.step_rhs();
+        let outcome = self.linear_solve_untimed(forcing);
+        self.timings.linear_s += start.elapsed().as_secs_f64();
+        outcome
+    }
+
+    fn linear_solve_untimed(&mut self, forcing: f64) -> (usize, bool) {
+        if self.settings.linear == LinearSolver::Direct {
+            if !self.work.couplings.is_empty() {
+                // Not symmetric: BiCGStab preconditioned by this matrix's
+                // symmetric part, factorised.
+                if self
+                    .work
+                    .factor
+                    .factorize(&self.work.assembly, &self.loads.filters)
+                {
+                    let st = self.pcg(forcing, self.settings.cg.max_iterations, true);
+                    return (st.iterations, st.converged);
+                }
+            } else if self.work.factor.solve(
+                &self.work.assembly,
+                &self.loads.filters,
+                &self.work.rhs,
+                &mut self.work.dx,
+            ) {
+                return (1, true);
+            }
+            if self.work.tangent_kind == TangentKind::Exact {
+                // Not positive definite: the caller projects and retries.
+                return (1, false);
+            }
+        }
+        if self.settings.linear == LinearSolver::FactoredCg {
+            if let Some(outcome) = self.factored_cg(forcing) {
+                return outcome;
+            }
+        }
+        if self.settings.linear == LinearSolver::TwoLevel && self.work.coarse_stale {
+            let start = std::time::Instant::now();
+            self.work
+                .coarse
+                .refresh(&self.work.assembly, &self.loads.filters, &self.state.x);
+            self.work.coarse_stale = false;
+            self.timings.factor_s += start.elapsed().as_secs_f64();
+        }
+        let cg = self.pcg(forcing, self.settings.cg.max_iterations, false);
+        (cg.iterations, cg.converged)
+    }
+
+    /// One conjugate-gradient solve of the step from zero, preconditioned by
+    /// the kept factor or by block Jacobi.
+    fn pcg(&mut self, rel_tol: f64, max_iterations: usize, factored: bool) -> solve::CgStats {
+        self.work.dx.fill(0.0);
+        let preconditioner = if factored {
+            Preconditioner::Factor(&mut self.work.factor)
+        } else if self.settings.linear == LinearSolver::TwoLevel && self.work.coarse.is_ready() {
+            Preconditioner::TwoLevel(&self.work.coarse)
+        } else {
+            Preconditioner::BlockJacobi
+        };
+        solve::solve(
+            solve::Operator {
+                asm: &self.work.assembly,
+                filters: &self.loads.filters,
+                couplings: &self.work.couplings,
+            },
+            &self.work.rhs,
+            &mut self.work.dx,
+            &CgSettings {
+                rel_tol,
+                max_iterations,
+            },
+            &mut self.work.cg,
+            preconditioner,
+        )
+    }
+
+    /// Conjugate gradients with the kept factor; a solve that stalls
+    /// refactorises the current matrix and runs again. `None` when the
+    /// current matrix cannot be factorised (block Jacobi takes over).
+    fn factored_cg(&mut self, forcing: f64) -> Option<(usize, bool)> {
+        let mut total = 0;
+        for fresh in [false, true] {
+            if fresh || !self.work.factor.is_factored() {
+                let start = std::time::Instant::now();
+                let factored = self
+                    .work
+                    .factor
+                    .factorize(&self.work.assembly, &self.loads.filters);
+                self.timings.factor_s += start.elapsed().as_secs_f64();
+                if !factored {
+                    return None;
+                }
+            }
+            let limit = if fresh {
+                self.settings.cg.max_iterations
+            } else {
+                REFACTOR_AFTER
+            };
+            let cg = self.pcg(forcing, limit, true);
+            total += cg.iterations;
+            if cg.converged {
+                return Some((total, true));
+            }
+        }
+        Some((total, false))
+    }
+
+    /// Positions `x_start + d + alpha·dx` (the prescribed move in full).
+    fn set_trial(&mut self, alpha: f64) {
+        for (i, x) in self.state.x.iter_mut().enumerate() {
+            let k = 3 * i;
+            let d = Vec3::new(
+                self.work.prescribed[k],
+                self.work.prescribed[k + 1],
+                self.work.prescribed[k + 2],
+            );
+            let y = Vec3::new(self.work.dx[k], self.work.dx[k + 1], self.work.dx[k + 2]);
+            *x = self.work.x_start[i] + d + y * alpha;
+        }
+    }
+
+    /// Takes the step, halving its free part while the residual does not
+    /// decrease (at most 6 times). When the step also moves constrained
+    /// directions, descent after a failed full step is measured from the
+    /// moved state (`alpha = 0`). Without descent the trial with the smallest
+    /// residual is kept (the Newton loop decides). Returns the new
+    /// (‖S r‖, scale) and whether the residual decreased.
+    fn line_search(&mut self, old_norm: f64) -> (f64, f64, bool) {
+        self.work.x_start.clone_from(&self.state.x);
+        let moves = self.work.prescribed.iter().any(|&d| d != 0.0);
+        let mut reference = old_norm;
+        let mut best: Option<(f64, f64)> = None;
+        let mut alpha = 1.0;
+        for k in 0..7 {
+            self.set_trial(alpha);
+            self.evaluate_forces();
+            let (norm, scale) = self.residual();
+            if norm.is_finite() && norm < reference {
+                return (norm, scale, true);
+            }
+            if norm.is_finite() && best.is_none_or(|(n, _)| norm < n) {
+                best = Some((norm, alpha));
+            }
+            if k == 0 && moves {
+                self.set_trial(0.0);
+                self.evaluate_forces();
+                let (norm, _) = self.residual();
+                if norm.is_finite() {
+                    reference = norm;
+                    if best.is_none_or(|(n, _)| norm < n) {
+                        best = Some((norm, 0.0));
+                    }
+                }
+            }
+            alpha *= 0.5;
+        }
+        // No decrease found: keep the best trial with some step (the
+        // smallest step if none was finite).
+        let alpha = best
+            .filter(|&(_, a)| a > 0.0)
+            .map_or(alpha * 2.0, |(_, a)| a);
+        self.set_trial(alpha);
+        self.evaluate_forces();
+        let (norm, scale) = self.residual();
+        (norm, scale, false)
+    }
+}
+
+fn not_converged(context: &str, iterations: usize, rel: f64) -> Error {
+    Error::Solver(format!(
+        "{context}: equilibrium not reached after {iterations} Newton iterations \
+         (relative residual {rel:.3e})"
+    ))
+}
