@@ -5,6 +5,8 @@
 //! failing frame stops the run with an error naming it; everything written
 //! before stays.
 
+use std::path::PathBuf;
+
 use super::outputs::{FrameInput, FrameOutputs, MapPiece, OutputSpec, RunKind, RunSummary};
 use super::{plan, stepper::simulate, texel_mm, vtkhdf};
 use crate::error::{Error, Result};
@@ -12,6 +14,7 @@ use crate::export::{self, FrameMetrics};
 use crate::mesh::{io, QualityReport, Vec3};
 use crate::scenario::Setup;
 use crate::strain::{ElementStrains, SurfaceField};
+use crate::surface::AnimatedSurface;
 
 /// What a FEM run produced.
 pub type FemRunSummary = RunSummary<FrameMetrics>;
@@ -80,56 +83,16 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<FemRun
     // the folder is touched: the planned output size, the adapters and
     // ffmpeg (opening the outputs).
     plan::check(setup, setup.force_large_output)?;
-    let (lo, hi) = mesh.bounds();
-    let spec = OutputSpec {
-        dir,
-        write_frames: setup.write_frames,
-        vtu_format: setup.vtu_format,
-        strain_images: setup.strain_images,
-        micro: setup.micro.as_ref(),
-        render: setup.render.as_ref(),
-        extent_mm: (
-            hi.x - lo.x,
-            setup
-                .render
-                .as_ref()
-                .map_or(0.0, |r| texel_mm((lo, hi), r.texture_px)),
-        ),
-        frame_rate_hz: 1.0 / setup.simulation.frame_dt,
-    };
     let whole = MapPiece {
         tag: String::new(),
         triangles: None,
     };
-    let mut outputs = FrameOutputs::open(spec, vec![whole])?;
-    let mut written = Vec::new();
-    if setup.write_mesh_vtu {
-        let path = dir.join("mesh.vtu");
-        io::write_vtu_as(&path, &io::Grid::from_mesh(mesh), setup.vtu_format)?;
-        written.push(path);
-    }
-    if setup.write_mesh_tetgen {
-        let base = dir.join("mesh");
-        io::write_tetgen(mesh, &base)?;
-        written.extend(io::tetgen_paths(&base));
-    }
+    let mut outputs = FrameOutputs::open(output_spec(setup), vec![whole])?;
+    let mut written = write_rest_mesh(setup)?;
     outputs.start()?;
     let mut written_after = Vec::new();
     let mut hdf = None;
-    // The top surface's animation, when exported.
-    let mut exported = (setup.write_surface_glb || setup.write_surface_obj).then(|| {
-        crate::surface::AnimatedSurface::from_top(
-            &setup.name,
-            &mesh.top,
-            &mesh.positions,
-            &[],
-            1.0 / setup.simulation.frame_dt,
-        )
-    });
-    if setup.write_surface_obj {
-        let folder = dir.join("surface");
-        std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
-    }
+    let mut exported = SurfaceExport::open(setup)?;
     let result = simulate(setup, |m, sim| {
         let mut m = *m;
         let field = SurfaceField::new(&mesh.top, &mesh.positions, sim.positions());
@@ -145,21 +108,7 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<FemRun
         if let (true, Some(grid)) = (setup.write_vtkhdf, &grid) {
             vtkhdf::push(&mut hdf, dir, setup, m.time_s, grid)?;
         }
-        if let Some(surface) = exported.as_mut() {
-            surface.frames.push(
-                mesh.top
-                    .vertices
-                    .iter()
-                    .map(|&v| sim.positions()[v])
-                    .collect(),
-            );
-            if setup.write_surface_obj {
-                let path = dir
-                    .join("surface")
-                    .join(format!("frame_{:04}.obj", m.frame));
-                crate::surface::obj::write_obj(&path, surface, Some(surface.frames.len() - 1))?;
-            }
-        }
+        exported.push(sim.positions(), m.frame)?;
         let probe = setup.simulation.probe.as_ref().map(|p| p.pose(m.time_s));
         let geometry = |tessellate: usize| {
             crate::render::scene::build(mesh, sim.positions(), &field, probe.as_ref(), tessellate)
@@ -187,14 +136,7 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<FemRun
     let closed = vtkhdf::finish(hdf);
     result?;
     written_after.extend(closed?);
-    if setup.write_surface_obj {
-        written_after.push(dir.join("surface"));
-    }
-    if let (true, Some(surface)) = (setup.write_surface_glb, &exported) {
-        let path = dir.join("surface.glb");
-        crate::surface::gltf::write_glb(&path, surface)?;
-        written_after.push(path);
-    }
+    exported.finish(&mut written_after)?;
     let finished = outputs.finish(false)?;
     written.extend(finished.written);
     written.extend(written_after);
@@ -206,4 +148,103 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<FemRun
         frames: finished.rows,
         micro_device: finished.micro_device,
     })
+}
+
+/// What the shared output stage needs of a FEM scenario.
+fn output_spec(setup: &Setup) -> OutputSpec<'_> {
+    let (lo, hi) = setup.mesh.bounds();
+    OutputSpec {
+        dir: &setup.output_dir,
+        write_frames: setup.write_frames,
+        vtu_format: setup.vtu_format,
+        strain_images: setup.strain_images,
+        micro: setup.micro.as_ref(),
+        render: setup.render.as_ref(),
+        extent_mm: (
+            hi.x - lo.x,
+            setup
+                .render
+                .as_ref()
+                .map_or(0.0, |r| texel_mm((lo, hi), r.texture_px)),
+        ),
+        frame_rate_hz: 1.0 / setup.simulation.frame_dt,
+    }
+}
+
+/// The rest mesh as VTU and TetGen files, as asked for; returns the paths.
+fn write_rest_mesh(setup: &Setup) -> Result<Vec<PathBuf>> {
+    let (dir, mesh) = (&setup.output_dir, &setup.mesh);
+    let mut written = Vec::new();
+    if setup.write_mesh_vtu {
+        let path = dir.join("mesh.vtu");
+        io::write_vtu_as(&path, &io::Grid::from_mesh(mesh), setup.vtu_format)?;
+        written.push(path);
+    }
+    if setup.write_mesh_tetgen {
+        let base = dir.join("mesh");
+        io::write_tetgen(mesh, &base)?;
+        written.extend(io::tetgen_paths(&base));
+    }
+    Ok(written)
+}
+
+/// The top surface's animation, when exported: an OBJ per frame as the
+/// run goes, one GLB at the end.
+struct SurfaceExport<'a> {
+    setup: &'a Setup,
+    surface: Option<AnimatedSurface>,
+}
+
+impl<'a> SurfaceExport<'a> {
+    fn open(setup: &'a Setup) -> Result<SurfaceExport<'a>> {
+        let mesh = &setup.mesh;
+        let surface = (setup.write_surface_glb || setup.write_surface_obj).then(|| {
+            AnimatedSurface::from_top(
+                &setup.name,
+                &mesh.top,
+                &mesh.positions,
+                &[],
+                1.0 / setup.simulation.frame_dt,
+            )
+        });
+        if setup.write_surface_obj {
+            let folder = setup.output_dir.join("surface");
+            std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
+        }
+        Ok(SurfaceExport { setup, surface })
+    }
+
+    /// Adds frame `frame` with the mesh's deformed `positions`.
+    fn push(&mut self, positions: &[Vec3], frame: usize) -> Result<()> {
+        let Some(surface) = self.surface.as_mut() else {
+            return Ok(());
+        };
+        let top = &self.setup.mesh.top;
+        surface
+            .frames
+            .push(top.vertices.iter().map(|&v| positions[v]).collect());
+        if self.setup.write_surface_obj {
+            let path = self
+                .setup
+                .output_dir
+                .join("surface")
+                .join(format!("frame_{frame:04}.obj"));
+            crate::surface::obj::write_obj(&path, surface, Some(surface.frames.len() - 1))?;
+        }
+        Ok(())
+    }
+
+    /// Writes the GLB; adds what was written to `written`.
+    fn finish(self, written: &mut Vec<PathBuf>) -> Result<()> {
+        let dir = &self.setup.output_dir;
+        if self.setup.write_surface_obj {
+            written.push(dir.join("surface"));
+        }
+        if let (true, Some(surface)) = (self.setup.write_surface_glb, &self.surface) {
+            let path = dir.join("surface.glb");
+            crate::surface::gltf::write_glb(&path, surface)?;
+            written.push(path);
+        }
+        Ok(())
+    }
 }
