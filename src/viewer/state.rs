@@ -515,6 +515,33 @@ impl ViewerState {
         }
     }
 
+    /// Sets region `region`'s Young's modulus (kPa) and Poisson ratio.
+    fn set_material(&mut self, region: String, e: f64, nu: f64) -> std::result::Result<(), String> {
+        if !(e.is_finite() && e > 0.0) {
+            return Err(format!(
+                "material.{region}: Young's modulus must be > 0 kPa, got {e}"
+            ));
+        }
+        let most = crate::fem::material::MAX_POISSON;
+        if !(nu.is_finite() && (0.0..=most).contains(&nu)) {
+            return Err(format!(
+                "material.{region}: Poisson ratio must be in [0, {most}], got {nu}"
+            ));
+        }
+        let known: Vec<String> = self.materials.iter().map(|m| m.0.clone()).collect();
+        let slot = self
+            .materials
+            .iter_mut()
+            .find(|m| m.0 == region)
+            .ok_or_else(|| format!("no region {region} (regions: {})", known.join(", ")))?;
+        if (slot.1, slot.2) != (e, nu) {
+            slot.1 = e;
+            slot.2 = nu;
+            self.materials_version += 1;
+        }
+        Ok(())
+    }
+
     fn try_apply(&mut self, command: Command) -> std::result::Result<(), String> {
         match command {
             Command::Orbit(a, e) => self.camera.orbit(a, e),
@@ -543,30 +570,7 @@ impl ViewerState {
                 }
                 self.light_scale = s;
             }
-            Command::Material(region, e, nu) => {
-                if !(e.is_finite() && e > 0.0) {
-                    return Err(format!(
-                        "material.{region}: Young's modulus must be > 0 kPa, got {e}"
-                    ));
-                }
-                let most = crate::fem::material::MAX_POISSON;
-                if !(nu.is_finite() && (0.0..=most).contains(&nu)) {
-                    return Err(format!(
-                        "material.{region}: Poisson ratio must be in [0, {most}], got {nu}"
-                    ));
-                }
-                let known: Vec<String> = self.materials.iter().map(|m| m.0.clone()).collect();
-                let slot = self
-                    .materials
-                    .iter_mut()
-                    .find(|m| m.0 == region)
-                    .ok_or_else(|| format!("no region {region} (regions: {})", known.join(", ")))?;
-                if (slot.1, slot.2) != (e, nu) {
-                    slot.1 = e;
-                    slot.2 = nu;
-                    self.materials_version += 1;
-                }
-            }
+            Command::Material(region, e, nu) => self.set_material(region, e, nu)?,
             Command::Friction(mu) => {
                 if self.friction.is_none() {
                     return Err("the probe's contact is not Coulomb: no friction to set".into());
@@ -587,64 +591,76 @@ impl ViewerState {
                     ),
                     _ => None,
                 };
-                let probe = self
-                    .probe
+                self.probe
                     .as_mut()
-                    .ok_or("the scenario has no [probe] to drive")?;
-                match probe_command {
-                    Command::Press(at) | Command::MoveTo(at) => {
-                        if !(at[0].is_finite() && at[1].is_finite()) {
-                            return Err(format!("probe position must be finite, got {at:?}"));
-                        }
-                        probe.drive = ProbeDrive::Live;
-                        probe.at_mm = probe.clamp_to_patch(at);
-                        if matches!(probe_command, Command::Press(_)) {
-                            probe.pressed = true;
-                        }
-                    }
-                    Command::PressPixel(_) | Command::MovePixel(_) => {
-                        probe.drive = ProbeDrive::Live;
-                        probe.at_mm = probe.clamp_to_patch(picked.expect("picked above"));
-                        if matches!(probe_command, Command::PressPixel(_)) {
-                            probe.pressed = true;
-                        }
-                    }
-                    Command::Depth(d) => {
-                        if !(d.is_finite() && d >= 0.0) {
-                            return Err(format!("probe depth must be ≥ 0 mm, got {d}"));
-                        }
-                        probe.depth_mm = d.min(probe.max_depth_mm);
-                    }
-                    Command::Release => probe.pressed = false,
-                    Command::Live => probe.drive = ProbeDrive::Live,
-                    Command::Play(t) => {
-                        probe.drive = ProbeDrive::Path {
-                            t_s: t.clamp(0.0, probe.path_duration()),
-                            playing: true,
-                            looping: matches!(probe.drive, ProbeDrive::Path { looping: true, .. }),
-                        }
-                    }
-                    Command::Pause(paused) => {
-                        if let ProbeDrive::Path { playing, .. } = &mut probe.drive {
-                            *playing = !paused;
-                        }
-                    }
-                    Command::Scrub(t) => {
-                        let looping = matches!(probe.drive, ProbeDrive::Path { looping: true, .. });
-                        probe.drive = ProbeDrive::Path {
-                            t_s: t.clamp(0.0, probe.path_duration()),
-                            playing: false,
-                            looping,
-                        };
-                    }
-                    Command::Loop(on) => {
-                        if let ProbeDrive::Path { looping, .. } = &mut probe.drive {
-                            *looping = on;
-                        }
-                    }
-                    _ => unreachable!("view commands are handled above"),
+                    .ok_or("the scenario has no [probe] to drive")?
+                    .apply(probe_command, picked)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+impl ProbeControl {
+    /// Applies a probe command; `picked` is the patch point a pixel
+    /// command picked (mm).
+    fn apply(
+        &mut self,
+        command: Command,
+        picked: Option<[f64; 2]>,
+    ) -> std::result::Result<(), String> {
+        match command {
+            Command::Press(at) | Command::MoveTo(at) => {
+                if !(at[0].is_finite() && at[1].is_finite()) {
+                    return Err(format!("probe position must be finite, got {at:?}"));
+                }
+                self.drive = ProbeDrive::Live;
+                self.at_mm = self.clamp_to_patch(at);
+                if matches!(command, Command::Press(_)) {
+                    self.pressed = true;
                 }
             }
+            Command::PressPixel(_) | Command::MovePixel(_) => {
+                self.drive = ProbeDrive::Live;
+                self.at_mm = self.clamp_to_patch(picked.expect("picked above"));
+                if matches!(command, Command::PressPixel(_)) {
+                    self.pressed = true;
+                }
+            }
+            Command::Depth(d) => {
+                if !(d.is_finite() && d >= 0.0) {
+                    return Err(format!("probe depth must be ≥ 0 mm, got {d}"));
+                }
+                self.depth_mm = d.min(self.max_depth_mm);
+            }
+            Command::Release => self.pressed = false,
+            Command::Live => self.drive = ProbeDrive::Live,
+            Command::Play(t) => {
+                self.drive = ProbeDrive::Path {
+                    t_s: t.clamp(0.0, self.path_duration()),
+                    playing: true,
+                    looping: matches!(self.drive, ProbeDrive::Path { looping: true, .. }),
+                }
+            }
+            Command::Pause(paused) => {
+                if let ProbeDrive::Path { playing, .. } = &mut self.drive {
+                    *playing = !paused;
+                }
+            }
+            Command::Scrub(t) => {
+                let looping = matches!(self.drive, ProbeDrive::Path { looping: true, .. });
+                self.drive = ProbeDrive::Path {
+                    t_s: t.clamp(0.0, self.path_duration()),
+                    playing: false,
+                    looping,
+                };
+            }
+            Command::Loop(on) => {
+                if let ProbeDrive::Path { looping, .. } = &mut self.drive {
+                    *looping = on;
+                }
+            }
+            _ => unreachable!("view commands are handled above"),
         }
         Ok(())
     }
