@@ -70,36 +70,14 @@ pub fn run(
         1,
         synthesis.map.data.iter(),
     )?;
-    let mut written = Vec::new();
     let map = &synthesis.map;
-    if exr {
-        let p = dir.join("synthesized.exr");
-        write_exr(&p, map)?;
-        written.push(p);
-    }
-    if png {
-        let p = dir.join("synthesized.png");
-        write_png16(&p, map)?;
-        written.push(p);
-    }
     // Normals only for the files and the preview that use them.
     let normals = if file.output.normal_maps || file.output.preview {
         normal_map(map)
     } else {
         Vec::new()
     };
-    if file.output.normal_maps {
-        if exr {
-            let p = dir.join("synthesized_normals.exr");
-            write_normal_exr(&p, &normals, map)?;
-            written.push(p);
-        }
-        if png {
-            let p = dir.join("synthesized_normals.png");
-            write_normal_png16(&p, &normals, map)?;
-            written.push(p);
-        }
-    }
+    let mut written = write_maps(&dir, map, &normals, (exr, png), file.output.normal_maps)?;
     if let Some(albedo) = &sources.albedo {
         let p = dir.join("albedo.png");
         write_albedo(&p, albedo, &synthesis)?;
@@ -115,6 +93,63 @@ pub fn run(
         written.push(p);
     }
     let p = dir.join("synthesis.json");
+    write_report(&p, path, &file, &synthesis, &statistics, rendered_on_gpu)?;
+    written.push(p);
+    Ok(SynthRun {
+        dir,
+        written,
+        synthesis,
+        statistics,
+        rendered_on_gpu,
+    })
+}
+
+/// The synthesized map and its normal map in the asked formats (`exr`,
+/// `png`); returns the paths.
+fn write_maps(
+    dir: &Path,
+    map: &DisplacementMap,
+    normals: &[[f32; 3]],
+    (exr, png): (bool, bool),
+    normal_maps: bool,
+) -> Result<Vec<PathBuf>> {
+    let mut written = Vec::new();
+    if exr {
+        let p = dir.join("synthesized.exr");
+        write_exr(&p, map)?;
+        written.push(p);
+    }
+    if png {
+        let p = dir.join("synthesized.png");
+        write_png16(&p, map)?;
+        written.push(p);
+    }
+    if normal_maps {
+        if exr {
+            let p = dir.join("synthesized_normals.exr");
+            write_normal_exr(&p, normals, map)?;
+            written.push(p);
+        }
+        if png {
+            let p = dir.join("synthesized_normals.png");
+            write_normal_png16(&p, normals, map)?;
+            written.push(p);
+        }
+    }
+    Ok(written)
+}
+
+/// `synthesis.json`: the file's settings, the output's size, the per-level
+/// figures and the statistics.
+fn write_report(
+    p: &Path,
+    path: &Path,
+    file: &SynthFile,
+    synthesis: &Synthesis,
+    statistics: &SynthStatistics,
+    rendered_on_gpu: bool,
+) -> Result<()> {
+    let map = &synthesis.map;
     let report = serde_json::json!({
         "file": path.display().to_string(),
         "synthesis": file.synthesis,
@@ -141,16 +176,8 @@ pub fn run(
         "preview_rendered_on_gpu": rendered_on_gpu,
     });
     let text = serde_json::to_string_pretty(&report)
-        .map_err(|e| Error::io(&p, std::io::Error::other(e)))?;
-    crate::mesh::io::write_atomically(&p, text.as_bytes())?;
-    written.push(p);
-    Ok(SynthRun {
-        dir,
-        written,
-        synthesis,
-        statistics,
-        rendered_on_gpu,
-    })
+        .map_err(|e| Error::io(p, std::io::Error::other(e)))?;
+    crate::mesh::io::write_atomically(p, text.as_bytes())
 }
 
 /// The synthesized albedo: each output pixel is the exemplar albedo's
