@@ -50,18 +50,7 @@ pub fn bench_render(
     let mut setup = setup.clone();
     setup.simulation.frames = frames.max(1).min(setup.simulation.frames);
     let micro = setup.micro.clone();
-    let mut render = match &setup.render {
-        Some(r) => r.clone(),
-        None => crate::scenario::RenderSection::default().setup(Path::new("."), micro.is_some())?,
-    };
-    render.width = width;
-    render.height = height;
-    let mode = if micro.is_some() {
-        Mode::Dynamic
-    } else {
-        Mode::None
-    };
-    render.modes = vec![mode];
+    let (render, mode) = bench_settings(&setup, (width, height))?;
     let ctx = crate::gpu::acquire()?.ok_or_else(no_gpu)?;
     let adapter = ctx.describe();
     let mut ctx = Some(ctx);
@@ -112,19 +101,7 @@ pub fn bench_render(
         );
         renderer.set_geometry(ctx, &geometry);
         let geometry_ms = start.elapsed().as_secs_f64() * 1e3;
-        // Warm-up (pipelines, first use of the resources).
-        renderer.submit(ctx, mode);
-        ctx.finish()?;
-        let start = Instant::now();
-        for _ in 0..repeats.max(1) {
-            renderer.submit(ctx, mode);
-        }
-        ctx.finish()?;
-        let render_ms = start.elapsed().as_secs_f64() * 1e3 / repeats.max(1) as f64;
-        let start = Instant::now();
-        renderer.render(ctx, mode)?;
-        let readback_ms = start.elapsed().as_secs_f64() * 1e3;
-        let stages = renderer.time_stages(ctx, mode)?;
+        let (render_ms, readback_ms, stages) = time_frame(&mut renderer, ctx, mode, repeats)?;
         if m.frame > 0 {
             for (sum, t) in figures.stages_ms.iter_mut().zip(stages) {
                 *sum += t;
@@ -152,4 +129,46 @@ pub fn bench_render(
         *x /= n;
     }
     Ok(figures)
+}
+
+/// The scenario's render settings (defaults without `[render]`) at the
+/// bench's size, in the dynamic mode (`none` without a microstructure).
+fn bench_settings(
+    setup: &crate::scenario::Setup,
+    (width, height): (usize, usize),
+) -> Result<(crate::render::RenderSetup, Mode)> {
+    let has_micro = setup.micro.is_some();
+    let mut render = match &setup.render {
+        Some(r) => r.clone(),
+        None => crate::scenario::RenderSection::default().setup(Path::new("."), has_micro)?,
+    };
+    render.width = width;
+    render.height = height;
+    let mode = if has_micro { Mode::Dynamic } else { Mode::None };
+    render.modes = vec![mode];
+    Ok((render, mode))
+}
+
+/// One frame's render times (ms): the mean of `repeats` submissions after
+/// a warm-up, one render with its read-back, and the stages timed alone.
+fn time_frame(
+    renderer: &mut Renderer,
+    ctx: &crate::gpu::Context,
+    mode: Mode,
+    repeats: usize,
+) -> Result<(f64, f64, [f64; FrameStage::COUNT])> {
+    use std::time::Instant;
+    // Warm-up (pipelines, first use of the resources).
+    renderer.submit(ctx, mode);
+    ctx.finish()?;
+    let start = Instant::now();
+    for _ in 0..repeats.max(1) {
+        renderer.submit(ctx, mode);
+    }
+    ctx.finish()?;
+    let render_ms = start.elapsed().as_secs_f64() * 1e3 / repeats.max(1) as f64;
+    let start = Instant::now();
+    renderer.render(ctx, mode)?;
+    let readback_ms = start.elapsed().as_secs_f64() * 1e3;
+    Ok((render_ms, readback_ms, renderer.time_stages(ctx, mode)?))
 }
