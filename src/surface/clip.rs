@@ -124,6 +124,84 @@ pub(super) struct Clip {
     pub end: f64,
 }
 
+/// One channel's keyframes, checked: finite times, strictly increasing,
+/// and the values their count and interpolation need (`n_targets` a
+/// keyframe for morph weights). `name` names the animation in errors.
+fn read_track(
+    channel: &::gltf::animation::Channel<'_>,
+    buffers: &[Vec<u8>],
+    name: &str,
+    n_targets: usize,
+) -> Result<Track, String> {
+    let property = channel.target().property();
+    let reader = channel.reader(|b| buffers.get(b.index()).map(|d| d.as_slice()));
+    let times: Vec<f64> = reader
+        .read_inputs()
+        .ok_or_else(|| format!("{name} channel {} has no keyframe times", channel.index()))?
+        .map(|t| t as f64)
+        .collect();
+    let (values, n): (Vec<f64>, usize) = match reader.read_outputs() {
+        Some(ReadOutputs::MorphTargetWeights(w)) => {
+            (w.into_f32().map(|x| x as f64).collect(), n_targets)
+        }
+        Some(ReadOutputs::Translations(v)) | Some(ReadOutputs::Scales(v)) => {
+            (v.flat_map(|x| x.map(|c| c as f64)).collect(), 3)
+        }
+        Some(ReadOutputs::Rotations(r)) => {
+            (r.into_f32().flat_map(|x| x.map(|c| c as f64)).collect(), 4)
+        }
+        None => return Err(format!("{name} channel {} has no values", channel.index())),
+    };
+    let interpolation = channel.sampler().interpolation();
+    let per_key = n * if interpolation == Interpolation::CubicSpline {
+        3
+    } else {
+        1
+    };
+    if let Some(k) = times.iter().position(|t| !t.is_finite()) {
+        return Err(format!(
+            "{name} channel {}: keyframe {k} has time {}",
+            channel.index(),
+            times[k]
+        ));
+    }
+    if times.is_empty() || values.len() != times.len() * per_key {
+        let what = if property == Property::MorphTargetWeights {
+            format!(
+                "morph target count mismatch: {name} has {} weight values for {} \
+                 keyframes, but the mesh has {n_targets} morph targets ({per_key} values \
+                 per keyframe expected)",
+                values.len(),
+                times.len()
+            )
+        } else {
+            format!(
+                "{name} channel {} has {} values for {} keyframes ({per_key} per keyframe expected)",
+                channel.index(),
+                values.len(),
+                times.len()
+            )
+        };
+        return Err(what);
+    }
+    if let Some(k) = (1..times.len())
+        .find(|&k| times[k].partial_cmp(&times[k - 1]) != Some(std::cmp::Ordering::Greater))
+    {
+        return Err(format!(
+            "{name} channel {}: keyframe times are not increasing at keyframe {k} ({} after {})",
+            channel.index(),
+            times[k],
+            times[k - 1]
+        ));
+    }
+    Ok(Track {
+        times,
+        values,
+        interpolation,
+        n,
+    })
+}
+
 impl Clip {
     /// Reads the tracks of `animation` that target the weights of node
     /// `weights_node` (with `n_targets` targets) or the transform of a node
@@ -156,74 +234,9 @@ impl Clip {
             if !wanted {
                 continue;
             }
-            let reader = channel.reader(|b| buffers.get(b.index()).map(|d| d.as_slice()));
-            let times: Vec<f64> = reader
-                .read_inputs()
-                .ok_or_else(|| format!("{name} channel {} has no keyframe times", channel.index()))?
-                .map(|t| t as f64)
-                .collect();
-            let (values, n): (Vec<f64>, usize) = match reader.read_outputs() {
-                Some(ReadOutputs::MorphTargetWeights(w)) => {
-                    (w.into_f32().map(|x| x as f64).collect(), n_targets)
-                }
-                Some(ReadOutputs::Translations(v)) | Some(ReadOutputs::Scales(v)) => {
-                    (v.flat_map(|x| x.map(|c| c as f64)).collect(), 3)
-                }
-                Some(ReadOutputs::Rotations(r)) => {
-                    (r.into_f32().flat_map(|x| x.map(|c| c as f64)).collect(), 4)
-                }
-                None => return Err(format!("{name} channel {} has no values", channel.index())),
-            };
-            let interpolation = channel.sampler().interpolation();
-            let per_key = n * if interpolation == Interpolation::CubicSpline {
-                3
-            } else {
-                1
-            };
-            if let Some(k) = times.iter().position(|t| !t.is_finite()) {
-                return Err(format!(
-                    "{name} channel {}: keyframe {k} has time {}",
-                    channel.index(),
-                    times[k]
-                ));
-            }
-            if times.is_empty() || values.len() != times.len() * per_key {
-                let what = if property == Property::MorphTargetWeights {
-                    format!(
-                        "morph target count mismatch: {name} has {} weight values for {} \
-                         keyframes, but the mesh has {n_targets} morph targets ({per_key} values \
-                         per keyframe expected)",
-                        values.len(),
-                        times.len()
-                    )
-                } else {
-                    format!(
-                        "{name} channel {} has {} values for {} keyframes ({per_key} per keyframe expected)",
-                        channel.index(),
-                        values.len(),
-                        times.len()
-                    )
-                };
-                return Err(what);
-            }
-            if let Some(k) = (1..times.len())
-                .find(|&k| times[k].partial_cmp(&times[k - 1]) != Some(std::cmp::Ordering::Greater))
-            {
-                return Err(format!(
-                    "{name} channel {}: keyframe times are not increasing at keyframe {k} ({} after {})",
-                    channel.index(),
-                    times[k],
-                    times[k - 1]
-                ));
-            }
-            clip.start = clip.start.min(times[0]);
-            clip.end = clip.end.max(times[times.len() - 1]);
-            let track = Track {
-                times,
-                values,
-                interpolation,
-                n,
-            };
+            let track = read_track(&channel, buffers, &name, n_targets)?;
+            clip.start = clip.start.min(track.times[0]);
+            clip.end = clip.end.max(track.times[track.times.len() - 1]);
             match property {
                 Property::MorphTargetWeights => clip.weights = Some(track),
                 Property::Translation => clip.trs.entry(node).or_default()[0] = Some(track),
