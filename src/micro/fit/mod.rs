@@ -38,6 +38,10 @@ use std::collections::HashMap;
 
 use rayon::prelude::*;
 
+mod count;
+
+pub use count::{count_histograms, Slopes};
+
 use super::convolve::{blur_along_axis, convolve_pass, PassParams};
 use super::kernel::{KernelModel, KernelParams, PiecewiseLinear};
 use super::map::DisplacementMap;
@@ -103,10 +107,6 @@ const COARSE_ALPHA: usize = 10;
 pub const STARTS: usize = 6;
 /// Half widths (α steps, σ steps) of a refinement window.
 const WINDOW: (usize, usize) = (10, 5);
-/// Candidates whose histograms are counted in one sweep over the texels.
-const GROUP: usize = 8;
-/// Texels per block of that sweep (kept in cache for the group).
-const CHUNK: usize = 2048;
 
 /// The candidate of grid indices `(a, s)`: α = −2 + 0.01·a, σ = 1 + 0.5·s µm.
 pub fn grid_params(a: usize, s: usize) -> KernelParams {
@@ -251,123 +251,6 @@ pub fn auto_range(maps: &[&DisplacementMap]) -> f64 {
         range = range.max((*q as f64 * 100.0).ceil() / 100.0);
     }
     range
-}
-
-/// A slope field, `(∂h/∂x, ∂h/∂y)` per texel.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Slopes {
-    /// Along x (u).
-    pub x: Vec<f32>,
-    /// Along y (v).
-    pub y: Vec<f32>,
-}
-
-impl Slopes {
-    /// The central-difference slopes of `map` (as [`NormalHistogram::of`],
-    /// which reads the same texels: interior texels without edge handling).
-    pub fn of(map: &DisplacementMap) -> Slopes {
-        let (w, h) = (map.width, map.height);
-        let mut x = vec![0.0f32; w * h];
-        let mut y = vec![0.0f32; w * h];
-        let k = map.height_unit_um / (2.0 * map.texel_um);
-        x.par_chunks_mut(w.max(1))
-            .zip(y.par_chunks_mut(w.max(1)))
-            .enumerate()
-            .for_each(|(j, (xr, yr))| {
-                let inner_row = j > 0 && j + 1 < h;
-                for i in 0..w {
-                    let (sx, sy) = if inner_row && i > 0 && i + 1 < w {
-                        let d = &map.data;
-                        let c = j * w + i;
-                        (
-                            (d[c + 1] - d[c - 1]) as f64 * k,
-                            (d[c + w] - d[c - w]) as f64 * k,
-                        )
-                    } else {
-                        let s = slope(map, i, j, [1.0, 1.0]);
-                        (s[0], s[1])
-                    };
-                    xr[i] = sx as f32;
-                    yr[i] = sy as f32;
-                }
-            });
-        Slopes { x, y }
-    }
-
-    /// Texels.
-    pub fn len(&self) -> usize {
-        self.x.len()
-    }
-
-    /// Whether there are none.
-    pub fn is_empty(&self) -> bool {
-        self.x.is_empty()
-    }
-}
-
-/// Normal-histogram counts of the slope fields `base + α·dir` for each α
-/// (f32, the same arithmetic as `shaders/fit.wgsl`): each texel's normal
-/// `(−s_x, −s_y)/√(1 + |s|²)` falls into cell `⌊(c + range)·bins/(2·range)⌋`
-/// per component, clamped to the edge cells (a NaN to the first). Candidates are counted
-/// [`GROUP`] at a time in parallel; counts are integers, so the result
-/// does not depend on the thread count.
-pub fn count_histograms(
-    base: &Slopes,
-    dir: &Slopes,
-    alphas: &[f32],
-    bins: usize,
-    range: f64,
-) -> Vec<Vec<u32>> {
-    let bins = bins.max(1);
-    let cells = bins * bins;
-    let scale = bins as f32 / (2.0 * range as f32);
-    let offset = range as f32;
-    let top = (bins - 1) as f32;
-    alphas
-        .par_chunks(GROUP)
-        .flat_map_iter(|group| {
-            // Two interleaved copies per candidate, so that runs of texels in
-            // one cell do not wait on each other's increments.
-            let mut counts = vec![vec![0u32; 2 * cells]; group.len()];
-            let mut index = vec![0u32; CHUNK];
-            for start in (0..base.len()).step_by(CHUNK) {
-                let end = (start + CHUNK).min(base.len());
-                let (bx, by) = (&base.x[start..end], &base.y[start..end]);
-                let (dx, dy) = (&dir.x[start..end], &dir.y[start..end]);
-                for (c, &a) in counts.iter_mut().zip(group) {
-                    // Cell indices first (a loop the compiler vectorises),
-                    // then the increments.
-                    for ((((k, &bx), &by), &dx), &dy) in
-                        index.iter_mut().zip(bx).zip(by).zip(dx).zip(dy)
-                    {
-                        let sx = bx + a * dx;
-                        let sy = by + a * dy;
-                        let inv = 1.0 / (1.0 + sx * sx + sy * sy).sqrt();
-                        // In [0, bins − 1] (a NaN to 0), so the conversion
-                        // through i32 is exact and vectorises.
-                        let cx = ((-sx * inv + offset) * scale).max(0.0).min(top) as i32;
-                        let cy = ((-sy * inv + offset) * scale).max(0.0).min(top) as i32;
-                        *k = (cy * bins as i32 + cx) as u32;
-                    }
-                    let (even, odd) = c.split_at_mut(cells);
-                    let mut pairs = index[..end - start].chunks_exact(2);
-                    for pair in &mut pairs {
-                        even[pair[0] as usize] += 1;
-                        odd[pair[1] as usize] += 1;
-                    }
-                    for &k in pairs.remainder() {
-                        even[k as usize] += 1;
-                    }
-                }
-            }
-            counts.into_iter().map(move |mut c| {
-                let (even, odd) = c.split_at_mut(cells);
-                even.iter_mut().zip(odd.iter()).for_each(|(e, o)| *e += o);
-                c.truncate(cells);
-                c
-            })
-        })
-        .collect()
 }
 
 /// One sample's fitting problem, prepared for [`search`]: the slopes of
