@@ -352,7 +352,11 @@ mod tests {
         let text = std::fs::read_to_string(&index).unwrap();
         for (from, to, expected) in [
             ("tile = 16", "tile = 0", "tile must be ≥ 1"),
-            ("edge = \"clamp\"", "edge = \"mirror\"", "edge must be"),
+            (
+                "edge = \"clamp\"",
+                "edge = \"mirror\"",
+                "unknown variant `mirror`, expected `wrap` or `clamp`",
+            ),
             ("version = 1", "version = 2", "version 1"),
             ("texel_um = 7.5", "texel_um = -1.0", "texel_um must be"),
             ("tile = 16", "tile = 16\ncolour = 1", "unknown field"),
