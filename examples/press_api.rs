@@ -71,7 +71,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 
     // Validation happens here: a bad value is an error naming the key.
     let mut setup = Setup::from_scenario(&scenario, &args.scenario)?;
-    setup.output_dir = args.out.clone();
+    setup.outputs.dir = args.out.clone();
     eprintln!(
         "{}: {} tets, dermis E = {} kPa, {} frames",
         args.scenario.display(),

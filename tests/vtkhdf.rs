@@ -243,7 +243,7 @@ fn a_stopped_run_keeps_its_finished_steps() {
     let scenario = skinpatch::scenario::Scenario::parse(&text, &fixture).unwrap();
     let mut setup = skinpatch::scenario::Setup::from_scenario(&scenario, &fixture).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    setup.output_dir = dir.path().to_path_buf();
+    setup.outputs.dir = dir.path().to_path_buf();
     let err = skinpatch::pipeline::run(&setup, |_| {}).unwrap_err();
     assert!(err.to_string().contains("frame 1"), "{err}");
     let file = hdf5::File::open(dir.path().join("frames.vtkhdf")).unwrap();

@@ -49,7 +49,7 @@ pub fn bench_render(
     use std::time::Instant;
     let mut setup = setup.clone();
     setup.simulation.frames = frames.max(1).min(setup.simulation.frames);
-    let micro = setup.micro.clone();
+    let micro = setup.outputs.micro.clone();
     let (render, mode) = bench_settings(&setup, (width, height))?;
     let ctx = crate::gpu::acquire()?.ok_or_else(no_gpu)?;
     let adapter = ctx.describe();
@@ -137,8 +137,8 @@ fn bench_settings(
     setup: &crate::scenario::Setup,
     (width, height): (usize, usize),
 ) -> Result<(crate::render::RenderSetup, Mode)> {
-    let has_micro = setup.micro.is_some();
-    let mut render = match &setup.render {
+    let has_micro = setup.outputs.micro.is_some();
+    let mut render = match &setup.outputs.render {
         Some(r) => r.clone(),
         None => crate::scenario::RenderSection::default().setup(Path::new("."), has_micro)?,
     };

@@ -186,6 +186,7 @@ fn bench_micro(
     )?;
     let setup = Setup::load(path).with_context(|| format!("scenario {}", path.display()))?;
     let model = setup
+        .outputs
         .micro
         .as_ref()
         .map_or_else(skinpatch::micro::KernelModel::forehead, |m| m.model.clone());

@@ -54,22 +54,22 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     }
     let mut setup = Setup::from_scenario(&scenario, path)
         .with_context(|| format!("scenario {}", path.display()))?;
-    setup.force_large_output = force;
+    setup.outputs.force_large_output = force;
     let progress = (!quiet).then(Progress::new);
     let result = skinpatch::pipeline::run(&setup, |frame| {
         if let Some(p) = &progress {
             p.frame(frame.metrics, frame.total_frames)
         }
     });
-    let summary = finished(result, progress, path, &setup.output_dir)?;
-    let mut record = run_record(path, overrides, &scenario, &setup.output_dir, &summary)?;
+    let summary = finished(result, progress, path, &setup.outputs.dir)?;
+    let mut record = run_record(path, overrides, &scenario, &setup.outputs.dir, &summary)?;
     record["fem_wall_s"] = summary
         .frames
         .iter()
         .map(|m| m.step_wall_s)
         .sum::<f64>()
         .into();
-    let summary_path = write_record(&setup.output_dir, &record)?;
+    let summary_path = write_record(&setup.outputs.dir, &record)?;
     let mut report = format!("scenario {}: mesh\n", setup.name);
     if let Some(quality) = &summary.quality {
         report += &quality.to_string();
@@ -159,18 +159,18 @@ fn run_surface(
 ) -> anyhow::Result<()> {
     let mut setup = skinpatch::scenario::SurfaceSetup::from_scenario(scenario, path)
         .with_context(|| format!("scenario {}", path.display()))?;
-    setup.force_large_output = force;
+    setup.outputs.force_large_output = force;
     let progress = (!quiet).then(Progress::new);
     let result = skinpatch::pipeline::surface::run(&setup, |frame| {
         if let Some(p) = &progress {
             p.frame(frame.metrics, frame.total_frames)
         }
     });
-    let summary = finished(result, progress, path, &setup.output_dir)?;
-    let mut record = run_record(path, overrides, scenario, &setup.output_dir, &summary)?;
+    let summary = finished(result, progress, path, &setup.outputs.dir)?;
+    let mut record = run_record(path, overrides, scenario, &setup.outputs.dir, &summary)?;
     // The same fields as a FEM run's record; no FEM ran.
     record["fem_wall_s"] = serde_json::Value::Null;
-    let summary_path = write_record(&setup.output_dir, &record)?;
+    let summary_path = write_record(&setup.outputs.dir, &record)?;
     let s = &setup.surface;
     let mut report = format!(
         "scenario {}: surface {}\n  {} positions, {} surface vertices, {} triangles, {} frames at {} Hz, {:.1} mm² at rest\n",

@@ -17,26 +17,15 @@ use super::micro::{write_neutral, MicroEngine};
 use super::render::RenderEngine;
 use crate::error::{Error, Result};
 use crate::export::{self, MetricsRow, MetricsWriter};
-use crate::mesh::io::{Grid, VtuFormat};
+use crate::mesh::io::Grid;
 use crate::render::scene::FrameGeometry;
-use crate::render::RenderSetup;
-use crate::scenario::{MicroSetup, StrainImageSettings};
+use crate::scenario::OutputSetup;
 use crate::strain::{StrainRaster, SurfaceField};
 
 /// What every kind of run writes per frame, borrowed from its setup.
 pub(super) struct OutputSpec<'a> {
-    /// The output folder.
-    pub dir: &'a Path,
-    /// Write `frames/frame_NNNN.vtu` and `frames.pvd`.
-    pub write_frames: bool,
-    /// How the VTU files store their arrays.
-    pub vtu_format: VtuFormat,
-    /// Strain maps per frame and map, if asked for.
-    pub strain_images: Option<StrainImageSettings>,
-    /// The microstructure stage, if any.
-    pub micro: Option<&'a MicroSetup>,
-    /// The renderer, if any.
-    pub render: Option<&'a RenderSetup>,
+    /// What the scenario asks to write.
+    pub outputs: &'a OutputSetup,
     /// Width of the surface's UV square (mm) and of a render texel (mm).
     pub extent_mm: (f64, f64),
     /// Frame rate of the MP4 files (Hz).
@@ -89,18 +78,18 @@ impl<'a, R: MetricsRow + Copy> FrameOutputs<'a, R> {
     /// [`FrameOutputs::start`].
     pub fn open(spec: OutputSpec<'a>, pieces: Vec<MapPiece<'a>>) -> Result<FrameOutputs<'a, R>> {
         let mut engines = Vec::new();
-        if let Some(micro) = spec.micro {
+        if let Some(micro) = spec.outputs.micro.as_ref() {
             for _ in &pieces {
                 engines.push(MicroEngine::new(micro)?);
             }
         }
-        let dir = spec.dir;
+        let dir = spec.outputs.dir.as_path();
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-        let renderer = match spec.render {
+        let renderer = match spec.outputs.render.as_ref() {
             Some(r) => Some(RenderEngine::new(
                 dir,
                 r,
-                spec.micro,
+                spec.outputs.micro.as_ref(),
                 engines.first(),
                 spec.extent_mm,
             )?),
@@ -109,8 +98,8 @@ impl<'a, R: MetricsRow + Copy> FrameOutputs<'a, R> {
         // Then the previous run's files go, so the folder holds one run.
         clear_previous_run(dir)?;
         for (folder, wanted) in [
-            ("frames", spec.write_frames),
-            ("strain", spec.strain_images.is_some()),
+            ("frames", spec.outputs.write_frames),
+            ("strain", spec.outputs.strain_images.is_some()),
         ] {
             if wanted {
                 let path = dir.join(folder);
@@ -131,11 +120,15 @@ impl<'a, R: MetricsRow + Copy> FrameOutputs<'a, R> {
 
     /// Writes the neutral microstructure and the header of `metrics.csv`.
     pub fn start(&mut self) -> Result<()> {
-        if let Some(micro) = self.spec.micro {
-            let neutral = write_neutral(self.spec.dir, self.spec.extent_mm.0, micro)?;
+        if let Some(micro) = self.spec.outputs.micro.as_ref() {
+            let neutral = write_neutral(
+                self.spec.outputs.dir.as_path(),
+                self.spec.extent_mm.0,
+                micro,
+            )?;
             self.written.extend(neutral);
         }
-        let path = self.spec.dir.join("metrics.csv");
+        let path = self.spec.outputs.dir.as_path().join("metrics.csv");
         self.metrics = Some(MetricsWriter::create(&path)?);
         self.written.push(path);
         Ok(())
@@ -143,15 +136,15 @@ impl<'a, R: MetricsRow + Copy> FrameOutputs<'a, R> {
 
     /// Whether frames need their VTU grid.
     pub fn wants_grid(&self) -> bool {
-        self.spec.write_frames
+        self.spec.outputs.write_frames
     }
 
     /// Writes one frame's files: VTU, strain images and microstructure per
     /// map, rendered frames. The frame's row follows with [`Self::row`].
     pub fn frame(&mut self, input: &FrameInput<'_>) -> Result<()> {
-        let (dir, f) = (self.spec.dir, input.frame);
-        if let (true, Some(grid)) = (self.spec.write_frames, input.grid) {
-            let path = export::write_frame(dir, f, grid, self.spec.vtu_format)?;
+        let (dir, f) = (self.spec.outputs.dir.as_path(), input.frame);
+        if let (true, Some(grid)) = (self.spec.outputs.write_frames, input.grid) {
+            let path = export::write_frame(dir, f, grid, self.spec.outputs.vtu_format)?;
             self.collection.push((input.time_s, path));
             // Rewritten (atomically) after every frame, so a killed run's
             // frames open in ParaView too.
@@ -167,19 +160,23 @@ impl<'a, R: MetricsRow + Copy> FrameOutputs<'a, R> {
                     &view
                 }
             };
-            if let Some(images) = self.spec.strain_images {
+            if let Some(images) = self.spec.outputs.strain_images {
                 let raster = StrainRaster::new(field, images.px, images.px);
                 export::strain_images::StrainImages::new(&raster, images.range)
                     .write_tagged(dir, &piece.tag, f)?;
             }
-            if let (Some(micro), Some(engine)) = (self.spec.micro, self.engines.get_mut(k)) {
+            if let (Some(micro), Some(engine)) =
+                (self.spec.outputs.micro.as_ref(), self.engines.get_mut(k))
+            {
                 if f % micro.frame_stride == 0 {
                     engine.write_frame(micro, field, &dir.join("micro"), &piece.tag, f)?;
                     fresh_normals = micro.normal_maps;
                 }
             }
         }
-        if let (Some(r), Some(renderer)) = (self.spec.render, self.renderer.as_mut()) {
+        if let (Some(r), Some(renderer)) =
+            (self.spec.outputs.render.as_ref(), self.renderer.as_mut())
+        {
             if f % r.frame_stride == 0 {
                 let geometry = (input.geometry)(r.tessellate);
                 renderer.frame(
@@ -208,29 +205,29 @@ impl<'a, R: MetricsRow + Copy> FrameOutputs<'a, R> {
     /// per-frame files (when `folders`) added to the files written, the MP4
     /// files encoded, and where the microstructure ran.
     pub fn finish(mut self, folders: bool) -> Result<Finished<R>> {
-        let dir = self.spec.dir;
+        let dir = self.spec.outputs.dir.as_path();
         if !self.collection.is_empty() {
             self.written.push(dir.join("frames.pvd"));
         }
         if folders {
             for (folder, wanted) in [
-                ("frames", self.spec.write_frames),
-                ("strain", self.spec.strain_images.is_some()),
-                ("micro", self.spec.micro.is_some()),
+                ("frames", self.spec.outputs.write_frames),
+                ("strain", self.spec.outputs.strain_images.is_some()),
+                ("micro", self.spec.outputs.micro.as_ref().is_some()),
             ] {
                 if wanted {
                     self.written.push(dir.join(folder));
                 }
             }
         }
-        let rendered = match (self.spec.render, &self.renderer) {
+        let rendered = match (self.spec.outputs.render.as_ref(), &self.renderer) {
             (Some(r), Some(renderer)) => renderer.finish(r, self.spec.frame_rate_hz)?,
             _ => Vec::new(),
         };
         let micro_device = self
             .engines
             .first()
-            .zip(self.spec.micro)
+            .zip(self.spec.outputs.micro.as_ref())
             .map(|(e, m)| e.summary(m));
         Ok(Finished {
             written: self.written,

@@ -91,15 +91,15 @@ pub fn planned_bytes(setup: &Setup) -> u64 {
         frames: setup.simulation.frames as u64 + 1,
         vtu: (VTU_BYTES_PER_TET * mesh.num_tets() as u64
             + VTU_BYTES_PER_POINT * mesh.num_vertices() as u64)
-            / if setup.vtu_format.f32 { 2 } else { 1 },
+            / if setup.outputs.vtu_format.f32 { 2 } else { 1 },
         // The VTKHDF steps hold the same arrays uncompressed, less the
         // connectivity of every frame after the first: a bound like the VTU's.
-        vtu_copies: u64::from(setup.write_frames) + u64::from(setup.write_vtkhdf),
+        vtu_copies: u64::from(setup.outputs.write_frames) + u64::from(setup.write_vtkhdf),
         rest_vtu: setup.write_mesh_vtu,
-        strain_images: setup.strain_images,
-        micro: setup.micro.as_ref(),
+        strain_images: setup.outputs.strain_images,
+        micro: setup.outputs.micro.as_ref(),
         maps: 1,
-        render: setup.render.as_ref(),
+        render: setup.outputs.render.as_ref(),
     }
     .bytes()
 }
@@ -111,13 +111,13 @@ pub fn planned_surface_bytes(setup: &crate::scenario::SurfaceSetup) -> u64 {
         frames: setup.surface.num_frames() as u64,
         vtu: (SURFACE_VTU_BYTES_PER_POINT * top.vertices.len() as u64
             + SURFACE_VTU_BYTES_PER_TRIANGLE * top.triangles.len() as u64)
-            / if setup.vtu_format.f32 { 2 } else { 1 },
-        vtu_copies: u64::from(setup.write_frames),
+            / if setup.outputs.vtu_format.f32 { 2 } else { 1 },
+        vtu_copies: u64::from(setup.outputs.write_frames),
         rest_vtu: setup.write_surface_vtu,
-        strain_images: setup.strain_images,
-        micro: setup.micro.as_ref(),
+        strain_images: setup.outputs.strain_images,
+        micro: setup.outputs.micro.as_ref(),
         maps: setup.pieces.len() as u64,
-        render: setup.render.as_ref(),
+        render: setup.outputs.render.as_ref(),
     }
     .bytes()
 }
@@ -155,7 +155,7 @@ pub fn check(setup: &Setup, force: bool) -> Result<()> {
     refuse(
         planned_bytes(setup),
         frames,
-        &setup.output_dir,
+        &setup.outputs.dir,
         force,
         "time.frame_rate_hz",
     )
@@ -166,7 +166,7 @@ pub fn check_surface(setup: &crate::scenario::SurfaceSetup, force: bool) -> Resu
     refuse(
         planned_surface_bytes(setup),
         setup.surface.num_frames(),
-        &setup.output_dir,
+        &setup.outputs.dir,
         force,
         "surface.frame_rate_hz",
     )

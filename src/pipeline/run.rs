@@ -60,7 +60,7 @@ impl Frame<'_> {
 /// use skinpatch::scenario::Setup;
 /// let mut setup = Setup::load(std::path::Path::new("tests/fixtures/press_small.toml"))?;
 /// let out = std::env::temp_dir().join(format!("skinpatch-doc-{}", std::process::id()));
-/// setup.output_dir = out.clone();
+/// setup.outputs.dir = out.clone();
 /// let (mut forces, mut peak_rs) = (Vec::new(), 0.0f64);
 /// let summary = skinpatch::pipeline::run(&setup, |frame| {
 ///     forces.push(frame.metrics.probe_force_n[2]);
@@ -77,12 +77,12 @@ impl Frame<'_> {
 /// # }
 /// ```
 pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<FemRunSummary> {
-    let dir = &setup.output_dir;
+    let dir = &setup.outputs.dir;
     let mesh = &setup.mesh;
     // Everything that can fail before the first frame is checked before
     // the folder is touched: the planned output size, the adapters and
     // ffmpeg (opening the outputs).
-    plan::check(setup, setup.force_large_output)?;
+    plan::check(setup, setup.outputs.force_large_output)?;
     let whole = MapPiece {
         tag: String::new(),
         triangles: None,
@@ -153,19 +153,12 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<FemRun
 /// What the shared output stage needs of a FEM scenario.
 fn output_spec(setup: &Setup) -> OutputSpec<'_> {
     let (lo, hi) = setup.mesh.bounds();
+    let render = setup.outputs.render.as_ref();
     OutputSpec {
-        dir: &setup.output_dir,
-        write_frames: setup.write_frames,
-        vtu_format: setup.vtu_format,
-        strain_images: setup.strain_images,
-        micro: setup.micro.as_ref(),
-        render: setup.render.as_ref(),
+        outputs: &setup.outputs,
         extent_mm: (
             hi.x - lo.x,
-            setup
-                .render
-                .as_ref()
-                .map_or(0.0, |r| texel_mm((lo, hi), r.texture_px)),
+            render.map_or(0.0, |r| texel_mm((lo, hi), r.texture_px)),
         ),
         frame_rate_hz: 1.0 / setup.simulation.frame_dt,
     }
@@ -173,11 +166,11 @@ fn output_spec(setup: &Setup) -> OutputSpec<'_> {
 
 /// The rest mesh as VTU and TetGen files, as asked for; returns the paths.
 fn write_rest_mesh(setup: &Setup) -> Result<Vec<PathBuf>> {
-    let (dir, mesh) = (&setup.output_dir, &setup.mesh);
+    let (dir, mesh) = (&setup.outputs.dir, &setup.mesh);
     let mut written = Vec::new();
     if setup.write_mesh_vtu {
         let path = dir.join("mesh.vtu");
-        io::write_vtu_as(&path, &io::Grid::from_mesh(mesh), setup.vtu_format)?;
+        io::write_vtu_as(&path, &io::Grid::from_mesh(mesh), setup.outputs.vtu_format)?;
         written.push(path);
     }
     if setup.write_mesh_tetgen {
@@ -208,7 +201,7 @@ impl<'a> SurfaceExport<'a> {
             )
         });
         if setup.write_surface_obj {
-            let folder = setup.output_dir.join("surface");
+            let folder = setup.outputs.dir.join("surface");
             std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
         }
         Ok(SurfaceExport { setup, surface })
@@ -226,7 +219,8 @@ impl<'a> SurfaceExport<'a> {
         if self.setup.write_surface_obj {
             let path = self
                 .setup
-                .output_dir
+                .outputs
+                .dir
                 .join("surface")
                 .join(format!("frame_{frame:04}.obj"));
             crate::surface::obj::write_obj(&path, surface, Some(surface.frames.len() - 1))?;
@@ -236,7 +230,7 @@ impl<'a> SurfaceExport<'a> {
 
     /// Writes the GLB; adds what was written to `written`.
     fn finish(self, written: &mut Vec<PathBuf>) -> Result<()> {
-        let dir = &self.setup.output_dir;
+        let dir = &self.setup.outputs.dir;
         if self.setup.write_surface_obj {
             written.push(dir.join("surface"));
         }

@@ -45,27 +45,17 @@ pub fn run(
     setup: &SurfaceSetup,
     mut on_frame: impl FnMut(&SurfaceFrame<'_>),
 ) -> Result<SurfaceRunSummary> {
-    let dir = &setup.output_dir;
+    let dir = &setup.outputs.dir;
     let surface = &setup.surface;
     // Everything that can fail before the first frame is checked before
     // the folder is touched: the planned output size and the adapters
     // (opening the outputs).
-    plan::check_surface(setup, setup.force_large_output)?;
+    plan::check_surface(setup, setup.outputs.force_large_output)?;
     let extent = surface.mm_per_uv();
+    let texel_mm = |r: &crate::render::RenderSetup| extent / r.texture_px as f64;
     let spec = OutputSpec {
-        dir,
-        write_frames: setup.write_frames,
-        vtu_format: setup.vtu_format,
-        strain_images: setup.strain_images,
-        micro: setup.micro.as_ref(),
-        render: setup.render.as_ref(),
-        extent_mm: (
-            extent,
-            setup
-                .render
-                .as_ref()
-                .map_or(0.0, |r| extent / r.texture_px as f64),
-        ),
+        outputs: &setup.outputs,
+        extent_mm: (extent, setup.outputs.render.as_ref().map_or(0.0, texel_mm)),
         frame_rate_hz: surface.frame_rate_hz,
     };
     // One map per piece: the unit square's one piece is every triangle in
@@ -85,7 +75,7 @@ pub fn run(
         let rest_field = SurfaceField::new(&surface.top, &surface.positions, &surface.positions);
         let path = dir.join("surface.vtu");
         let grid = export::surface_grid(surface, &surface.positions, &rest_field);
-        io::write_vtu_as(&path, &grid, setup.vtu_format)?;
+        io::write_vtu_as(&path, &grid, setup.outputs.vtu_format)?;
         written.push(path);
     }
     outputs.start()?;

@@ -29,7 +29,7 @@ pub(super) fn push(
         *writer = Some(Writer::create(
             &dir.join("frames.vtkhdf"),
             grid,
-            setup.vtu_format,
+            setup.outputs.vtu_format,
         )?);
     }
     writer

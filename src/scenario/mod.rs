@@ -172,20 +172,30 @@ pub struct Setup {
     pub mesh: TetMesh,
     /// How the mesh was obtained, for logs.
     pub mesh_source: MeshSource,
-    /// Output folder.
-    pub output_dir: PathBuf,
+    /// The per-frame outputs (shared with surface scenarios).
+    pub outputs: OutputSetup,
     /// Write `mesh.vtu`.
     pub write_mesh_vtu: bool,
     /// Write `mesh.node/.ele/.face`.
     pub write_mesh_tetgen: bool,
-    /// Write one VTU per frame.
-    pub write_frames: bool,
     /// Write every frame into `frames.vtkhdf`.
     pub write_vtkhdf: bool,
     /// Write the top surface's animation as `surface.glb`.
     pub write_surface_glb: bool,
     /// Write the top surface of every frame as `surface/frame_NNNN.obj`.
     pub write_surface_obj: bool,
+    /// The simulation.
+    pub simulation: SimulationSetup,
+}
+
+/// What both kinds of scenario write per frame (the FEM patch and an
+/// animated surface): the settings of the pipeline's one output stage.
+#[derive(Clone, Debug)]
+pub struct OutputSetup {
+    /// Output folder.
+    pub dir: PathBuf,
+    /// Write `frames/frame_NNNN.vtu` and `frames.pvd`.
+    pub write_frames: bool,
     /// How the VTU files store their arrays.
     pub vtu_format: crate::mesh::io::VtuFormat,
     /// Strain maps per frame, if asked for.
@@ -194,8 +204,6 @@ pub struct Setup {
     pub micro: Option<MicroSetup>,
     /// The renderer, if the scenario has one.
     pub render: Option<crate::render::RenderSetup>,
-    /// The simulation.
-    pub simulation: SimulationSetup,
     /// Run even when the planned output exceeds
     /// the pipeline's planned-output limit (`skinpatch run --force`).
     pub force_large_output: bool,
@@ -631,21 +639,23 @@ impl Setup {
         }
         Ok(Setup {
             name,
-            render,
             mesh,
             mesh_source,
-            output_dir,
+            outputs: OutputSetup {
+                dir: output_dir,
+                write_frames: scenario.output.frames_vtu,
+                vtu_format: scenario.output.vtu_format(),
+                strain_images,
+                micro,
+                render,
+                force_large_output: false,
+            },
             write_mesh_vtu: scenario.output.mesh_vtu,
             write_mesh_tetgen: scenario.output.mesh_tetgen,
-            write_frames: scenario.output.frames_vtu,
             write_vtkhdf: scenario.output.vtkhdf()?,
             write_surface_glb: scenario.output.surface_glb,
             write_surface_obj: scenario.output.surface_obj,
-            vtu_format: scenario.output.vtu_format(),
-            strain_images,
-            micro,
             simulation,
-            force_large_output: false,
         })
     }
 

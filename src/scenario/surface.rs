@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::{Scenario, StrainImageSettings};
+use super::{OutputSetup, Scenario};
 use crate::error::{Error, Result};
 use crate::surface::{AnimatedSurface, LengthUnit, ReadOptions, UvLayout, UvPiece};
 
@@ -48,23 +48,10 @@ pub struct SurfaceSetup {
     pub layout: UvLayout,
     /// The maps: one per UDIM tile, or the unit square.
     pub pieces: Vec<UvPiece>,
-    /// Output folder.
-    pub output_dir: PathBuf,
+    /// The per-frame outputs (shared with FEM scenarios).
+    pub outputs: OutputSetup,
     /// Write the rest surface as `surface.vtu`.
     pub write_surface_vtu: bool,
-    /// Write `frames/frame_NNNN.vtu` and `frames.pvd`.
-    pub write_frames: bool,
-    /// How the VTU files store their arrays.
-    pub vtu_format: crate::mesh::io::VtuFormat,
-    /// Strain maps per frame, if asked for.
-    pub strain_images: Option<StrainImageSettings>,
-    /// The microstructure stage, if the scenario has one.
-    pub micro: Option<super::MicroSetup>,
-    /// The renderer, if the scenario has one.
-    pub render: Option<crate::render::RenderSetup>,
-    /// Run even when the planned output exceeds
-    /// the pipeline's planned-output limit (`skinpatch run --force`).
-    pub force_large_output: bool,
 }
 
 impl SurfaceSetup {
@@ -157,14 +144,16 @@ impl SurfaceSetup {
             surface,
             layout,
             pieces,
-            output_dir,
+            outputs: OutputSetup {
+                dir: output_dir,
+                write_frames: scenario.output.frames_vtu,
+                vtu_format: scenario.output.vtu_format(),
+                strain_images: scenario.output.strain_image_settings()?,
+                micro,
+                render,
+                force_large_output: false,
+            },
             write_surface_vtu: scenario.output.mesh_vtu,
-            write_frames: scenario.output.frames_vtu,
-            vtu_format: scenario.output.vtu_format(),
-            strain_images: scenario.output.strain_image_settings()?,
-            micro,
-            render,
-            force_large_output: false,
         })
     }
 

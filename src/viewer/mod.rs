@@ -88,15 +88,15 @@ fn load(options: &ViewOptions) -> Result<Loaded> {
     let path = &options.scenario;
     let scenario = Scenario::load_with(path, &options.overrides)?;
     let setup = Setup::from_scenario(&scenario, path)?;
-    let render = match &setup.render {
+    let render = match &setup.outputs.render {
         Some(r) => r.clone(),
         None => {
             let base = path.parent().unwrap_or(Path::new("."));
             let mut section = crate::scenario::RenderSection::default();
-            if setup.micro.is_none() {
+            if setup.outputs.micro.is_none() {
                 section.modes = vec![crate::render::Mode::None];
             }
-            section.setup(base, setup.micro.is_some())?
+            section.setup(base, setup.outputs.micro.is_some())?
         }
     };
     Ok(Loaded {
@@ -138,7 +138,7 @@ fn initial_state(loaded: &Loaded, viewport: [f32; 2]) -> state::ViewerState {
         friction,
         viewport,
     );
-    state.has_micro = setup.micro.is_some();
+    state.has_micro = setup.outputs.micro.is_some();
     if !state.has_micro {
         state.mode = state::ViewMode::None;
     }

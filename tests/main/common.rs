@@ -112,7 +112,7 @@ pub fn run_fixture(
     let scenario = skinpatch::scenario::Scenario::parse(&text, &fixture).unwrap();
     let mut setup = skinpatch::scenario::Setup::from_scenario(&scenario, &fixture).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    setup.output_dir = dir.path().to_path_buf();
+    setup.outputs.dir = dir.path().to_path_buf();
     (skinpatch::pipeline::run(&setup, |_| {}).unwrap(), dir)
 }
 

@@ -124,7 +124,7 @@ fn deep_press_is_robust() {
     let path = common::root().join("tests/fixtures/deep_press.toml");
     let mut setup = skinpatch::scenario::Setup::load(&path).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    setup.output_dir = dir.path().to_path_buf();
+    setup.outputs.dir = dir.path().to_path_buf();
     let summary = skinpatch::pipeline::run(&setup, |_| {}).unwrap();
     let forces: Vec<f64> = summary.frames.iter().map(|m| m.probe_force_n[2]).collect();
     assert_eq!(forces.len(), 11);

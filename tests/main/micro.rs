@@ -401,7 +401,7 @@ fn setup_with(extra: &str) -> skinpatch::Result<skinpatch::scenario::Setup> {
 #[test]
 fn microstructure_section_is_validated() {
     let ok = setup_with("\n[microstructure]\n[microstructure.procedural]\nsize_px = 32\n").unwrap();
-    let micro = ok.micro.unwrap();
+    let micro = ok.outputs.micro.unwrap();
     assert_eq!(
         (micro.neutral.size().0, micro.neutral.texel_um()),
         (32, 10_000.0 / 32.0)
@@ -412,7 +412,7 @@ fn microstructure_section_is_validated() {
         "\n[microstructure]\nstrain_raster_step = 8\n[microstructure.procedural]\nsize_px = 32\n",
     )
     .unwrap();
-    assert_eq!(stepped.micro.unwrap().raster_step, 8);
+    assert_eq!(stepped.outputs.micro.unwrap().raster_step, 8);
     for (extra, expected) in [
         ("edge = \"mirror\"\n", "microstructure.edge"),
         ("formats = [\"png16\", \"tiff\"]\n", "microstructure.formats[1]"),
@@ -455,13 +455,14 @@ fn a_loaded_map_takes_the_patch_texel_size_unless_told() {
         "\n[microstructure]\nmap = {:?}\nheight_unit_um = 65535.0\n",
         path.to_str().unwrap()
     );
-    let micro = setup_with(&text).unwrap().micro.unwrap();
+    let micro = setup_with(&text).unwrap().outputs.micro.unwrap();
     // 10 mm patch over 50 texels; heights 0 … 1 per full range × 65535 µm.
     let neutral = micro.neutral.whole("this test").unwrap();
     assert_eq!(neutral.texel_um, 200.0);
     assert_eq!(neutral.height_unit_um, 65535.0);
     let told = setup_with(&format!("{text}texel_um = 7.5\n"))
         .unwrap()
+        .outputs
         .micro
         .unwrap();
     assert_eq!(told.neutral.texel_um(), 7.5);

@@ -372,7 +372,7 @@ fn run_render_small(out: &Path, extra: &str) -> skinpatch::error::Result<()> {
     let path = root().join("tests/fixtures/render_small.toml");
     let scenario = skinpatch::scenario::Scenario::parse(&text, &path)?;
     let mut setup = skinpatch::scenario::Setup::from_scenario(&scenario, &path)?;
-    setup.output_dir = out.to_path_buf();
+    setup.outputs.dir = out.to_path_buf();
     skinpatch::pipeline::run(&setup, |_| {}).map(|_| ())
 }
 
@@ -433,7 +433,7 @@ fn difference_images_show_where_the_microstructure_changed() {
     let scenario = skinpatch::scenario::Scenario::parse(&text, &path).unwrap();
     let mut setup = skinpatch::scenario::Setup::from_scenario(&scenario, &path).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    setup.output_dir = dir.path().to_path_buf();
+    setup.outputs.dir = dir.path().to_path_buf();
     let summary = skinpatch::pipeline::run(&setup, |_| {}).unwrap();
     let folder = dir.path().join("render/difference");
     assert!(summary.written.contains(&folder));
@@ -881,7 +881,7 @@ fn mp4_holds_every_rendered_frame() {
     let path = root().join("tests/fixtures/render_small.toml");
     let scenario = skinpatch::scenario::Scenario::parse(&text, &path).unwrap();
     let mut setup = skinpatch::scenario::Setup::from_scenario(&scenario, &path).unwrap();
-    setup.output_dir = with_mp4.clone();
+    setup.outputs.dir = with_mp4.clone();
     skinpatch::pipeline::run(&setup, |_| {}).unwrap();
     for mode in ["none", "static", "dynamic"] {
         let video = with_mp4.join(format!("render/{mode}.mp4"));

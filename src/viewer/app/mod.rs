@@ -151,6 +151,7 @@ impl App {
         let (lo, hi) = setup.mesh.bounds();
         let albedo = Albedo::from_source(&render.albedo, render.texture_px, hi.x - lo.x)?;
         let neutral = setup
+            .outputs
             .micro
             .as_ref()
             .map(|m| m.neutral.whole("skinpatch view"))
@@ -164,7 +165,7 @@ impl App {
             });
         let mut anisotropic = render.clone();
         anisotropic.roughness = crate::render::Roughness::Anisotropic;
-        let curve = crate::pipeline::roughness_curve(&anisotropic, setup.micro.as_ref());
+        let curve = crate::pipeline::roughness_curve(&anisotropic, setup.outputs.micro.as_ref());
         let texel_mm = crate::pipeline::texel_mm((lo, hi), render.texture_px);
         let state = super::initial_state(&loaded, [options.size.0 as f32, options.size.1 as f32]);
         Ok(App {
@@ -250,7 +251,7 @@ impl App {
             color_space: wgpu::SurfaceColorSpace::Auto,
         };
         surface.configure(&ctx.device, &config);
-        let (chain, own) = match &self.loaded.setup.micro {
+        let (chain, own) = match &self.loaded.setup.outputs.micro {
             Some(m) => {
                 let chain = crate::pipeline::gpu_chain(ctx, m)?;
                 (Some(chain), None)
