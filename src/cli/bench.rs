@@ -1,5 +1,6 @@
 //! `skinpatch bench`: `fem`, `micro` and `render` figures, each printed as a
-//! table (the measurements are the library's `skinpatch::bench`).
+//! table, and `gpu`, every GPU figure in one report (the measurements are
+//! the library's `skinpatch::bench`).
 
 use std::path::{Path, PathBuf};
 
@@ -34,6 +35,31 @@ pub enum BenchCommand {
     /// `--width × --height` (dynamic mode), and prints frames per second for
     /// rendering alone and for the whole frame.
     Render(RenderArgs),
+    /// Every GPU figure in one run, written as a JSON report and Markdown.
+    ///
+    /// Records the adapters (as `gpu-info`), the microstructure chain at
+    /// fixed 10 µm texels from 1024² to 16384² (tiles where one binding
+    /// cannot hold the map) for strain-raster steps 1, 2 and 4, per stage
+    /// with bytes and GB/s and with the CPU reference's parity up to 2048²;
+    /// the renderer at 1920 × 1080 with and without the moment filter and
+    /// MSAA; the whole frame (FEM, chain, geometry, render) of the
+    /// scenario's first frames; and the GPU fit counter against the CPU
+    /// one. `--quick` sizes everything for a software adapter.
+    Gpu(GpuArgs),
+}
+
+/// `bench gpu`.
+#[derive(Args)]
+pub struct GpuArgs {
+    /// Scenario (its mesh, kernel model, render settings and first frames).
+    #[arg(long, default_value = "examples/press.toml")]
+    scenario: PathBuf,
+    /// Small sizes for a software adapter (CI): the same parts, in seconds.
+    #[arg(long)]
+    quick: bool,
+    /// The JSON report; the Markdown is written beside it (`.md`).
+    #[arg(long, value_name = "FILE", default_value = "gpu-report.json")]
+    report: PathBuf,
 }
 
 /// Options every stage takes.
@@ -113,7 +139,32 @@ pub fn run(command: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Render(a) => {
             bench_render(&a.common.scenario, a.common.frames, a.width, a.height)
         }
+        BenchCommand::Gpu(a) => bench_gpu(&a),
     }
+}
+
+/// `bench gpu`: the report, then its Markdown on stdout.
+fn bench_gpu(args: &GpuArgs) -> anyhow::Result<()> {
+    use skinpatch::bench::gpu::{bench_gpu, write_report, GpuBenchSizes};
+    let path = &args.scenario;
+    let setup = Setup::load(path).with_context(|| format!("scenario {}", path.display()))?;
+    let sizes = if args.quick {
+        GpuBenchSizes::quick()
+    } else {
+        GpuBenchSizes::full()
+    };
+    let start = std::time::Instant::now();
+    let report = bench_gpu(&setup, &sizes, |part| {
+        eprintln!("[{:7.1} s] {part}", start.elapsed().as_secs_f64())
+    })?;
+    let md = write_report(&report, &args.report)?;
+    print_stdout(&format!(
+        "{}\nwritten: {} and {} ({:.1} s)\n",
+        report.markdown(),
+        args.report.display(),
+        md.display(),
+        start.elapsed().as_secs_f64()
+    ))
 }
 
 /// `bench fem`: the first frames with each linear solver, in one run.

@@ -365,6 +365,103 @@ fn solver_failure_stops_cleanly_and_keeps_outputs() {
 /// `bench micro` prints each stage's traffic and, given the peak
 /// bandwidth, how far a resident frame is from it; a bad bandwidth is
 /// refused before any work.
+/// `bench gpu --quick` runs every part of the report on the adapter at
+/// hand (lavapipe in CI) and writes the JSON and Markdown: the chain for
+/// each strain-raster step at each size, at parity with its CPU reference
+/// (and tiled at parity with untiled), the four render cases with the
+/// whole frame, and the GPU fit counter choosing the CPU's optimum.
+#[test]
+fn bench_gpu_quick_writes_every_part_of_the_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let report = dir.path().join("gpu.json");
+    let o = skinpatch(&[
+        "bench",
+        "gpu",
+        "--quick",
+        "--scenario",
+        "tests/fixtures/press_small.toml",
+        "--report",
+        report.to_str().unwrap(),
+    ]);
+    if !o.status.success() {
+        // Only without an adapter, and then it says so.
+        assert!(
+            std::env::var("SKINPATCH_REQUIRE_GPU").map_or(true, |v| v != "1"),
+            "stderr: {}",
+            text(&o.stderr)
+        );
+        assert!(text(&o.stderr).contains("GPU"), "{}", text(&o.stderr));
+        return;
+    }
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    let adapter = v["adapter"].as_str().unwrap();
+    assert!(!adapter.is_empty());
+    assert!(!v["adapters"].as_array().unwrap().is_empty());
+    let micro = v["micro"].as_array().unwrap();
+    let steps: Vec<u64> = micro
+        .iter()
+        .map(|m| m["raster_step"].as_u64().unwrap())
+        .collect();
+    assert_eq!(steps, [1, 2, 4]);
+    for m in micro {
+        let rows = m["rows"].as_array().unwrap();
+        let sizes: Vec<u64> = rows.iter().map(|r| r["size"].as_u64().unwrap()).collect();
+        assert_eq!(sizes, [128, 256]);
+        for r in rows {
+            assert!(r["gpu_ms"].as_f64().unwrap() > 0.0, "{r}");
+            assert!(r["cpu_ms"].as_f64().unwrap() > 0.0, "{r}");
+            assert!(r["max_difference"].as_f64().unwrap() <= 1e-4, "{r}");
+            let stages = r["stages"].as_array().unwrap();
+            assert_eq!(stages.len(), skinpatch::gpu::micro::MicroStage::COUNT);
+            assert!(
+                stages.iter().all(|s| s["bytes"].as_u64().unwrap() > 0),
+                "{r}"
+            );
+            assert!(r["resident_frame_ms"].as_f64().unwrap() > 0.0, "{r}");
+            let tiled = &r["tiled"];
+            assert!(tiled["max_difference"].as_f64().unwrap() <= 1e-4, "{r}");
+        }
+        assert_eq!(rows[1]["tiled"]["total"], 4);
+    }
+    let render = v["render"].as_array().unwrap();
+    let cases: Vec<(String, u64)> = render
+        .iter()
+        .map(|r| {
+            let filter = r["microstructure_filter"].as_str().unwrap().to_string();
+            (filter, r["msaa"].as_u64().unwrap())
+        })
+        .collect();
+    let expected = [("moments", 4), ("moments", 1), ("none", 4), ("none", 1)];
+    assert_eq!(cases, expected.map(|(f, m)| (f.to_string(), m)).to_vec());
+    for r in render {
+        assert_eq!(
+            (r["width"].as_u64(), r["height"].as_u64()),
+            (Some(160), Some(90))
+        );
+        assert!(r["render_ms"].as_f64().unwrap() > 0.0, "{r}");
+        assert_eq!(r["passes"].as_array().unwrap().len(), 6);
+        let whole = &r["whole_frame"];
+        assert!(whole["fem_ms"].as_f64().unwrap() > 0.0, "{r}");
+        let fps = whole["frames_per_s"].as_f64().unwrap();
+        assert!(fps.is_finite() && fps > 0.0, "{r}");
+        let share = whole["gpu_share"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&share), "{r}");
+    }
+    let fit = &v["fit"];
+    assert_eq!(fit["same_optimum"], true, "{fit}");
+    assert!(fit["evaluations"].as_u64().unwrap() > 1000, "{fit}");
+    assert!(fit["cpu_s"].as_f64().unwrap() > 0.0 && fit["gpu_s"].as_f64().unwrap() > 0.0);
+    let md = std::fs::read_to_string(report.with_extension("md")).unwrap();
+    for heading in [
+        "## Microstructure chain",
+        "## Renderer and whole frame",
+        "## Fit counter",
+    ] {
+        assert!(md.contains(heading), "{md}");
+    }
+    assert!(md.contains(adapter) && text(&o.stdout).contains(adapter));
+}
+
 #[test]
 fn bench_micro_reports_traffic_against_a_given_bandwidth() {
     let args = [
