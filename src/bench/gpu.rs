@@ -30,8 +30,9 @@ use crate::scenario::Setup;
 pub struct GpuBenchSizes {
     /// Map sides of the microstructure chain (texels of `texel_um`).
     pub map_sizes: Vec<usize>,
-    /// Texel size of those maps (µm).
-    pub texel_um: f64,
+    /// Texel size of those maps (µm); `None`: the patch's width over the
+    /// smallest size (a map always at least as large as the patch).
+    pub texel_um: Option<f64>,
     /// Largest side the CPU reference runs at (for parity and its time).
     pub cpu_up_to: usize,
     /// Tile side for maps beyond one GPU binding.
@@ -57,7 +58,7 @@ impl GpuBenchSizes {
     pub fn full() -> GpuBenchSizes {
         GpuBenchSizes {
             map_sizes: vec![1024, 2048, 4096, 8192, 16384],
-            texel_um: 10.0,
+            texel_um: Some(10.0),
             cpu_up_to: 2048,
             tile: 4096,
             raster_steps: vec![1, 2, 4],
@@ -73,7 +74,7 @@ impl GpuBenchSizes {
     pub fn quick() -> GpuBenchSizes {
         GpuBenchSizes {
             map_sizes: vec![128, 256],
-            texel_um: 10.0,
+            texel_um: None,
             cpu_up_to: 256,
             tile: 128,
             raster_steps: vec![1, 2, 4],
@@ -94,6 +95,8 @@ pub struct GpuReport {
     pub adapters: Vec<Value>,
     /// The sizes used.
     pub sizes: GpuBenchSizes,
+    /// The texel size the chain ran at (µm).
+    pub texel_um: f64,
     /// The microstructure chain, one bench per strain-raster step.
     pub micro: Vec<(usize, MicroBench)>,
     /// The render cases: (moment filter, MSAA samples, figures).
@@ -133,11 +136,16 @@ pub fn bench_gpu(
         .micro
         .as_ref()
         .map_or_else(crate::micro::KernelModel::forehead, |m| m.model.clone());
+    let (lo, hi) = setup.mesh.bounds();
+    let smallest = sizes.map_sizes.iter().copied().min().unwrap_or(1).max(1);
+    let texel_um = sizes
+        .texel_um
+        .unwrap_or((hi.x - lo.x) * 1e3 / smallest as f64);
     let mut micro = Vec::new();
     for &step in &sizes.raster_steps {
         progress(&format!("microstructure chain, strain-raster step {step}"));
         let layout = MapLayout::FixedTexel {
-            texel_um: sizes.texel_um,
+            texel_um,
             cpu_up_to: sizes.cpu_up_to,
             tile: Some(sizes.tile),
         };
@@ -161,8 +169,7 @@ pub fn bench_gpu(
             let mut case = setup.clone();
             let mut r = match &case.outputs.render {
                 Some(r) => r.clone(),
-                None => crate::scenario::RenderSection::default()
-                    .setup(std::path::Path::new("."), case.outputs.micro.is_some())?,
+                None => super::render::default_render(case.outputs.micro.is_some())?,
             };
             r.microstructure_filter = filter;
             r.msaa = msaa;
@@ -181,6 +188,7 @@ pub fn bench_gpu(
         adapter,
         adapters,
         sizes: sizes.clone(),
+        texel_um,
         micro,
         render,
         fit,
@@ -348,7 +356,7 @@ impl GpuReport {
             "cpu_threads": rayon::current_num_threads(),
             "sizes": {
                 "map_sizes": self.sizes.map_sizes,
-                "texel_um": self.sizes.texel_um,
+                "texel_um": self.texel_um,
                 "cpu_up_to": self.sizes.cpu_up_to,
                 "tile": self.sizes.tile,
                 "repetitions": self.sizes.repetitions,
@@ -373,11 +381,11 @@ impl GpuReport {
         let mut md = format!(
             "# skinpatch bench gpu\n\nAdapter: {}; {} CPU threads.\n\n\
              ## Microstructure chain ({} µm texels)\n\n\
-             | step | size | GPU ms | resident stages ms | CPU ms | max abs diff | tiled GPU ms |\n\
+             | step | size | GPU ms | resident stages ms | CPU ms | max GPU−CPU diff / range | tiled GPU ms |\n\
              |---|---|---|---|---|---|---|\n",
             self.adapter,
             rayon::current_num_threads(),
-            self.sizes.texel_um
+            self.texel_um
         );
         for (step, bench) in &self.micro {
             for r in &bench.rows {
@@ -438,6 +446,9 @@ fn whole_frame_ms(b: &RenderBench) -> f64 {
 /// Writes the JSON report to `path` and the Markdown beside it (`.md`),
 /// each atomically; returns the Markdown's path.
 pub fn write_report(report: &GpuReport, path: &std::path::Path) -> Result<std::path::PathBuf> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    }
     let text = serde_json::to_string_pretty(&report.json())
         .map_err(|e| Error::io(path, std::io::Error::other(e)))?;
     crate::mesh::io::write_atomically(path, text.as_bytes())?;

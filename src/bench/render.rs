@@ -140,7 +140,7 @@ fn bench_settings(
     let has_micro = setup.outputs.micro.is_some();
     let mut render = match &setup.outputs.render {
         Some(r) => r.clone(),
-        None => crate::scenario::RenderSection::default().setup(Path::new("."), has_micro)?,
+        None => default_render(has_micro)?,
     };
     render.width = width;
     render.height = height;
@@ -171,4 +171,14 @@ fn time_frame(
     renderer.render(ctx, mode)?;
     let readback_ms = start.elapsed().as_secs_f64() * 1e3;
     Ok((render_ms, readback_ms, renderer.time_stages(ctx, mode)?))
+}
+
+/// The default `[render]` for a scenario without one: in mode `none`
+/// without a microstructure (the default `dynamic` needs one).
+pub(super) fn default_render(has_micro: bool) -> Result<crate::render::RenderSetup> {
+    let mut section = crate::scenario::RenderSection::default();
+    if !has_micro {
+        section.modes = vec![Mode::None];
+    }
+    section.setup(Path::new("."), has_micro)
 }
