@@ -250,6 +250,138 @@ impl BoundaryConditions {
     }
 }
 
+/// A node held along some directions so that the constraints leave no
+/// rigid motion of the patch free (see [`rigid_motion_pins`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pin {
+    /// The node.
+    pub node: usize,
+    /// Its filter with the held directions added.
+    pub filter: Filter,
+}
+
+/// The rigid motions of `rest` (three translations, three rotations about
+/// the centroid) that `filters` leave entirely free, as an orthonormal basis
+/// of coefficient vectors (empty when the supports hold every one).
+fn free_rigid_motions(rest: &[Vec3], filters: &[Filter]) -> Vec<nalgebra::Vector6<f64>> {
+    let n = rest.len().max(1) as f64;
+    let centre = rest.iter().sum::<Vec3>() / n;
+    // Gram matrix of the modes' constrained parts: Σ_i u_kᵀ (I − S_i) u_l.
+    let mut gram = nalgebra::Matrix6::<f64>::zeros();
+    let mut size = 0.0;
+    for (x, f) in rest.iter().zip(filters) {
+        let modes = rigid_modes_at(x, &centre);
+        size += modes.iter().map(|u| u.norm_squared()).sum::<f64>();
+        if *f == Filter::Free {
+            continue;
+        }
+        let held = modes.map(|u| u - f.apply(&u));
+        for k in 0..6 {
+            for l in 0..6 {
+                gram[(k, l)] += held[k].dot(&held[l]);
+            }
+        }
+    }
+    let eigen = gram.symmetric_eigen();
+    (0..6)
+        .filter(|&k| eigen.eigenvalues[k] <= 1e-12 * size)
+        .map(|k| eigen.eigenvectors.column(k).into_owned())
+        .collect()
+}
+
+/// The displacement of a point at `x` under each unit rigid motion about
+/// `centre`: translations along x, y, z, then rotations about them.
+fn rigid_modes_at(x: &Vec3, centre: &Vec3) -> [Vec3; 6] {
+    let r = x - centre;
+    [
+        Vec3::x(),
+        Vec3::y(),
+        Vec3::z(),
+        Vec3::x().cross(&r),
+        Vec3::y().cross(&r),
+        Vec3::z().cross(&r),
+    ]
+}
+
+/// Pins that remove the rigid motions `filters` leave free (e.g. a bottom
+/// on rollers with free sides leaves the patch free to slide along x and y
+/// and to turn about z). A quasi-static solve of such a patch has no unique
+/// answer, and a frictionless probe on it is a neutral or unstable mode in
+/// which Newton's method stalls. The pins are statically determinate — the
+/// fewest directions at the fewest nodes, chosen from `pool` (the bottom
+/// face, say): the node nearest the pool's centroid is held along every
+/// direction in which a free motion moves it, then the node farthest from
+/// the pins so far, until no motion is free (at most three nodes). Pins
+/// carry no force at an equilibrium whose loads have no net force or
+/// moment along the free motions, so they change no answer that exists
+/// without them. Targets stay the rest positions.
+pub fn rigid_motion_pins(rest: &[Vec3], filters: &[Filter], pool: &[usize]) -> Vec<Pin> {
+    let mut filters = filters.to_vec();
+    let mut pins: Vec<Pin> = Vec::new();
+    let pool: Vec<usize> = if pool.is_empty() {
+        (0..rest.len()).collect()
+    } else {
+        pool.to_vec()
+    };
+    if pool.is_empty() {
+        return pins;
+    }
+    let centre = rest.iter().sum::<Vec3>() / rest.len() as f64;
+    let pool_centre = pool.iter().map(|&i| rest[i]).sum::<Vec3>() / pool.len() as f64;
+    for _ in 0..3 {
+        let free = free_rigid_motions(rest, &filters);
+        if free.is_empty() {
+            break;
+        }
+        // The node nearest the pool's centroid first, then the one farthest
+        // from every pin so far (ties: the lower index).
+        let score = |i: usize| -> f64 {
+            if pins.is_empty() {
+                -(rest[i] - pool_centre).norm()
+            } else {
+                pins.iter()
+                    .map(|p| (rest[i] - rest[p.node]).norm())
+                    .fold(f64::INFINITY, f64::min)
+            }
+        };
+        let node = pool
+            .iter()
+            .copied()
+            .fold(None, |best: Option<(usize, f64)>, i| {
+                let s = score(i);
+                match best {
+                    Some((_, b)) if b >= s => best,
+                    _ => Some((i, s)),
+                }
+            })
+            .map(|(i, _)| i)
+            .expect("the pool is not empty");
+        let modes = rigid_modes_at(&rest[node], &centre);
+        let moves = nalgebra::Matrix3xX::from_columns(
+            &free
+                .iter()
+                .map(|c| filters[node].apply(&(0..6).map(|k| modes[k] * c[k]).sum::<Vec3>()))
+                .collect::<Vec<_>>(),
+        );
+        let svd = moves.svd(true, false);
+        let largest = svd.singular_values.max();
+        let u = svd.u.expect("asked for U");
+        let mut filter = filters[node];
+        for (k, &s) in svd.singular_values.iter().enumerate() {
+            if s > 1e-9 * largest && largest > 0.0 {
+                filter = filter.constrain(&u.column(k).into_owned());
+            }
+        }
+        if filter == filters[node] {
+            break;
+        }
+        filters[node] = filter;
+        pins.retain(|p| p.node != node);
+        pins.push(Pin { node, filter });
+    }
+    pins
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -263,5 +395,53 @@ mod tests {
         assert!((k.at(0.5) - 1.125).abs() < 1e-15);
         assert!((k.at(1.5) - 1.025).abs() < 1e-15);
         assert_eq!(k.at(5.0), 0.8);
+    }
+
+    /// A 3 × 3 × 2 lattice with its bottom on rollers can slide along x and
+    /// y and turn about z: two pins hold it (the bottom centre along x and
+    /// y, the farthest bottom node along its tangent of the turn), and then
+    /// no rigid motion is free. Rollers on the sides leave none to pin.
+    #[test]
+    fn pins_hold_exactly_the_free_rigid_motions() {
+        let rest: Vec<Vec3> = (0..18)
+            .map(|k| Vec3::new((k % 3) as f64, ((k / 3) % 3) as f64, (k / 9) as f64))
+            .collect();
+        let bottom: Vec<usize> = (0..9).collect();
+        let mut filters = vec![Filter::Free; rest.len()];
+        for &i in &bottom {
+            filters[i] = Filter::Free.constrain(&Vector3::z());
+        }
+        assert_eq!(free_rigid_motions(&rest, &filters).len(), 3);
+        let pins = rigid_motion_pins(&rest, &filters, &bottom);
+        assert_eq!(pins.len(), 2, "{pins:?}");
+        assert_eq!(pins[0].node, 4);
+        assert_eq!(pins[0].filter, Filter::Fixed);
+        assert_eq!(pins[1].node, 0);
+        let s = pins[1].filter.matrix();
+        // Held along z and the turn's tangent at (−1, −1) from the centre.
+        let tangent = Vector3::new(1.0, -1.0, 0.0).normalize();
+        assert!((s * tangent).norm() < 1e-12 && (s * Vector3::z()).norm() < 1e-12);
+        let radial = Vector3::new(1.0, 1.0, 0.0).normalize();
+        assert!((s * radial - radial).norm() < 1e-12);
+        for p in &pins {
+            filters[p.node] = p.filter;
+        }
+        assert!(free_rigid_motions(&rest, &filters).is_empty());
+        // Sides on rollers hold the sliding and the turn.
+        let mut filters = vec![Filter::Free; rest.len()];
+        for &i in &bottom {
+            filters[i] = Filter::Free.constrain(&Vector3::z());
+        }
+        for i in 0..rest.len() {
+            for axis in 0..2 {
+                if rest[i][axis] == 0.0 || rest[i][axis] == 2.0 {
+                    let mut e = Vector3::zeros();
+                    e[axis] = 1.0;
+                    filters[i] = filters[i].constrain(&e);
+                }
+            }
+        }
+        assert!(free_rigid_motions(&rest, &filters).is_empty());
+        assert!(rigid_motion_pins(&rest, &filters, &bottom).is_empty());
     }
 }

@@ -175,6 +175,27 @@ impl ProbePose {
         }
     }
 
+    /// The probe's lowest point (mm): the bottom of the sphere, of the
+    /// capsule's lower end (its middle when level), the punch's face centre.
+    pub fn lowest_point(&self) -> Vec3 {
+        match self.shape {
+            ProbeShape::Sphere { radius_mm } => self.centre - Vec3::z() * radius_mm,
+            ProbeShape::Capsule {
+                radius_mm,
+                length_mm,
+            } => {
+                let end = self.axis * (0.5 * length_mm * -self.axis.z.signum());
+                let end = if self.axis.z == 0.0 {
+                    Vec3::zeros()
+                } else {
+                    end
+                };
+                self.centre + end - Vec3::z() * radius_mm
+            }
+            ProbeShape::Punch { .. } => self.centre,
+        }
+    }
+
     /// Height of the probe's lowest point (mm).
     pub fn lowest_z(&self) -> f64 {
         match self.shape {
@@ -566,7 +587,61 @@ pub fn solve_with_contact(
         ..Default::default()
     };
     finish_report(sim, base_ext, pose, state, &mut report);
+    if let Some(depth) = passed_through(sim, pose, state) {
+        let p = pose.lowest_point();
+        return Err(crate::error::Error::Solver(format!(
+            "{context}: the probe has passed through the skin: its lowest point ({:.3}, {:.3}, \
+             {:.3}) mm is {depth:.3} mm below the deformed surface above it, and {} nodes hold \
+             it (node-to-surface contact cannot keep a probe this deep out of this mesh: press \
+             less deep, or refine the top layer)",
+            p.x, p.y, p.z, report.contact_nodes
+        )));
+    }
     Ok(report)
+}
+
+/// Whether the probe has slipped through the skin between the surface
+/// nodes (which node-to-surface contact cannot see): the deformed top
+/// surface right above the probe's lowest point — the lowest triangle whose
+/// horizontal projection holds it — lies above that point by more than the
+/// triangle's longest edge, so the probe is inside the skin. A probe the
+/// skin holds has that surface on its own, within the sag of a triangle's
+/// chord. Returns how deep the point is below the surface (mm).
+fn passed_through(
+    sim: &super::integrate::Simulation,
+    pose: &ProbePose,
+    state: &ContactState,
+) -> Option<f64> {
+    let p = pose.lowest_point();
+    let x = sim.positions();
+    let mut lowest: Option<(f64, f64)> = None;
+    for tri in &state.top_triangles {
+        let [a, b, c] = tri.map(|v| x[v]);
+        let Some(z) = height_above(&a, &b, &c, &p) else {
+            continue;
+        };
+        let edge = [(b - a).norm(), (c - b).norm(), (a - c).norm()]
+            .into_iter()
+            .fold(0.0, f64::max);
+        if lowest.is_none_or(|(lz, _)| z < lz) {
+            lowest = Some((z, edge));
+        }
+    }
+    let (z, edge) = lowest?;
+    (z - p.z > edge).then_some(z - p.z)
+}
+
+/// The height at `p`'s (x, y) of the triangle `a b c` if its horizontal
+/// projection holds that point (edges included).
+fn height_above(a: &Vec3, b: &Vec3, c: &Vec3, p: &Vec3) -> Option<f64> {
+    let det = (b.x - a.x) * (c.y - a.y) - (c.x - a.x) * (b.y - a.y);
+    if det.abs() < 1e-300 {
+        return None;
+    }
+    let u = ((p.x - a.x) * (c.y - a.y) - (c.x - a.x) * (p.y - a.y)) / det;
+    let v = ((b.x - a.x) * (p.y - a.y) - (p.x - a.x) * (b.y - a.y)) / det;
+    let eps = -1e-12;
+    (u >= eps && v >= eps && u + v <= 1.0 - eps).then(|| a.z + u * (b.z - a.z) + v * (c.z - a.z))
 }
 
 /// Contact force on node `v`: what balances the rest (at equilibrium; at an
@@ -722,30 +797,38 @@ fn update_active_set(
     changed
 }
 
-/// Frictionless contact: forgets the constraint plane of every sliding node
-/// whose plane normal differs from the probe normal at the node's closest
-/// point by more than [`MAX_TILT`], so that [`apply_contact`] re-projects
-/// it; returns whether any was. Called on a nearly converged iterate: a
-/// plane kept while the node slid along it has tilted by the node's drift
-/// over the probe radius (up to ~1e-3 rad), and the node's reaction with
-/// it, which gives a frictionless probe a tangential force of that order.
-/// Under Coulomb friction the same tilt moves the friction force by a tilt
-/// of the normal reaction, ~1e-3/μ of itself; on the main job re-projecting
-/// there changes the probe force by 5e-6 of itself and costs a quarter more
-/// Newton iterations, so Coulomb planes are kept.
+/// Forgets the constraint plane of every sliding node whose plane normal
+/// differs from the probe normal at the node's closest point by more than
+/// [`max_tilt`], so that [`apply_contact`] re-projects it; returns whether
+/// any was. Called on a nearly converged iterate: a plane kept while the
+/// node slid along it has tilted by the node's drift over the probe radius
+/// (up to ~1e-3 rad), and the node's reaction with it, which gives a
+/// frictionless probe a tangential force of that order and turns a Coulomb
+/// node's force out of its cone by the tilt (|f_t|/f_n off by about
+/// θ(1 + μ²)).
 fn drop_tilted_planes(
     sim: &super::integrate::Simulation,
     frame: &Frame,
     state: &mut ContactState,
 ) -> bool {
-    if frame.mode != ContactMode::Frictionless {
-        return false;
-    }
+    let limit = max_tilt(frame.mode);
     let before = state.planes.len();
     state
         .planes
-        .retain(|&v, plane| (plane.1 - frame.pose.distance(&sim.state.x[v]).1).norm() <= MAX_TILT);
+        .retain(|&v, plane| (plane.1 - frame.pose.distance(&sim.state.x[v]).1).norm() <= limit);
     state.planes.len() != before
+}
+
+/// Angle (rad) by which a kept constraint plane may differ from the
+/// tangent plane at the node's closest probe point at convergence:
+/// [`MAX_TILT`] without friction; under Coulomb friction small enough that
+/// no node's |f_t|/f_n exceeds μ by more than 5e-4 of itself (half the
+/// bound the tests hold it to), `5e-4·μ/(1 + μ²)`.
+fn max_tilt(mode: ContactMode) -> f64 {
+    match mode {
+        ContactMode::Coulomb(mu) if mu > 0.0 => MAX_TILT.min(5e-4 * mu / (1.0 + mu * mu)),
+        _ => MAX_TILT,
+    }
 }
 
 /// Sets the solver's constraints and loads for the current contact state:

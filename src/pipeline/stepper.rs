@@ -8,9 +8,11 @@ use std::time::Instant;
 
 use crate::error::{Error, Result};
 use crate::export::FrameMetrics;
+use crate::fem::boundary::{rigid_motion_pins, Pin};
 use crate::fem::contact::{solve_with_contact, ContactState};
 use crate::fem::integrate::{Dynamics, Simulation};
 use crate::fem::load_steps::{load_steps, press_in, MAX_PROBE_STEP};
+use crate::fem::solve::Filter;
 use crate::mesh::Vec3;
 use crate::scenario::Setup;
 
@@ -52,6 +54,8 @@ pub struct Stepper {
     last_solved: Option<(Vec<Vec3>, f64)>,
     inverted_before: usize,
     split_before: bool,
+    // Nodes held so that no rigid motion is free (quasi-static runs).
+    pins: Vec<Pin>,
 }
 
 impl Stepper {
@@ -61,6 +65,27 @@ impl Stepper {
         sim.settings = s.newton;
         sim.dynamics = s.dynamics;
         let sides: Vec<usize> = s.sets.sides.iter().flatten().copied().collect();
+        // A quasi-static patch whose supports leave it free to move rigidly
+        // has no unique equilibrium; backward Euler's inertia gives one.
+        let (supports, _) = s.boundary.constraints(&s.sets, &mesh.positions, 0.0);
+        let pins = if s.dynamics.is_none() {
+            rigid_motion_pins(&mesh.positions, &supports, &s.sets.bottom)
+        } else {
+            Vec::new()
+        };
+        for pin in &pins {
+            let p = mesh.positions[pin.node];
+            log::info!(
+                "the supports leave the patch free to move rigidly: node {} at ({:.3}, {:.3}, \
+                 {:.3}) mm is held at rest along {} more direction(s), which carry no force \
+                 unless the loads push the patch as a whole",
+                pin.node,
+                p.x,
+                p.y,
+                p.z,
+                held_directions(&pin.filter) - held_directions(&supports[pin.node]),
+            );
+        }
         Stepper {
             sim,
             contact: ContactState::new(mesh, &sides),
@@ -70,6 +95,7 @@ impl Stepper {
             last_solved: None,
             inverted_before: 0,
             split_before: false,
+            pins,
         }
     }
 
@@ -147,7 +173,10 @@ impl Stepper {
         for k in 1..=substeps {
             let ts = t_prev + (t - t_prev) * k as f64 / substeps as f64;
             let context = format!("frame {frame} (t = {ts:.4} s)");
-            let (filters, targets) = s.boundary.constraints(&s.sets, &mesh.positions, ts);
+            let (mut filters, targets) = s.boundary.constraints(&s.sets, &mesh.positions, ts);
+            for pin in &self.pins {
+                filters[pin.node] = pin.filter;
+            }
             if sim.dynamics.is_some() {
                 sim.begin_step();
             }
@@ -216,6 +245,11 @@ impl Stepper {
         );
         Ok(m)
     }
+}
+
+/// How many directions `filter` holds.
+fn held_directions(filter: &Filter) -> usize {
+    3 - filter.matrix().trace().round() as usize
 }
 
 /// Applies the inversion rule to a solved frame: a warning when inverted
