@@ -14,7 +14,11 @@
 //! * frictionless and slipping nodes are held on the tangent plane of their
 //!   closest probe point and slide freely or against a Coulomb slip load of
 //!   magnitude `μ·F_n` opposing their slip (its stiffness is in the Newton
-//!   matrix);
+//!   matrix); a frictionless node's plane is re-projected at every Newton
+//!   iteration with the probe's curvature times its normal reaction in the
+//!   matrix, so Newton converges quadratically on the curved surface;
+//! * a probe that slips between the surface nodes (the surface above its
+//!   lowest point higher than that point) stops the solve with an error;
 //! * sticking and bonded nodes are held at an anchor that moves rigidly with
 //!   the probe from where the node was at the start of the frame;
 //! * a Coulomb node's slip over a step is relative to the probe: from where
@@ -216,6 +220,40 @@ impl ProbePose {
         }
     }
 
+    /// The Hessian of the distance to the probe surface at `p` (1/mm): its
+    /// curvature, `(I − n nᵀ)/ρ` at distance ρ from a sphere's centre,
+    /// `(I − n nᵀ − a aᵀ)/ρ` from a capsule's axis `a` between its ends,
+    /// zero for the flat punch.
+    pub fn distance_hessian(&self, p: &Vec3) -> nalgebra::Matrix3<f64> {
+        let curved = |centre: &Vec3, along: Option<&Vec3>| {
+            let d = p - centre;
+            let rho = d.norm();
+            if rho == 0.0 {
+                return nalgebra::Matrix3::zeros();
+            }
+            let n = d / rho;
+            let mut m = nalgebra::Matrix3::identity() - n * n.transpose();
+            if let Some(a) = along {
+                m -= a * a.transpose();
+            }
+            m / rho
+        };
+        match self.shape {
+            ProbeShape::Sphere { .. } => curved(&self.centre, None),
+            ProbeShape::Capsule { length_mm, .. } => {
+                let s = (p - self.centre).dot(&self.axis);
+                let half = length_mm / 2.0;
+                let on_axis = self.centre + self.axis * s.clamp(-half, half);
+                if s.abs() < half {
+                    curved(&on_axis, Some(&self.axis))
+                } else {
+                    curved(&on_axis, None)
+                }
+            }
+            ProbeShape::Punch { .. } => nalgebra::Matrix3::zeros(),
+        }
+    }
+
     /// The closest point on the probe surface to `p`, with its outward normal.
     pub fn project(&self, p: &Vec3) -> (Vec3, Vec3) {
         let (d, n) = self.distance(p);
@@ -362,10 +400,12 @@ pub struct ContactState {
     /// another start (a predicted surface node would touch where it never
     /// was).
     solved: Vec<Vec3>,
-    /// Per sliding node the constraint plane in use (point, normal): kept
-    /// while the node lies within the solver's position tolerance of the
-    /// probe, re-projected otherwise (a sphere on a free block is a neutral
-    /// mode that planes following the nodes every iteration would let drift).
+    /// Per sliding node the constraint plane in use (point, normal).
+    /// Frictionless nodes take the tangent plane where they are at every
+    /// iteration, with the probe's curvature in the matrix; Coulomb nodes
+    /// keep theirs while they lie within the solver's position tolerance
+    /// of the probe and its normal within [`max_tilt`] of the probe's (a
+    /// friction force in a moving plane would cost Newton its rate).
     planes: std::collections::BTreeMap<usize, (Vec3, Vec3)>,
     /// Complementarity constants: each node's rest stiffness (N/mm), which
     /// turns a gap or a slip into a comparable force.
@@ -839,6 +879,7 @@ fn apply_contact(sim: &mut super::integrate::Simulation, frame: &Frame, state: &
     sim.loads.targets.copy_from_slice(frame.base_targets);
     sim.loads.f_ext.copy_from_slice(frame.base_ext);
     sim.loads.slip_loads.clear();
+    sim.loads.curvature.clear();
     state.planes.retain(|v, _| state.active.contains_key(v));
     for (&v, c) in &state.active {
         match *c {
@@ -847,18 +888,35 @@ fn apply_contact(sim: &mut super::integrate::Simulation, frame: &Frame, state: &
                 sim.loads.targets[v] = anchor;
             }
             NodeContact::Slide { friction } => {
-                let (q, n) = match state.planes.get(&v) {
-                    Some(&plane)
-                        if frame.pose.distance(&sim.state.x[v]).0.abs() <= sim.position_tol() =>
-                    {
-                        plane
+                let x = sim.state.x[v];
+                let (q, n) = if frame.mode == ContactMode::Frictionless {
+                    // The constraint linearised where the node is: the
+                    // tangent plane at its closest probe point, with the
+                    // surface's curvature times the normal reaction in the
+                    // matrix (Newton on the curved constraint).
+                    let plane = frame.pose.project(&x);
+                    let reaction = contact_force(sim, frame.base_ext, v).dot(&plane.1).max(0.0);
+                    if reaction > 0.0 {
+                        sim.loads
+                            .curvature
+                            .push((v, -frame.pose.distance_hessian(&x) * reaction));
                     }
-                    _ => {
-                        let plane = frame.pose.project(&sim.state.x[v]);
-                        state.planes.insert(v, plane);
-                        plane
+                    plane
+                } else {
+                    // A sliding Coulomb node keeps its plane while it stays on
+                    // the probe and its plane stays within the cone's tilt.
+                    let (gap, normal) = frame.pose.distance(&x);
+                    match state.planes.get(&v) {
+                        Some(&plane)
+                            if gap.abs() <= sim.position_tol()
+                                && (plane.1 - normal).norm() <= max_tilt(frame.mode) =>
+                        {
+                            plane
+                        }
+                        _ => frame.pose.project(&x),
                     }
                 };
+                state.planes.insert(v, (q, n));
                 sim.loads.filters[v] = sim.loads.filters[v].constrain(&n);
                 sim.loads.targets[v] = q;
                 if let ContactMode::Coulomb(mu) = frame.mode {

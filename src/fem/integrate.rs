@@ -262,6 +262,12 @@ pub struct Loads {
     pub f_ext: Vec<Vec3>,
     /// Sliding-friction loads, which depend on the positions (see [`SlipLoad`]).
     pub slip_loads: Vec<SlipLoad>,
+    /// Stiffness the constraints' curvature adds to nodes' diagonal blocks
+    /// (N/mm): a node held on a curved surface by a reaction λ along its
+    /// normal gains `−λ ∇²g` (g the distance to the surface), the term that
+    /// makes Newton's method on the curved constraint quadratic when the
+    /// constraint plane is re-projected at every iteration.
+    pub curvature: Vec<(usize, Matrix3<f64>)>,
 }
 
 /// The solver's buffers, kept between solves.
@@ -341,6 +347,7 @@ impl Simulation {
                 targets: mesh.positions.clone(),
                 f_ext: vec![Vec3::zeros(); n],
                 slip_loads: Vec::new(),
+                curvature: Vec::new(),
             },
             work: Workspace {
                 f_elastic: vec![Vec3::zeros(); n],
@@ -563,6 +570,9 @@ impl Simulation {
             let c = 1.0 / (d.dt * d.dt) + d.alpha / d.dt;
             let diagonal: Vec<f64> = self.model.mass.iter().map(|m| m * c).collect();
             self.work.assembly.add_to_diagonal(&diagonal);
+        }
+        for (node, k) in &self.loads.curvature {
+            self.work.assembly.add_to_diagonal_block(*node, k);
         }
         self.work.couplings.clear();
         for load in &self.loads.slip_loads {
