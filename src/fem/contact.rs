@@ -540,8 +540,11 @@ struct Frame<'a> {
 /// `|−F_t + c·s_t| ≤ μ F_n` (tangential force `F_t`, slip `s_t` since the
 /// solve started) and otherwise slides against the friction force
 /// `−μ F_n` along that vector. A sliding node is held on the tangent plane
-/// of its closest probe point, re-projected whenever it has left the probe
-/// by more than the solver's position tolerance. The first iteration judges
+/// of its closest probe point: re-projected at every iteration without
+/// friction, and under friction whenever it has left the probe by more
+/// than the solver's position tolerance or tilted past `max_tilt`. The
+/// solve ends with an error when the probe has passed through the skin
+/// between the nodes (see `passed_through`). The first iteration judges
 /// no carried-over node (its positions and reactions are the last solve's).
 /// The solve has converged when an iteration changes no contact or
 /// stick/slip state and the residual and constraint gaps are within

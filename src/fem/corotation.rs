@@ -113,6 +113,25 @@ impl RestElement {
         })
     }
 
+    /// The same forces from the rotation data alone, through the first
+    /// Piola stress `P = U diag(Ψ_i) Vᵀ` (`Ψ_i = ∂Ψ/∂σ̂_i` per unit rest
+    /// volume): `f_a = −V P g_a`. Since `RᵀF = V Σ̂ Vᵀ`, this is
+    /// [`RestElement::forces`] to round-off, with 4 small products in place
+    /// of 16 blocks of `K0` — the element pass reads 150 bytes of rest data
+    /// per tet instead of 1.3 kB.
+    pub fn forces_from(&self, rot: &Corotation) -> [Vec3; 4] {
+        let s = rot.sigma;
+        let trace_term = self.lambda * (s.sum() - 3.0);
+        let psi = s.map(|si| 2.0 * self.mu * (si - 1.0) + trace_term) * self.volume;
+        // −V P = −U diag(VΨ) Vᵀ: scale U's columns, then multiply by Vᵀ.
+        let mut us = rot.u;
+        for k in 0..3 {
+            us.column_mut(k).scale_mut(-psi[k]);
+        }
+        let p = us * rot.v.transpose();
+        self.grads.map(|g| p * g)
+    }
+
     /// Corotated elastic energy at `x` (N·mm).
     pub fn energy(&self, x: &[Vec3; 4]) -> f64 {
         let sigma = Corotation::of(&self.deformation_gradient(x)).sigma;
@@ -407,6 +426,29 @@ mod tests {
             assert!(f.norm() < 1e-14, "force {f}");
         }
         assert!(e.energy(&x).abs() < 1e-28);
+    }
+
+    /// The stress form of the forces equals the rest-stiffness form to
+    /// round-off, stretched, sheared, rotated and inverted.
+    #[test]
+    fn stress_forces_match_the_rest_stiffness_forces() {
+        let e = element();
+        let rot = Rotation3::from_euler_angles(0.3, -0.7, 1.1);
+        let cases = [
+            Matrix3::new(1.1, 0.2, -0.1, 0.05, 0.9, 0.15, -0.2, 0.1, 1.2),
+            rot.matrix() * Matrix3::new(0.6, 0.1, 0.0, 0.0, 1.3, 0.2, 0.1, 0.0, 0.8),
+            Matrix3::new(1.0, 0.1, 0.0, 0.0, 1.0, 0.2, 0.1, 0.0, -0.4),
+        ];
+        for f in cases {
+            let x = deform(&f, Vec3::new(0.3, 0.1, -0.2));
+            let c = Corotation::of(&e.deformation_gradient(&x));
+            let a = e.forces(&x, &c.r);
+            let b = e.forces_from(&c);
+            let scale = a.iter().map(|v| v.norm()).fold(0.0, f64::max);
+            for (fa, fb) in a.iter().zip(&b) {
+                assert!((fa - fb).norm() <= 1e-12 * scale, "{fa} vs {fb}");
+            }
+        }
     }
 
     #[test]

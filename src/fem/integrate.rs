@@ -485,7 +485,7 @@ impl Simulation {
                 let xe = tets[t].map(|v| x[v]);
                 let e = &elements[t];
                 *c = Corotation::of(&e.deformation_gradient(&xe));
-                *f = e.forces(&xe, &c.r);
+                *f = e.forces_from(c);
             });
         self.work
             .assembly
