@@ -14,9 +14,10 @@
 //! * frictionless and slipping nodes are held on the tangent plane of their
 //!   closest probe point and slide freely or against a Coulomb slip load of
 //!   magnitude `μ·F_n` opposing their slip (its stiffness is in the Newton
-//!   matrix); a frictionless node's plane is re-projected at every Newton
-//!   iteration with the probe's curvature times its normal reaction in the
-//!   matrix, so Newton converges quadratically on the curved surface;
+//!   matrix); a sliding node's plane is re-projected at every Newton
+//!   iteration with the probe's curvature times its normal reaction (and,
+//!   under friction, the turning of that reaction) in the matrix, so Newton
+//!   converges quadratically on the curved surface;
 //! * a probe that slips between the surface nodes (the surface above its
 //!   lowest point higher than that point) stops the solve with an error;
 //! * sticking and bonded nodes are held at an anchor that moves rigidly with
@@ -400,12 +401,10 @@ pub struct ContactState {
     /// another start (a predicted surface node would touch where it never
     /// was).
     solved: Vec<Vec3>,
-    /// Per sliding node the constraint plane in use (point, normal).
-    /// Frictionless nodes take the tangent plane where they are at every
-    /// iteration, with the probe's curvature in the matrix; Coulomb nodes
-    /// keep theirs while they lie within the solver's position tolerance
-    /// of the probe and its normal within [`max_tilt`] of the probe's (a
-    /// friction force in a moving plane would cost Newton its rate).
+    /// Per sliding node the constraint plane in use (point, normal): the
+    /// tangent plane where the node is, taken at every iteration (with the
+    /// probe's curvature in the matrix); checked against the probe's normal
+    /// on the nearly converged iterate ([`max_tilt`]).
     planes: std::collections::BTreeMap<usize, (Vec3, Vec3)>,
     /// Complementarity constants: each node's rest stiffness (N/mm), which
     /// turns a gap or a slip into a comparable force.
@@ -540,9 +539,8 @@ struct Frame<'a> {
 /// `|−F_t + c·s_t| ≤ μ F_n` (tangential force `F_t`, slip `s_t` since the
 /// solve started) and otherwise slides against the friction force
 /// `−μ F_n` along that vector. A sliding node is held on the tangent plane
-/// of its closest probe point: re-projected at every iteration without
-/// friction, and under friction whenever it has left the probe by more
-/// than the solver's position tolerance or tilted past `max_tilt`. The
+/// of its closest probe point, re-projected at every iteration with the
+/// probe's curvature in the Newton matrix. The
 /// solve ends with an error when the probe has passed through the skin
 /// between the nodes (see `passed_through`). The first iteration judges
 /// no carried-over node (its positions and reactions are the last solve's).
@@ -840,15 +838,15 @@ fn update_active_set(
     changed
 }
 
-/// Forgets the constraint plane of every sliding node whose plane normal
-/// differs from the probe normal at the node's closest point by more than
-/// [`max_tilt`], so that [`apply_contact`] re-projects it; returns whether
-/// any was. Called on a nearly converged iterate: a plane kept while the
-/// node slid along it has tilted by the node's drift over the probe radius
-/// (up to ~1e-3 rad), and the node's reaction with it, which gives a
-/// frictionless probe a tangential force of that order and turns a Coulomb
-/// node's force out of its cone by the tilt (|f_t|/f_n off by about
-/// θ(1 + μ²)).
+/// Whether any sliding node's plane (taken where the node was at the start
+/// of the last Newton step) differs from the probe normal at the node's
+/// closest point now by more than [`max_tilt`]; those planes are forgotten
+/// and the caller re-applies the constraints ([`apply_contact`]) at the
+/// current positions. Called on a nearly converged iterate: a plane the
+/// node slid along has tilted by its drift over the probe radius, and the
+/// node's reaction with it, which gives a frictionless probe a tangential
+/// force of that order and turns a Coulomb node's force out of its cone by
+/// the tilt (|f_t|/f_n off by about θ(1 + μ²)).
 fn drop_tilted_planes(
     sim: &super::integrate::Simulation,
     frame: &Frame,
@@ -891,34 +889,33 @@ fn apply_contact(sim: &mut super::integrate::Simulation, frame: &Frame, state: &
                 sim.loads.targets[v] = anchor;
             }
             NodeContact::Slide { friction } => {
+                // The constraint linearised where the node is: the tangent
+                // plane at its closest probe point, with the second-order
+                // terms of the curved surface in the matrix.
                 let x = sim.state.x[v];
-                let (q, n) = if frame.mode == ContactMode::Frictionless {
-                    // The constraint linearised where the node is: the
-                    // tangent plane at its closest probe point, with the
-                    // surface's curvature times the normal reaction in the
-                    // matrix (Newton on the curved constraint).
-                    let plane = frame.pose.project(&x);
-                    let reaction = contact_force(sim, frame.base_ext, v).dot(&plane.1).max(0.0);
-                    if reaction > 0.0 {
-                        sim.loads
-                            .curvature
-                            .push((v, -frame.pose.distance_hessian(&x) * reaction));
+                let (q, n) = frame.pose.project(&x);
+                let fc = contact_force(sim, frame.base_ext, v);
+                let reaction = fc.dot(&n).max(0.0);
+                if reaction > 0.0 {
+                    let h = frame.pose.distance_hessian(&x);
+                    // The normal reaction holding the node on the curved
+                    // surface: −F_n ∇²g.
+                    let mut k = -h * reaction;
+                    if let ContactMode::Coulomb(mu) = frame.mode {
+                        // The friction magnitude μ·F_n follows the normal
+                        // reaction, which turns with the normal:
+                        // δF_n ⊃ (H f_c)·δx, so the friction force gains
+                        // μ ŝ (H f_c)ᵀ δx (symmetric on a sphere; its
+                        // symmetric part elsewhere).
+                        let load = state.slip_load(v, n, friction, mu);
+                        let d = x - load.reference;
+                        let slip = d - n * d.dot(&n);
+                        let dir = slip / slip.norm().max(load.min_slip);
+                        let t = dir * (h * fc).transpose() * mu;
+                        k += (t + t.transpose()) * 0.5;
                     }
-                    plane
-                } else {
-                    // A sliding Coulomb node keeps its plane while it stays on
-                    // the probe and its plane stays within the cone's tilt.
-                    let (gap, normal) = frame.pose.distance(&x);
-                    match state.planes.get(&v) {
-                        Some(&plane)
-                            if gap.abs() <= sim.position_tol()
-                                && (plane.1 - normal).norm() <= max_tilt(frame.mode) =>
-                        {
-                            plane
-                        }
-                        _ => frame.pose.project(&x),
-                    }
-                };
+                    sim.loads.curvature.push((v, k));
+                }
                 state.planes.insert(v, (q, n));
                 sim.loads.filters[v] = sim.loads.filters[v].constrain(&n);
                 sim.loads.targets[v] = q;

@@ -206,7 +206,23 @@ impl RestElement {
     }
 }
 
+/// Slot of block `(a, b)`, `a ≤ b`, among a tet's 10 distinct stiffness
+/// blocks ([`Tangent::upper_blocks`]); `(b, a)` is its transpose.
+pub const UPPER: [[usize; 4]; 4] = [[0, 1, 2, 3], [1, 4, 5, 6], [2, 5, 7, 8], [3, 6, 8, 9]];
+
 impl Tangent {
+    /// The 10 distinct blocks `scale·K_ab`, `a ≤ b`, at the slots of
+    /// [`UPPER`] (the tangent is symmetric: `K_ba = K_abᵀ`).
+    pub fn upper_blocks(&self, scale: f64) -> [Matrix3<f64>; 10] {
+        let mut out = [Matrix3::zeros(); 10];
+        for a in 0..4 {
+            for b in a..4 {
+                out[UPPER[a][b]] = self.block(a, b) * scale;
+            }
+        }
+        out
+    }
+
     /// The 3×3 stiffness block `K_ab` (N/mm).
     pub fn block(&self, a: usize, b: usize) -> Matrix3<f64> {
         let (ca, cb) = (&self.c[a], &self.c[b]);
@@ -447,6 +463,34 @@ mod tests {
             let scale = a.iter().map(|v| v.norm()).fold(0.0, f64::max);
             for (fa, fb) in a.iter().zip(&b) {
                 assert!((fa - fb).norm() <= 1e-12 * scale, "{fa} vs {fb}");
+            }
+        }
+    }
+
+    /// The 10 upper blocks are the blocks, and the lower ones their
+    /// transposes to round-off (the tangent is symmetric).
+    #[test]
+    fn upper_blocks_hold_the_whole_symmetric_tangent() {
+        let e = element();
+        let f = Matrix3::new(0.8, 0.2, -0.1, 0.05, 0.7, 0.15, -0.2, 0.1, 0.9);
+        let x = deform(&f, Vec3::zeros());
+        for kind in [TangentKind::Exact, TangentKind::Projected] {
+            let t = e.tangent(&Corotation::of(&e.deformation_gradient(&x)), kind);
+            let upper = t.upper_blocks(2.0);
+            for a in 0..4 {
+                for b in 0..4 {
+                    let k = t.block(a, b) * 2.0;
+                    let (lo, hi) = (a.min(b), a.max(b));
+                    let stored = if a <= b {
+                        upper[UPPER[lo][hi]]
+                    } else {
+                        upper[UPPER[lo][hi]].transpose()
+                    };
+                    assert!(
+                        (k - stored).norm() <= 1e-13 * k.norm().max(1e-300),
+                        "{a}{b}"
+                    );
+                }
             }
         }
     }

@@ -33,7 +33,7 @@ use rayon::prelude::*;
 
 use super::assembly::Assembly;
 use super::coarse::Coarse;
-use super::corotation::{Corotation, RestElement, Tangent, TangentKind};
+use super::corotation::{Corotation, RestElement, TangentKind, UPPER};
 use super::material::Material;
 use super::solve::{CgSettings, CgWorkspace, Coupling, Factor, Filter};
 
@@ -278,6 +278,8 @@ pub(super) struct Workspace {
     pub(super) corotations: Vec<Corotation>,
     pub(super) x_start: Vec<Vec3>,
     pub(super) tet_forces: Vec<[Vec3; 4]>,
+    /// Per tet its 10 distinct tangent blocks (see [`super::corotation::UPPER`]).
+    pub(super) tet_blocks: Vec<[Matrix3<f64>; 10]>,
     pub(super) f_int: Vec<Vec3>,
     pub(super) cg: CgWorkspace,
     pub(super) coarse: Coarse,
@@ -355,6 +357,7 @@ impl Simulation {
                 corotations: vec![Corotation::of(&Matrix3::identity()); m],
                 x_start: Vec::new(),
                 tet_forces: vec![[Vec3::zeros(); 4]; m],
+                tet_blocks: vec![[Matrix3::zeros(); 10]; m],
                 f_int: vec![Vec3::zeros(); n],
                 cg: CgWorkspace::default(),
                 coarse: Coarse::new(&mesh.positions),
@@ -558,14 +561,22 @@ impl Simulation {
             &self.work.corotations,
             self.work.tangent_kind,
         );
-        let tangents: Vec<Tangent> = (0..elements.len())
-            .into_par_iter()
-            .map(|t| elements[t].tangent(&corotations[t], kind))
-            .collect();
         let k = self.dynamics.map_or(1.0, |d| 1.0 + d.beta / d.dt);
+        // Each tet's 10 distinct blocks once, then the per-node gather
+        // (the lower ones as transposes: the matrix is symmetric to the bit).
         self.work
-            .assembly
-            .assemble_stiffness(|t, a, b| tangents[t].block(a, b) * k);
+            .tet_blocks
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(t, out)| *out = elements[t].tangent(&corotations[t], kind).upper_blocks(k));
+        let blocks = &self.work.tet_blocks;
+        self.work.assembly.assemble_stiffness(|t, a, b| {
+            if a <= b {
+                blocks[t][UPPER[a][b]]
+            } else {
+                blocks[t][UPPER[b][a]].transpose()
+            }
+        });
         if let Some(d) = self.dynamics {
             let c = 1.0 / (d.dt * d.dt) + d.alpha / d.dt;
             let diagonal: Vec<f64> = self.model.mass.iter().map(|m| m * c).collect();

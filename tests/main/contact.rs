@@ -175,6 +175,71 @@ fn a_probe_through_the_skin_stops_the_run() {
     assert!(forces[failed - 1] > 0.4, "{metrics}");
 }
 
+/// Coulomb friction bounds every node's force, not only the sum: after
+/// each step of a press and drag on patch_3k, each contact node's
+/// tangential force (against the probe's normal at the node) is at most
+/// μ(1 + 1e-3) times its normal force, for μ = 0.8 (as press_small) and
+/// μ = 0.3. Kept constraint planes tilted away from the probe's normal
+/// gave 0.8023 and 0.3015.
+#[test]
+fn coulomb_forces_stay_in_the_cone_node_by_node() {
+    let _ = env_logger::builder().is_test(true).try_init();
+    for mu in [0.8, 0.3] {
+        let mut r = rig(
+            common::patch_3k(),
+            BottomCondition::Fixed,
+            SideCondition::Rollers,
+        );
+        let probe = sphere(
+            vec![
+                (0.0, Vector3::new(0.0, 0.0, 1.5)),
+                (0.5, Vector3::new(0.0, 0.0, 1.0)),
+                (1.0, Vector3::new(0.5, 0.0, 1.0)),
+            ],
+            ContactMode::Coulomb(mu),
+        );
+        let steps = 6;
+        let mut worst: f64 = 0.0;
+        let mut sliding = 0;
+        for k in 1..=steps {
+            let pose = probe.pose(k as f64 / steps as f64);
+            solve_with_contact(
+                &mut r.sim,
+                (&r.base.0, &r.base.1, &r.base.2),
+                &pose,
+                probe.mode,
+                &mut r.state,
+                &format!("μ {mu}, step {k}"),
+            )
+            .unwrap();
+            let largest = r
+                .state
+                .active
+                .keys()
+                .map(|&v| r.sim.internal_forces()[v].norm())
+                .fold(0.0, f64::max);
+            for &v in r.state.active.keys() {
+                let f = -r.sim.internal_forces()[v];
+                let (_, n) = pose.distance(&r.sim.positions()[v]);
+                let normal = f.dot(&n);
+                let tangential = (f - n * normal).norm();
+                if normal > 1e-6 * largest {
+                    worst = worst.max(tangential / normal);
+                }
+                if tangential > 0.99 * mu * normal {
+                    sliding += 1;
+                }
+            }
+        }
+        println!("μ {mu}: largest |f_t|/f_n {worst:.6}, {sliding} sliding node-steps");
+        assert!(sliding > 0, "the drag makes nodes slide");
+        assert!(
+            worst <= mu * (1.0 + 1e-3),
+            "μ {mu}: |f_t|/f_n reaches {worst}"
+        );
+    }
+}
+
 /// Runs tests/fixtures/drag.toml with the given `[probe]` contact lines.
 fn drag(contact: &str) -> (skinpatch::pipeline::FemRunSummary, tempfile::TempDir) {
     common::run_fixture("drag.toml", |t| {
