@@ -487,7 +487,7 @@ impl Simulation {
             .for_each(|(t, (c, f))| {
                 let xe = tets[t].map(|v| x[v]);
                 let e = &elements[t];
-                *c = Corotation::of(&e.deformation_gradient(&xe));
+                *c = Corotation::near(&e.deformation_gradient(&xe), &c.v);
                 *f = e.forces_from(c);
             });
         self.work
