@@ -5,7 +5,7 @@
 //! pressed in from just above the patch in such steps.
 
 use crate::error::{Error, Result};
-use crate::fem::contact::{Probe, ProbePose};
+use crate::fem::probe::{Probe, ProbePose};
 use crate::mesh::TetMesh;
 
 /// Frame 0's load steps and the height (mm) its probe starts above its

@@ -12,6 +12,7 @@ pub mod integrate;
 pub mod load_steps;
 pub mod material;
 mod newton;
+pub mod probe;
 pub mod solve;
 
 pub use corotation::{Corotation, RestElement, TangentKind};

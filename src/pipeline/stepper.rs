@@ -127,7 +127,7 @@ impl Stepper {
         &mut self,
         s: &crate::scenario::SimulationSetup,
         mesh: &crate::mesh::TetMesh,
-        probe: Option<&crate::fem::contact::Probe>,
+        probe: Option<&crate::fem::probe::Probe>,
     ) -> Result<FrameMetrics> {
         let sim = &mut self.sim;
         let frame = self.frame;

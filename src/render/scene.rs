@@ -11,7 +11,7 @@
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3 as V3;
 
-use crate::fem::contact::{ProbePose, ProbeShape};
+use crate::fem::probe::{ProbePose, ProbeShape};
 use crate::mesh::{TetMesh, TopSurface, Vec3};
 use crate::strain::SurfaceField;
 

@@ -6,7 +6,7 @@
 
 use glam::Vec3;
 
-use crate::fem::contact::{Probe, ProbePose};
+use crate::fem::probe::{Probe, ProbePose};
 use crate::render::camera::{Camera, Projection};
 use crate::render::light::{Light, LightKind};
 use crate::render::{Mode, Roughness};
@@ -685,7 +685,7 @@ fn from_direction(d: Vec3) -> (f32, f32) {
 mod tests {
     use super::*;
     use crate::fem::boundary::Keyframes;
-    use crate::fem::contact::{ContactMode, ProbeShape};
+    use crate::fem::probe::{ContactMode, ProbeShape};
     use glam::Mat4;
     use nalgebra::Vector3;
 

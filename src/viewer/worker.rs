@@ -16,8 +16,8 @@ use std::time::{Duration, Instant};
 use nalgebra::Vector3;
 
 use crate::export::FrameMetrics;
-use crate::fem::contact::{ContactMode, Probe, ProbePose};
 use crate::fem::material::Material;
+use crate::fem::probe::{ContactMode, Probe, ProbePose};
 use crate::mesh::{TetMesh, Vec3};
 use crate::pipeline::Stepper;
 use crate::scenario::SimulationSetup;
