@@ -50,6 +50,8 @@ pub struct GpuBenchSizes {
     pub frames: usize,
     /// Side of the fit's neutral map (texels).
     pub fit_map: usize,
+    /// How long the viewer's loop runs offscreen (s).
+    pub viewer_s: f64,
 }
 
 impl GpuBenchSizes {
@@ -67,6 +69,7 @@ impl GpuBenchSizes {
             texture_px: None,
             frames: 8,
             fit_map: 512,
+            viewer_s: 10.0,
         }
     }
 
@@ -83,6 +86,7 @@ impl GpuBenchSizes {
             texture_px: Some(256),
             frames: 2,
             fit_map: 64,
+            viewer_s: 2.0,
         }
     }
 }
@@ -104,6 +108,70 @@ pub struct GpuReport {
     /// The fit: GPU seconds, CPU seconds, whether both found the same
     /// optimum, candidates scored.
     pub fit: FitFigures,
+    /// The viewer's loop without a window; `None` in a build without the
+    /// `viewer` feature (the caller, above this layer, runs it).
+    pub viewer: Option<ViewerLoopFigures>,
+}
+
+/// The viewer's render loop run offscreen: the scenario's probe path
+/// played in a loop while the FEM thread solves the newest target, each
+/// displayed frame turning the camera a little (so each one renders) and
+/// drawn through the window's present pass into an offscreen texture.
+/// Unlike a window it waits for no display refresh.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ViewerLoopFigures {
+    /// Size of the view (px).
+    pub size: (usize, usize),
+    /// The shading mode shown.
+    pub mode: String,
+    /// Wall time of the loop (s).
+    pub seconds: f64,
+    /// Frames drawn and presented.
+    pub frames: usize,
+    /// Frames the FEM thread solved meanwhile.
+    pub fem_frames: usize,
+    /// Microstructure chain runs (one per new solved state in a mode that
+    /// shows the deformed map).
+    pub chain_runs: usize,
+    /// Mean wall time of a chain run (ms); `None` without any.
+    pub chain_ms: Option<f64>,
+    /// Mean wall time of a render of the view (ms).
+    pub render_ms: f64,
+    /// Mean wall time of the present pass, waited for (ms).
+    pub present_ms: f64,
+    /// Largest difference (8-bit levels) between the last presented image
+    /// and the renderer's own pixels sRGB-encoded on the CPU.
+    pub present_max_difference: u8,
+}
+
+impl ViewerLoopFigures {
+    /// Frames presented per second.
+    pub fn frames_per_s(&self) -> f64 {
+        self.frames as f64 / self.seconds.max(1e-9)
+    }
+
+    /// FEM frames solved per second.
+    pub fn fem_frames_per_s(&self) -> f64 {
+        self.fem_frames as f64 / self.seconds.max(1e-9)
+    }
+
+    fn json(&self) -> Value {
+        json!({
+            "width": self.size.0,
+            "height": self.size.1,
+            "mode": self.mode,
+            "seconds": self.seconds,
+            "frames": self.frames,
+            "frames_per_s": self.frames_per_s(),
+            "fem_frames": self.fem_frames,
+            "fem_frames_per_s": self.fem_frames_per_s(),
+            "chain_runs": self.chain_runs,
+            "chain_ms": self.chain_ms,
+            "render_ms": self.render_ms,
+            "present_ms": self.present_ms,
+            "present_max_difference": self.present_max_difference,
+        })
+    }
 }
 
 /// The GPU fit counter against the CPU one on one problem.
@@ -169,7 +237,9 @@ pub fn bench_gpu(
             let mut case = setup.clone();
             let mut r = match &case.outputs.render {
                 Some(r) => r.clone(),
-                None => super::render::default_render(case.outputs.micro.is_some())?,
+                None => {
+                    crate::scenario::RenderSection::default_setup(case.outputs.micro.is_some())?
+                }
             };
             r.microstructure_filter = filter;
             r.msaa = msaa;
@@ -192,6 +262,7 @@ pub fn bench_gpu(
         micro,
         render,
         fit,
+        viewer: None,
     })
 }
 
@@ -362,6 +433,7 @@ impl GpuReport {
                 "repetitions": self.sizes.repetitions,
                 "image": [self.sizes.image.0, self.sizes.image.1],
                 "frames": self.sizes.frames,
+                "viewer_s": self.sizes.viewer_s,
             },
             "micro": micro,
             "render": render,
@@ -372,6 +444,7 @@ impl GpuReport {
                 "evaluations": self.fit.evaluations,
                 "same_optimum": self.fit.same_optimum,
             },
+            "viewer": self.viewer.as_ref().map(ViewerLoopFigures::json),
         })
     }
 
@@ -434,6 +507,25 @@ impl GpuReport {
             self.fit.gpu_s,
             if self.fit.same_optimum { "yes" } else { "no" }
         );
+        md += &match &self.viewer {
+            Some(v) => format!(
+                "\n## Viewer loop, offscreen ({} × {} px, mode {}, {:.1} s)\n\n\
+                 | frames/s | FEM frames/s | render ms | chain ms | present ms |\n\
+                 |---|---|---|---|---|\n| {:.1} | {:.2} | {:.3} | {} | {:.3} |\n",
+                v.size.0,
+                v.size.1,
+                v.mode,
+                v.seconds,
+                v.frames_per_s(),
+                v.fem_frames_per_s(),
+                v.render_ms,
+                ms(v.chain_ms),
+                v.present_ms
+            ),
+            None => "\n## Viewer loop, offscreen\n\nNot measured: built without the `viewer` \
+                     feature.\n"
+                .to_string(),
+        };
         md
     }
 }

@@ -2,8 +2,6 @@
 //! microstructure chain, geometry and render — timed per part, without
 //! writing files.
 
-use std::path::Path;
-
 use crate::error::Result;
 use crate::pipeline::render::{device, no_gpu};
 use crate::pipeline::{simulate, texel_mm};
@@ -140,7 +138,7 @@ fn bench_settings(
     let has_micro = setup.outputs.micro.is_some();
     let mut render = match &setup.outputs.render {
         Some(r) => r.clone(),
-        None => default_render(has_micro)?,
+        None => crate::scenario::RenderSection::default_setup(has_micro)?,
     };
     render.width = width;
     render.height = height;
@@ -171,14 +169,4 @@ fn time_frame(
     renderer.render(ctx, mode)?;
     let readback_ms = start.elapsed().as_secs_f64() * 1e3;
     Ok((render_ms, readback_ms, renderer.time_stages(ctx, mode)?))
-}
-
-/// The default `[render]` for a scenario without one: in mode `none`
-/// without a microstructure (the default `dynamic` needs one).
-pub(super) fn default_render(has_micro: bool) -> Result<crate::render::RenderSetup> {
-    let mut section = crate::scenario::RenderSection::default();
-    if !has_micro {
-        section.modes = vec![Mode::None];
-    }
-    section.setup(Path::new("."), has_micro)
 }

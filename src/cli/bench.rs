@@ -43,8 +43,10 @@ pub enum BenchCommand {
     /// with bytes and GB/s and with the CPU reference's parity up to 2048²;
     /// the renderer at 1920 × 1080 with and without the moment filter and
     /// MSAA; the whole frame (FEM, chain, geometry, render) of the
-    /// scenario's first frames; and the GPU fit counter against the CPU
-    /// one. `--quick` sizes everything for a software adapter.
+    /// scenario's first frames; the GPU fit counter against the CPU one;
+    /// and the viewer's render loop without a window (10 s at 1920 × 1080,
+    /// the probe's path played while the FEM thread solves). `--quick`
+    /// sizes everything for a software adapter.
     Gpu(GpuArgs),
 }
 
@@ -154,9 +156,26 @@ fn bench_gpu(args: &GpuArgs) -> anyhow::Result<()> {
         GpuBenchSizes::full()
     };
     let start = std::time::Instant::now();
-    let report = bench_gpu(&setup, &sizes, |part| {
-        eprintln!("[{:7.1} s] {part}", start.elapsed().as_secs_f64())
-    })?;
+    let progress = |part: &str| eprintln!("[{:7.1} s] {part}", start.elapsed().as_secs_f64());
+    #[allow(unused_mut)]
+    let mut report = bench_gpu(&setup, &sizes, progress)?;
+    // The viewer is a layer above the benchmarks: its loop is run here.
+    #[cfg(feature = "viewer")]
+    {
+        let (w, h) = sizes.image;
+        progress(&format!(
+            "viewer loop offscreen, {w} × {h} px, {} s",
+            sizes.viewer_s
+        ));
+        let figures = skinpatch::viewer::offscreen::bench_loop(
+            &setup,
+            sizes.image,
+            sizes.viewer_s,
+            sizes.texture_px,
+        )
+        .context("the viewer's loop")?;
+        report.viewer = Some(figures);
+    }
     let md = write_report(&report, &args.report)?;
     print_stdout(&format!(
         "{}\nwritten: {} and {} ({:.1} s)\n",

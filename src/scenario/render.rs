@@ -454,6 +454,17 @@ impl EnvironmentSection {
 }
 
 impl RenderSection {
+    /// The render settings of a scenario without `[render]`: the defaults,
+    /// in mode `none` without a microstructure (the default `dynamic`
+    /// needs one).
+    pub fn default_setup(has_micro: bool) -> Result<RenderSetup> {
+        let mut section = RenderSection::default();
+        if !has_micro {
+            section.modes = vec![Mode::None];
+        }
+        section.setup(Path::new("."), has_micro)
+    }
+
     /// `modes`: known, needing a microstructure where they do, each once.
     fn modes(&self, has_micro: bool) -> Result<Vec<Mode>> {
         let mut modes = Vec::new();

@@ -7,17 +7,21 @@
 //! Layout: [`state`] (the view and its commands, no window), [`keys`] (the
 //! key table), [`script`] (`--script` steps), [`worker`] (the simulation
 //! thread), [`record`] (frames and the replayable path), [`present`]
-//! (`shaders/present.wgsl`, the image into the window) and `app` (the winit
+//! (`shaders/present.wgsl`, the image into the window), `frame` (one
+//! frame's GPU work: renderer, geometry, chain, render), `app` (the winit
 //! event loop, with its rooms: the egui panel, presentation and window
-//! captures, the script runner, key actions).
+//! captures, the script runner, key actions) and [`offscreen`] (the same
+//! loop without a window, timed for `skinpatch bench gpu`).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use crate::error::{Error, Result};
 use crate::scenario::{Scenario, Setup};
 
 mod app;
+mod frame;
 pub mod keys;
+pub mod offscreen;
 pub mod present;
 pub mod record;
 pub mod script;
@@ -88,17 +92,7 @@ fn load(options: &ViewOptions) -> Result<Loaded> {
     let path = &options.scenario;
     let scenario = Scenario::load_with(path, &options.overrides)?;
     let setup = Setup::from_scenario(&scenario, path)?;
-    let render = match &setup.outputs.render {
-        Some(r) => r.clone(),
-        None => {
-            let base = path.parent().unwrap_or(Path::new("."));
-            let mut section = crate::scenario::RenderSection::default();
-            if setup.outputs.micro.is_none() {
-                section.modes = vec![crate::render::Mode::None];
-            }
-            section.setup(base, setup.outputs.micro.is_some())?
-        }
-    };
+    let render = view_render(&setup)?;
     Ok(Loaded {
         scenario,
         setup,
@@ -106,10 +100,22 @@ fn load(options: &ViewOptions) -> Result<Loaded> {
     })
 }
 
-/// The viewer's first state for a loaded scenario and a view of `viewport`
-/// pixels.
-fn initial_state(loaded: &Loaded, viewport: [f32; 2]) -> state::ViewerState {
-    let setup = &loaded.setup;
+/// The render settings the viewer draws `setup` with: its `[render]`, or
+/// the renderer's defaults (mode `none` without a microstructure).
+fn view_render(setup: &Setup) -> Result<crate::render::RenderSetup> {
+    match &setup.outputs.render {
+        Some(r) => Ok(r.clone()),
+        None => crate::scenario::RenderSection::default_setup(setup.outputs.micro.is_some()),
+    }
+}
+
+/// The viewer's first state for `setup` drawn with `render`, in a view of
+/// `viewport` pixels.
+fn initial_state(
+    setup: &Setup,
+    render: &crate::render::RenderSetup,
+    viewport: [f32; 2],
+) -> state::ViewerState {
     let (lo, hi) = setup.mesh.bounds();
     let probe = setup
         .simulation
@@ -127,12 +133,12 @@ fn initial_state(loaded: &Loaded, viewport: [f32; 2]) -> state::ViewerState {
         })
         .collect();
     let friction = match setup.simulation.probe.as_ref().map(|p| p.mode) {
-        Some(crate::fem::contact::ContactMode::Coulomb(mu)) => Some(mu),
+        Some(crate::fem::probe::ContactMode::Coulomb(mu)) => Some(mu),
         _ => None,
     };
     let mut state = state::ViewerState::new(
-        &loaded.render.camera,
-        &loaded.render.lights,
+        &render.camera,
+        &render.lights,
         probe,
         materials,
         friction,

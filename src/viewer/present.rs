@@ -9,6 +9,14 @@ use crate::gpu::{buffers, Context};
 /// The shader source.
 pub const SHADER: &str = include_str!("../../shaders/present.wgsl");
 
+/// The background around the view (the window's clear colour).
+pub const BACKGROUND: wgpu::Color = wgpu::Color {
+    r: 0.02,
+    g: 0.02,
+    b: 0.025,
+    a: 1.0,
+};
+
 /// Uniforms; mirrors WGSL `PresentInfo`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -105,6 +113,64 @@ impl PresentStage {
         pass.set_viewport(rect[0], rect[1], rect[2], rect[3], 0.0, 1.0);
         pass.draw(0..3, 0..1);
     }
+}
+
+/// Records a copy of an 8-bit RGBA or BGRA `texture` of `size` pixels
+/// into a read-back buffer; returns it with its padded row length (bytes).
+pub fn copy_out(
+    ctx: &Context,
+    enc: &mut wgpu::CommandEncoder,
+    texture: &wgpu::Texture,
+    size: (u32, u32),
+) -> (wgpu::Buffer, usize) {
+    let row = (4 * size.0 as usize).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as usize);
+    let staging = buffers::staging(ctx, (row * size.1 as usize) as u64);
+    enc.copy_texture_to_buffer(
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
+        wgpu::TexelCopyBufferInfo {
+            buffer: &staging,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(row as u32),
+                rows_per_image: None,
+            },
+        },
+        wgpu::Extent3d {
+            width: size.0,
+            height: size.1,
+            depth_or_array_layers: 1,
+        },
+    );
+    (staging, row)
+}
+
+/// A copy made by [`copy_out`] (rows `row` bytes apart) as tightly packed
+/// RGB; `bgra` swaps the channels of a BGRA texture.
+pub fn read_rgb(
+    ctx: &Context,
+    staging: &wgpu::Buffer,
+    row: usize,
+    size: (u32, u32),
+    bgra: bool,
+) -> crate::error::Result<Vec<u8>> {
+    let (w, h) = (size.0 as usize, size.1 as usize);
+    let bytes: Vec<u8> = buffers::map_read(ctx, staging, row * h)?;
+    let mut rgb = Vec::with_capacity(w * h * 3);
+    for y in 0..h {
+        for px in bytes[y * row..y * row + 4 * w].chunks(4) {
+            if bgra {
+                rgb.extend_from_slice(&[px[2], px[1], px[0]]);
+            } else {
+                rgb.extend_from_slice(&px[..3]);
+            }
+        }
+    }
+    Ok(rgb)
 }
 
 #[cfg(test)]

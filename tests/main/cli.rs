@@ -362,14 +362,12 @@ fn solver_failure_stops_cleanly_and_keeps_outputs() {
         .contains("frame_0000.vtu"));
 }
 
-/// `bench micro` prints each stage's traffic and, given the peak
-/// bandwidth, how far a resident frame is from it; a bad bandwidth is
-/// refused before any work.
 /// `bench gpu --quick` runs every part of the report on the adapter at
 /// hand (lavapipe in CI) and writes the JSON and Markdown: the chain for
 /// each strain-raster step at each size, at parity with its CPU reference
 /// (and tiled at parity with untiled), the four render cases with the
-/// whole frame, and the GPU fit counter choosing the CPU's optimum.
+/// whole frame, the GPU fit counter choosing the CPU's optimum, and the
+/// viewer's loop offscreen presenting the renderer's image.
 #[test]
 fn bench_gpu_quick_writes_every_part_of_the_report() {
     let dir = tempfile::tempdir().unwrap();
@@ -451,17 +449,51 @@ fn bench_gpu_quick_writes_every_part_of_the_report() {
     assert_eq!(fit["same_optimum"], true, "{fit}");
     assert!(fit["evaluations"].as_u64().unwrap() > 1000, "{fit}");
     assert!(fit["cpu_s"].as_f64().unwrap() > 0.0 && fit["gpu_s"].as_f64().unwrap() > 0.0);
+    if cfg!(feature = "viewer") {
+        check_viewer_loop(&v["viewer"]);
+    } else {
+        assert!(v["viewer"].is_null());
+    }
     let md = std::fs::read_to_string(report.with_extension("md")).unwrap();
     for heading in [
         "## Microstructure chain",
         "## Renderer and whole frame",
         "## Fit counter",
+        "## Viewer loop, offscreen",
     ] {
         assert!(md.contains(heading), "{md}");
     }
     assert!(md.contains(adapter) && text(&o.stdout).contains(adapter));
 }
 
+/// The viewer loop's part of `bench gpu --quick`'s report.
+fn check_viewer_loop(viewer: &serde_json::Value) {
+    assert_eq!(
+        (viewer["width"].as_u64(), viewer["height"].as_u64()),
+        (Some(160), Some(90))
+    );
+    // press_small has no microstructure: the view shows mode none and the
+    // chain never runs.
+    assert_eq!(viewer["mode"], "none", "{viewer}");
+    assert_eq!(viewer["chain_runs"], 0, "{viewer}");
+    assert!(viewer["chain_ms"].is_null(), "{viewer}");
+    assert!(viewer["seconds"].as_f64().unwrap() >= 2.0, "{viewer}");
+    assert!(viewer["frames"].as_u64().unwrap() >= 2, "{viewer}");
+    let fps = viewer["frames_per_s"].as_f64().unwrap();
+    assert!(fps.is_finite() && fps > 0.0, "{viewer}");
+    // The probe's path plays, so the FEM thread solves new frames.
+    assert!(viewer["fem_frames"].as_u64().unwrap() >= 1, "{viewer}");
+    assert!(viewer["render_ms"].as_f64().unwrap() > 0.0, "{viewer}");
+    assert!(viewer["present_ms"].as_f64().unwrap() > 0.0, "{viewer}");
+    assert!(
+        viewer["present_max_difference"].as_u64().unwrap() <= 1,
+        "{viewer}"
+    );
+}
+
+/// `bench micro` prints each stage's traffic and, given the peak
+/// bandwidth, how far a resident frame is from it; a bad bandwidth is
+/// refused before any work.
 #[test]
 fn bench_micro_reports_traffic_against_a_given_bandwidth() {
     let args = [

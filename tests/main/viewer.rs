@@ -338,3 +338,33 @@ fn shipped_scripts_load() {
     }
     assert!(count >= 1);
 }
+
+/// The viewer's loop without a window, as `skinpatch bench gpu` runs it,
+/// on a scenario with a microstructure: it draws frames while the FEM
+/// thread solves the playing path, runs the chain on each new state, and
+/// presents the renderer's image, sRGB-encoded, to one 8-bit level. Bad
+/// arguments are refused by name.
+#[test]
+fn offscreen_loop_runs_the_chain_and_presents_the_rendered_image() {
+    use skinpatch::viewer::offscreen::bench_loop;
+    let setup = Setup::load(&common::root().join("tests/fixtures/render_small.toml")).unwrap();
+    let e = bench_loop(&setup, (96, 64), 0.0, None)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("viewer loop duration"), "{e}");
+    let e = bench_loop(&setup, (4, 64), 1.0, None)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("viewer loop size"), "{e}");
+    if common::context().is_none() {
+        return;
+    }
+    let f = bench_loop(&setup, (96, 64), 1.5, None).unwrap();
+    assert_eq!(f.size, (96, 64));
+    assert_eq!(f.mode, "dynamic");
+    assert!(f.seconds >= 1.5 && f.frames >= 2, "{f:?}");
+    assert!(f.fem_frames >= 1, "{f:?}");
+    assert!(f.chain_runs >= 1 && f.chain_ms.unwrap() > 0.0, "{f:?}");
+    assert!(f.render_ms > 0.0 && f.present_ms > 0.0, "{f:?}");
+    assert!(f.present_max_difference <= 1, "{f:?}");
+}

@@ -24,19 +24,18 @@ use winit::keyboard::{Key, ModifiersState, NamedKey};
 use winit::window::{Window, WindowId};
 
 use self::script_run::ScriptRun;
+use super::frame::{render_state, run_chain, upload_solved, RenderInputs};
 use super::keys;
 use super::present::PresentStage;
 use super::record::FrameRecorder;
 use super::script::Script;
-use super::state::{Command, Overlay, ProbeDrive, ViewerState};
+use super::state::{Command, ProbeDrive, ViewerState};
 use super::worker::{FemWorker, Solved};
 use super::{Loaded, ViewOptions, ViewSummary};
 use crate::error::{Error, Result};
 use crate::gpu::micro::GpuMicro;
 use crate::gpu::Context;
-use crate::render::albedo::Albedo;
-use crate::render::overlay::OverlayKind;
-use crate::render::{Image, NormalMap, RenderSetup, Renderer};
+use crate::render::{Image, Renderer};
 use crate::strain::SurfaceField;
 
 /// Width of the side panel (logical points).
@@ -81,16 +80,6 @@ fn device<'a>(chain: &'a Option<GpuMicro>, own: &'a Option<Context>) -> &'a Cont
     }
 }
 
-/// Inputs the renderer is rebuilt from when the view changes size.
-struct RenderInputs {
-    setup: RenderSetup,
-    albedo: Albedo,
-    // The neutral map's normals and its width and height.
-    neutral: Option<(Vec<[f32; 3]>, usize, usize)>,
-    curve: [f32; 16],
-    texel_mm: f64,
-}
-
 /// Rates shown in the panel and reported at the end.
 #[derive(Default)]
 struct Rates {
@@ -102,7 +91,7 @@ struct Rates {
     micro_ms: Vec<f64>,
     render_ms: Vec<f64>,
     // Target sent and when, until a shown frame reflects it.
-    pending: Option<(Instant, crate::fem::contact::ProbePose)>,
+    pending: Option<(Instant, crate::fem::probe::ProbePose)>,
     latencies_ms: Vec<f64>,
 }
 
@@ -146,36 +135,11 @@ impl App {
         script: Option<Script>,
         proxy: EventLoopProxy<Wake>,
     ) -> Result<App> {
-        let setup = &loaded.setup;
-        let render = loaded.render.clone();
-        let (lo, hi) = setup.mesh.bounds();
-        let albedo = Albedo::from_source(&render.albedo, render.texture_px, hi.x - lo.x)?;
-        let neutral = setup
-            .outputs
-            .micro
-            .as_ref()
-            .map(|m| m.neutral.whole("skinpatch view"))
-            .transpose()?
-            .map(|map| {
-                (
-                    crate::micro::normals::normal_map(map),
-                    map.width,
-                    map.height,
-                )
-            });
-        let mut anisotropic = render.clone();
-        anisotropic.roughness = crate::render::Roughness::Anisotropic;
-        let curve = crate::pipeline::roughness_curve(&anisotropic, setup.outputs.micro.as_ref());
-        let texel_mm = crate::pipeline::texel_mm((lo, hi), render.texture_px);
-        let state = super::initial_state(&loaded, [options.size.0 as f32, options.size.1 as f32]);
+        let inputs = RenderInputs::new(&loaded.setup, loaded.render.clone())?;
+        let viewport = [options.size.0 as f32, options.size.1 as f32];
+        let state = super::initial_state(&loaded.setup, &loaded.render, viewport);
         Ok(App {
-            inputs: RenderInputs {
-                setup: render,
-                albedo,
-                neutral,
-                curve,
-                texel_mm,
-            },
+            inputs,
             state,
             worker: None,
             proxy,
@@ -261,7 +225,9 @@ impl App {
         let device_ctx = chain.as_ref().map(GpuMicro::context).or(own.as_ref());
         let device_ctx = device_ctx.expect("one of the two is set");
         let render_size = view_size(&window, size.width, size.height);
-        let renderer = build_renderer(device_ctx, &self.inputs, chain.as_ref(), render_size)?;
+        let renderer = self
+            .inputs
+            .renderer(device_ctx, chain.as_ref(), render_size)?;
         let present = PresentStage::new(device_ctx, format);
         let (pixels, pw, ph) = renderer.pixels();
         let present_bind = present.bind(device_ctx, pixels, (pw, ph), [0.0, 0.0]);
@@ -363,16 +329,9 @@ impl App {
         };
         let mesh = &self.loaded.setup.mesh;
         if fresh {
-            let field = SurfaceField::new(&mesh.top, &mesh.positions, &solved.positions);
-            let geometry = crate::render::scene::build(
-                mesh,
-                &solved.positions,
-                &field,
-                solved.pose.as_ref(),
-                self.inputs.setup.tessellate,
-            );
             let ctx = device(&gpu.chain, &gpu.own);
-            gpu.renderer.set_geometry(ctx, &geometry);
+            let tessellate = self.inputs.setup.tessellate;
+            let field = upload_solved(ctx, &mut gpu.renderer, mesh, &solved, tessellate);
             self.field = Some(field);
             self.shown = Some(solved.clone());
             self.dirty = true;
@@ -380,12 +339,7 @@ impl App {
         let frame = solved.metrics.frame;
         if self.state.mode.needs_deformed_map() && self.chain_on != Some(frame) {
             if let (Some(chain), Some(field)) = (gpu.chain.as_mut(), &self.field) {
-                let start = Instant::now();
-                chain.submit(field, true);
-                chain.context().finish()?;
-                self.rates
-                    .micro_ms
-                    .push(start.elapsed().as_secs_f64() * 1e3);
+                self.rates.micro_ms.push(run_chain(chain, field)?);
                 self.chain_on = Some(frame);
                 self.dirty = true;
             }
@@ -400,7 +354,7 @@ impl App {
         let wanted = view_size(&gpu.window, size.width, size.height);
         if wanted != gpu.render_size {
             let ctx = device(&gpu.chain, &gpu.own);
-            gpu.renderer = build_renderer(ctx, &self.inputs, gpu.chain.as_ref(), wanted)?;
+            gpu.renderer = self.inputs.renderer(ctx, gpu.chain.as_ref(), wanted)?;
             gpu.render_size = wanted;
             self.state.viewport = [wanted.0 as f32, wanted.1 as f32];
             let (pixels, pw, ph) = gpu.renderer.pixels();
@@ -413,26 +367,9 @@ impl App {
         if !self.dirty || self.shown.is_none() {
             return Ok(false);
         }
-        let (mode, roughness) = self.state.mode.render();
-        let overlay = match self.state.overlay {
-            Overlay::Off => OverlayKind::Off,
-            Overlay::Rs => OverlayKind::Rs,
-            Overlay::Rt => OverlayKind::Rt,
-            Overlay::Axes => OverlayKind::Axes,
-        };
-        let lights = self.state.lights();
-        let camera = self.state.camera.camera();
         let ctx = device(&gpu.chain, &gpu.own);
-        let start = Instant::now();
-        let renderer = &mut gpu.renderer;
-        renderer.set_view(camera, &lights)?;
-        renderer.set_roughness(roughness);
-        renderer.set_overlay(overlay, self.state.overlay_range as f32);
-        renderer.submit(ctx, mode);
-        ctx.finish()?;
-        self.rates
-            .render_ms
-            .push(start.elapsed().as_secs_f64() * 1e3);
+        let ms = render_state(ctx, &mut gpu.renderer, &self.state)?;
+        self.rates.render_ms.push(ms);
         self.dirty = false;
         Ok(true)
     }
@@ -745,35 +682,5 @@ fn view_size(window: &Window, width: u32, height: u32) -> (usize, usize) {
     (
         width.saturating_sub(panel).max(16) as usize,
         height.max(16) as usize,
-    )
-}
-
-/// The renderer for a view of `size` pixels.
-fn build_renderer(
-    ctx: &Context,
-    inputs: &RenderInputs,
-    chain: Option<&GpuMicro>,
-    size: (usize, usize),
-) -> Result<Renderer> {
-    let mut setup = inputs.setup.clone();
-    setup.width = size.0;
-    setup.height = size.1;
-    setup.supersample = 1;
-    let neutral = inputs
-        .neutral
-        .as_ref()
-        .map(|(normals, width, height)| NormalMap {
-            normals,
-            width: *width,
-            height: *height,
-        });
-    Renderer::new(
-        ctx,
-        &setup,
-        &inputs.albedo,
-        neutral,
-        chain.map(GpuMicro::normals_texture),
-        inputs.curve,
-        inputs.texel_mm,
     )
 }

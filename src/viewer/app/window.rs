@@ -5,6 +5,7 @@ use super::panel::PanelOutput;
 use super::{device, App, Gpu};
 use crate::error::{Error, Result};
 use crate::gpu::Context;
+use crate::viewer::present::{copy_out, read_rgb, BACKGROUND};
 use crate::viewer::state::Command;
 
 impl App {
@@ -136,12 +137,7 @@ impl Gpu {
                 resolve_target: None,
                 depth_slice: None,
                 ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color {
-                        r: 0.02,
-                        g: 0.02,
-                        b: 0.025,
-                        a: 1.0,
-                    }),
+                    load: wgpu::LoadOp::Clear(BACKGROUND),
                     store: wgpu::StoreOp::Store,
                 },
             })],
@@ -181,23 +177,13 @@ fn captured_rgb(
     row: usize,
     config: &wgpu::SurfaceConfiguration,
 ) -> Result<((usize, usize), Vec<u8>)> {
-    let (w, h) = (config.width as usize, config.height as usize);
-    let bytes: Vec<u8> = crate::gpu::buffers::map_read(ctx, staging, row * h)?;
     let bgra = matches!(
         config.format,
         wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Bgra8UnormSrgb
     );
-    let mut rgb = Vec::with_capacity(w * h * 3);
-    for y in 0..h {
-        for px in bytes[y * row..y * row + 4 * w].chunks(4) {
-            if bgra {
-                rgb.extend_from_slice(&[px[2], px[1], px[0]]);
-            } else {
-                rgb.extend_from_slice(&px[..3]);
-            }
-        }
-    }
-    Ok(((w, h), rgb))
+    let size = (config.width, config.height);
+    let rgb = read_rgb(ctx, staging, row, size, bgra)?;
+    Ok(((size.0 as usize, size.1 as usize), rgb))
 }
 
 /// Records a copy of the window's frame into a read-back buffer; returns it
@@ -222,29 +208,5 @@ fn capture_window(
             config.format, config.usage
         )));
     }
-    let row =
-        (4 * config.width as usize).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as usize);
-    let staging = crate::gpu::buffers::staging(ctx, (row * config.height as usize) as u64);
-    enc.copy_texture_to_buffer(
-        wgpu::TexelCopyTextureInfo {
-            texture,
-            mip_level: 0,
-            origin: wgpu::Origin3d::ZERO,
-            aspect: wgpu::TextureAspect::All,
-        },
-        wgpu::TexelCopyBufferInfo {
-            buffer: &staging,
-            layout: wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(row as u32),
-                rows_per_image: None,
-            },
-        },
-        wgpu::Extent3d {
-            width: config.width,
-            height: config.height,
-            depth_or_array_layers: 1,
-        },
-    );
-    Ok((staging, row))
+    Ok(copy_out(ctx, enc, texture, (config.width, config.height)))
 }
