@@ -104,7 +104,23 @@ impl Simulation {
     /// ones with that move's coupling
     /// (`S K S y = S (r − K d)`), so a target that moves every iteration —
     /// a contact node re-projected onto a curved probe — costs no extra solve.
-    pub fn solve_with<U>(&mut self, context: &str, mut update: U) -> Result<NewtonStats>
+    ///
+    /// The whole loop runs on a thread of rayon's pool (the caller's
+    /// thread waits): the element pass, the assembly and every vector
+    /// operation of the linear solves fork and join there, where a
+    /// parallel loop costs a few microseconds. Called from outside the
+    /// pool, each of those loops would first be handed to the pool and
+    /// waited for, which costs tens of microseconds each, and a BiCGStab
+    /// iteration on patch_25k runs about thirty of them.
+    pub fn solve_with<U>(&mut self, context: &str, update: U) -> Result<NewtonStats>
+    where
+        U: FnMut(&mut Simulation, usize, bool) -> bool + Send,
+    {
+        rayon::scope(|_| self.newton_loop(context, update))
+    }
+
+    /// [`Simulation::solve_with`]'s loop, on the calling thread.
+    fn newton_loop<U>(&mut self, context: &str, mut update: U) -> Result<NewtonStats>
     where
         U: FnMut(&mut Simulation, usize, bool) -> bool,
     {
