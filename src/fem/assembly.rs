@@ -248,26 +248,50 @@ impl Assembly {
     /// the factorisation). Parallel over nodes; every sum runs in the fixed
     /// order of the neighbour list.
     pub fn multiply(&self, x: &[f64], y: &mut [f64]) {
-        let values = self.matrix.values();
-        y.par_chunks_mut(3)
-            .with_min_len(MULTIPLY_GRAIN)
+        y.par_chunks_mut(3 * MULTIPLY_GRAIN)
             .enumerate()
-            .for_each(|(i, out)| {
-                let (start, end) = (self.neighbour_start[i], self.neighbour_start[i + 1]);
-                let n = end - start;
-                let rows = &values[9 * start..9 * end];
-                let (r0, rest) = rows.split_at(3 * n);
-                let (r1, r2) = rest.split_at(3 * n);
-                let mut s = [0.0f64; 3];
-                for (k, &j) in self.neighbours[start..end].iter().enumerate() {
-                    let xj = &x[3 * j..3 * j + 3];
-                    let b = 3 * k;
-                    s[0] += r0[b] * xj[0] + r0[b + 1] * xj[1] + r0[b + 2] * xj[2];
-                    s[1] += r1[b] * xj[0] + r1[b + 1] * xj[1] + r1[b + 2] * xj[2];
-                    s[2] += r2[b] * xj[0] + r2[b + 1] * xj[1] + r2[b + 2] * xj[2];
-                }
-                out.copy_from_slice(&s);
-            });
+            .for_each(|(c, out)| self.multiply_rows(c * MULTIPLY_GRAIN, x, out));
+    }
+
+    /// Rows of nodes `first..` of `y = K x` into `out` (three per node),
+    /// with the widest vector unit the processor has: the same operations
+    /// in the same order whatever it is (no fused multiply-add), so the
+    /// same bits.
+    fn multiply_rows(&self, first: usize, x: &[f64], out: &mut [f64]) {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor has AVX2 (checked above).
+            return unsafe { self.multiply_rows_avx2(first, x, out) };
+        }
+        self.multiply_rows_portable(first, x, out);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn multiply_rows_avx2(&self, first: usize, x: &[f64], out: &mut [f64]) {
+        self.multiply_rows_portable(first, x, out);
+    }
+
+    #[inline(always)]
+    fn multiply_rows_portable(&self, first: usize, x: &[f64], out: &mut [f64]) {
+        let values = self.matrix.values();
+        for (k, row) in out.chunks_exact_mut(3).enumerate() {
+            let i = first + k;
+            let (start, end) = (self.neighbour_start[i], self.neighbour_start[i + 1]);
+            let n = end - start;
+            let rows = &values[9 * start..9 * end];
+            let (r0, rest) = rows.split_at(3 * n);
+            let (r1, r2) = rest.split_at(3 * n);
+            let mut s = [0.0f64; 3];
+            for (k, &j) in self.neighbours[start..end].iter().enumerate() {
+                let xj = &x[3 * j..3 * j + 3];
+                let b = 3 * k;
+                s[0] += r0[b] * xj[0] + r0[b + 1] * xj[1] + r0[b + 2] * xj[2];
+                s[1] += r1[b] * xj[0] + r1[b + 1] * xj[1] + r1[b + 2] * xj[2];
+                s[2] += r2[b] * xj[0] + r2[b + 1] * xj[1] + r2[b + 2] * xj[2];
+            }
+            row.copy_from_slice(&s);
+        }
     }
 }
 
@@ -392,5 +416,24 @@ pub(crate) mod tests {
         }
         assert_eq!(asm.neighbours(4), &[1, 2, 3, 4]);
         assert!((asm.diagonal_block(0) - dense.fixed_view::<3, 3>(0, 0)).norm() < 1e-15);
+    }
+
+    /// The product on the processor's vector unit has the portable code's
+    /// bits, node by node (a mesh of several product tasks).
+    #[test]
+    fn vector_product_has_the_portable_bits() {
+        let (tets, rest, positions) = cube_mesh(9);
+        let n = positions.len();
+        assert!(n > 2 * MULTIPLY_GRAIN, "{n} nodes");
+        let mut asm = Assembly::new(n, &tets);
+        asm.assemble_stiffness(|t, a, b| rest[t].k0[a][b]);
+        let x: Vec<f64> = (0..3 * n).map(|k| (k as f64 * 0.731).sin()).collect();
+        let mut y = vec![0.0; 3 * n];
+        asm.multiply(&x, &mut y);
+        let mut portable = vec![0.0; 3 * n];
+        asm.multiply_rows_portable(0, &x, &mut portable);
+        for (a, b) in y.iter().zip(&portable) {
+            assert_eq!(a.to_bits(), b.to_bits());
+        }
     }
 }
