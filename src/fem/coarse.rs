@@ -244,9 +244,7 @@ impl Coarse {
                 }
             });
     }
-}
 
-impl Coarse {
     /// `S_i v` with node `i`'s filter at the last refresh.
     #[inline]
     fn filtered(&self, i: usize, v: Vec3) -> Vec3 {

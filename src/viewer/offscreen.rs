@@ -13,7 +13,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use super::frame::{render_state, run_chain, upload_solved, RenderInputs};
-use super::present::{copy_out, read_rgb, PresentStage, BACKGROUND};
+use super::present::{begin_pass, copy_out, read_rgb, PresentStage};
 use super::state::Command;
 use super::worker::{FemWorker, Solved};
 use crate::bench::gpu::ViewerLoopFigures;
@@ -183,27 +183,11 @@ fn draw(
     target: &wgpu::Texture,
     size: (usize, usize),
 ) -> Result<()> {
-    let view = target.create_view(&wgpu::TextureViewDescriptor::default());
     let mut enc = ctx
         .device
         .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
     {
-        let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("offscreen view"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &view,
-                resolve_target: None,
-                depth_slice: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(BACKGROUND),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: None,
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
+        let mut pass = begin_pass(&mut enc, target, "offscreen view");
         present.draw(&mut pass, bind, [0.0, 0.0, size.0 as f32, size.1 as f32]);
     }
     ctx.queue.submit(std::iter::once(enc.finish()));

@@ -115,6 +115,32 @@ impl PresentStage {
     }
 }
 
+/// A render pass into `target` (a window's frame or an offscreen
+/// texture), cleared to [`BACKGROUND`].
+pub fn begin_pass<'e>(
+    enc: &'e mut wgpu::CommandEncoder,
+    target: &wgpu::Texture,
+    label: &str,
+) -> wgpu::RenderPass<'e> {
+    let view = target.create_view(&wgpu::TextureViewDescriptor::default());
+    enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some(label),
+        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+            view: &view,
+            resolve_target: None,
+            depth_slice: None,
+            ops: wgpu::Operations {
+                load: wgpu::LoadOp::Clear(BACKGROUND),
+                store: wgpu::StoreOp::Store,
+            },
+        })],
+        depth_stencil_attachment: None,
+        timestamp_writes: None,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    })
+}
+
 /// Records a copy of an 8-bit RGBA or BGRA `texture` of `size` pixels
 /// into a read-back buffer; returns it with its padded row length (bytes).
 pub fn copy_out(

@@ -5,7 +5,7 @@ use super::panel::PanelOutput;
 use super::{device, App, Gpu};
 use crate::error::{Error, Result};
 use crate::gpu::Context;
-use crate::viewer::present::{copy_out, read_rgb, BACKGROUND};
+use crate::viewer::present::{begin_pass, copy_out, read_rgb};
 use crate::viewer::state::Command;
 
 impl App {
@@ -129,23 +129,7 @@ impl Gpu {
         jobs: &[egui::ClippedPrimitive],
         screen: &egui_wgpu::ScreenDescriptor,
     ) {
-        let view = target.create_view(&wgpu::TextureViewDescriptor::default());
-        let pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("window"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &view,
-                resolve_target: None,
-                depth_slice: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(BACKGROUND),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: None,
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
+        let pass = begin_pass(enc, target, "window");
         let mut pass = pass.forget_lifetime();
         if image {
             let (w, h) = self.render_size;
