@@ -332,8 +332,37 @@ fn fit_figures(ctx: &crate::gpu::Context, side: usize) -> Result<FitFigures> {
 impl GpuReport {
     /// The report as JSON: every figure, per part.
     pub fn json(&self) -> Value {
-        let micro: Vec<Value> = self
-            .micro
+        json!({
+            "skinpatch": env!("CARGO_PKG_VERSION"),
+            "adapter": self.adapter,
+            "adapters": self.adapters,
+            "cpu_threads": rayon::current_num_threads(),
+            "sizes": {
+                "map_sizes": self.sizes.map_sizes,
+                "texel_um": self.texel_um,
+                "cpu_up_to": self.sizes.cpu_up_to,
+                "tile": self.sizes.tile,
+                "repetitions": self.sizes.repetitions,
+                "image": [self.sizes.image.0, self.sizes.image.1],
+                "frames": self.sizes.frames,
+                "viewer_s": self.sizes.viewer_s,
+            },
+            "micro": self.micro_json(),
+            "render": self.render_json(),
+            "fit": {
+                "map": self.fit.map,
+                "cpu_s": self.fit.cpu_s,
+                "gpu_s": self.fit.gpu_s,
+                "evaluations": self.fit.evaluations,
+                "same_optimum": self.fit.same_optimum,
+            },
+            "viewer": self.viewer.as_ref().map(ViewerLoopFigures::json),
+        })
+    }
+
+    /// The chain's figures: per strain-raster step, per map size.
+    fn micro_json(&self) -> Vec<Value> {
+        self.micro
             .iter()
             .map(|(step, bench)| {
                 let rows: Vec<Value> = bench
@@ -390,9 +419,12 @@ impl GpuReport {
                     "rows": rows,
                 })
             })
-            .collect();
-        let render: Vec<Value> = self
-            .render
+            .collect()
+    }
+
+    /// The render cases' figures with their whole frames.
+    fn render_json(&self) -> Vec<Value> {
+        self.render
             .iter()
             .map(|(filter, msaa, b)| {
                 let passes: Vec<Value> = FrameStage::ALL
@@ -419,33 +451,7 @@ impl GpuReport {
                     },
                 })
             })
-            .collect();
-        json!({
-            "skinpatch": env!("CARGO_PKG_VERSION"),
-            "adapter": self.adapter,
-            "adapters": self.adapters,
-            "cpu_threads": rayon::current_num_threads(),
-            "sizes": {
-                "map_sizes": self.sizes.map_sizes,
-                "texel_um": self.texel_um,
-                "cpu_up_to": self.sizes.cpu_up_to,
-                "tile": self.sizes.tile,
-                "repetitions": self.sizes.repetitions,
-                "image": [self.sizes.image.0, self.sizes.image.1],
-                "frames": self.sizes.frames,
-                "viewer_s": self.sizes.viewer_s,
-            },
-            "micro": micro,
-            "render": render,
-            "fit": {
-                "map": self.fit.map,
-                "cpu_s": self.fit.cpu_s,
-                "gpu_s": self.fit.gpu_s,
-                "evaluations": self.fit.evaluations,
-                "same_optimum": self.fit.same_optimum,
-            },
-            "viewer": self.viewer.as_ref().map(ViewerLoopFigures::json),
-        })
+            .collect()
     }
 
     /// The report's headline figures as Markdown tables.
