@@ -167,7 +167,7 @@ impl ContactState {
             normal: n,
             magnitude: friction.norm(),
             mu,
-            min_slip: MIN_SLIP * self.tolerance[v],
+            stiffness: self.stiffness[v],
         }
     }
 }
@@ -186,10 +186,6 @@ const FREEZE_AFTER: usize = 30;
 /// Angle (rad) by which a kept constraint plane may differ from the tangent
 /// plane at the node's closest probe point at convergence.
 const MAX_TILT: f64 = 2e-4;
-
-/// Slip (relative to the penetration tolerance) below which a sliding node's
-/// friction force is regularised (proportional to the slip).
-const MIN_SLIP: f64 = 0.01;
 
 /// One contact solve: the probe, the mode and the base problem.
 struct Frame<'a> {
@@ -439,9 +435,10 @@ fn update_active_set(
                 }
             }
             NodeContact::Slide { friction } => {
-                // Against the friction of the last step: a node that now
-                // moves along its friction force (or not at all) sticks.
-                let xi = tangential(&(c * (sim.state.x[v] - reference) - friction), &n);
+                // The trial force `λ_t − c·s`: a node whose tangential
+                // reaction and slip no longer exceed the cone sticks.
+                let load = state.slip_load(v, n, friction, mu);
+                let xi = load.trial(&sim.state.x[v], &f);
                 if xi.norm() <= limit {
                     changed = true;
                     counts[2] += 1;
@@ -449,17 +446,11 @@ fn update_active_set(
                         anchor: frame.pose.project(&reference).0,
                     }
                 } else {
-                    // The solver recomputes the magnitude from the normal
-                    // reaction at every residual (and its dependence on the
-                    // positions is in the Newton matrix); this is the
-                    // current value, for the stick test above.
-                    let dir = -state
-                        .slip_load(v, n, friction, mu)
-                        .force(&sim.state.x[v])
-                        .try_normalize(1e-300)
-                        .unwrap_or_else(Vec3::zeros);
+                    // The solver recomputes the force from the reaction at
+                    // every residual (its derivative is in the Newton
+                    // matrix); this is the current value.
                     NodeContact::Slide {
-                        friction: -dir * limit,
+                        friction: xi.normalize() * limit,
                     }
                 }
             }
@@ -578,13 +569,15 @@ fn apply_contact(sim: &mut super::integrate::Simulation, frame: &Frame, state: &
                     if let ContactMode::Coulomb(mu) = frame.mode {
                         // The friction magnitude μ·F_n follows the normal
                         // reaction, which turns with the normal:
-                        // δF_n ⊃ (H f_c)·δx, so the friction force gains
-                        // μ ŝ (H f_c)ᵀ δx (symmetric on a sphere; its
+                        // δF_n ⊃ (H f_c)·δx, so the friction force
+                        // (along the trial direction ξ̂) gains
+                        // μ ξ̂ (H f_c)ᵀ δx (symmetric on a sphere; its
                         // symmetric part elsewhere).
                         let load = state.slip_load(v, n, friction, mu);
-                        let d = x - load.reference;
-                        let slip = d - n * d.dot(&n);
-                        let dir = slip / slip.norm().max(load.min_slip);
+                        let dir = -load
+                            .trial(&x, &fc)
+                            .try_normalize(0.0)
+                            .unwrap_or_else(Vec3::zeros);
                         let t = dir * (h * fc).transpose() * mu;
                         k += (t + t.transpose()) * 0.5;
                     }

@@ -147,17 +147,19 @@ pub struct NewtonStats {
     pub scale: f64,
 }
 
-/// A Coulomb sliding-friction load on one node: a force of magnitude
-/// `m = μ F_n` (the node's normal reaction) opposing its tangential slip from
-/// `reference`, `f = −m·ŝ`, `ŝ = s/|s|`, `s = (I − n nᵀ)(x − reference)`.
-/// Its derivative at fixed `m` enters the Newton matrix as
-/// `(m/|s|)(I − n nᵀ − ŝ ŝᵀ)` — symmetric and positive semi-definite, the
-/// stiffness of `m·|s|` — so a slipping node's direction converges with
-/// Newton's rate instead of as a fixed point; the magnitude's dependence on
-/// the normal reaction enters as a [`Coupling`], which makes the matrix
-/// non-symmetric (solved by BiCGStab). Below a slip of `min_slip` the force
-/// is regularised to `−m·s/min_slip` (stiffness `(m/min_slip)(I − n nᵀ)`),
-/// so force and stiffness stay consistent through `s = 0`.
+/// A Coulomb sliding-friction load on one node, in the semi-smooth form of
+/// Alart & Curnier (1991): the force has magnitude `m = μ F_n` (the node's
+/// normal reaction) along the trial force `ξ = λ_t − c·s`, where `λ_t` is
+/// the node's tangential reaction, `s = (I − n nᵀ)(x − reference)` its
+/// slip and `c` its complementarity constant: `f = m·ξ/|ξ|`. At a solution
+/// `f = λ_t`, so `ξ = −(m + c|s|)·ŝ` and the force opposes the slip. Unlike
+/// the slip direction `ŝ`, the trial direction stays well defined where a
+/// node barely slips (`|ξ| ≥ m` once `λ_t = f`), so a node near the
+/// stick–slip boundary costs no extra Newton iterations. The force's
+/// derivative, with `δλ = (K δx)_node`, is
+/// `δf = G δλ − a·c·Q δx`, `G = μ ξ̂ nᵀ + a·Q`, `Q = I − n nᵀ − ξ̂ ξ̂ᵀ`,
+/// `a = m/|ξ| ≤ 1`: the Newton matrix gains `a·c·Q` on the node's diagonal
+/// block and the non-symmetric row [`Coupling`] `G` (solved by BiCGStab).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SlipLoad {
     /// The node.
@@ -166,15 +168,13 @@ pub struct SlipLoad {
     pub reference: Vec3,
     /// Unit normal of the contact surface.
     pub normal: Vec3,
-    /// Force magnitude `μ·F_n` (N); with `mu > 0` recomputed from the
-    /// normal reaction at every residual evaluation.
+    /// Force magnitude `μ·F_n` (N), recomputed from the normal reaction at
+    /// every residual evaluation.
     pub magnitude: f64,
-    /// The friction coefficient μ the magnitude follows (the normal
-    /// reaction's change enters the Newton matrix, see
-    /// [`solve::Coupling`]); 0 for a magnitude that does not.
+    /// The friction coefficient μ.
     pub mu: f64,
-    /// Slip below which the force is regularised (mm, > 0).
-    pub min_slip: f64,
+    /// Complementarity constant `c` (N/mm): turns slip into force.
+    pub stiffness: f64,
 }
 
 impl SlipLoad {
@@ -184,24 +184,47 @@ impl SlipLoad {
         d - self.normal * d.dot(&self.normal)
     }
 
-    /// The friction force on the node at `x` (N).
-    pub fn force(&self, x: &Vec3) -> Vec3 {
-        let s = self.slip(x);
-        -s * (self.magnitude / s.norm().max(self.min_slip))
+    /// The trial force `ξ = λ_t − c·s` at `x` with the node's contact
+    /// reaction `reaction` (`−(f_int + f_ext)`).
+    pub fn trial(&self, x: &Vec3, reaction: &Vec3) -> Vec3 {
+        let n = self.normal;
+        reaction - n * reaction.dot(&n) - self.slip(x) * self.stiffness
     }
 
-    /// Its contribution to the node's diagonal stiffness block (N/mm).
-    fn stiffness(&self, x: &Vec3) -> Matrix3<f64> {
-        let s = self.slip(x);
-        let len = s.norm();
-        let n = self.normal;
-        let tangent = Matrix3::identity() - n * n.transpose();
-        if len > self.min_slip {
-            let dir = s / len;
-            (tangent - dir * dir.transpose()) * (self.magnitude / len)
+    /// Recomputes the magnitude `μ·max(F_n, 0)` from `reaction`.
+    pub fn follow(&mut self, reaction: &Vec3) {
+        self.magnitude = self.mu * reaction.dot(&self.normal).max(0.0);
+    }
+
+    /// The friction force on the node at `x` (N); zero where the trial
+    /// force vanishes.
+    pub fn force(&self, x: &Vec3, reaction: &Vec3) -> Vec3 {
+        let xi = self.trial(x, reaction);
+        let len = xi.norm();
+        if len > 0.0 {
+            xi * (self.magnitude / len)
         } else {
-            tangent * (self.magnitude / self.min_slip)
+            Vec3::zeros()
         }
+    }
+
+    /// The force's linearisation: (its diagonal stiffness block `a·c·Q`,
+    /// the row coupling `G`), see the type's documentation. `None` while
+    /// the force vanishes.
+    fn linearisation(&self, x: &Vec3, reaction: &Vec3) -> Option<(Matrix3<f64>, Matrix3<f64>)> {
+        let xi = self.trial(x, reaction);
+        let len = xi.norm();
+        if self.magnitude <= 0.0 || len <= 0.0 {
+            return None;
+        }
+        let dir = xi / len;
+        let n = self.normal;
+        let q = Matrix3::identity() - n * n.transpose() - dir * dir.transpose();
+        let a = self.magnitude / len;
+        Some((
+            q * (a * self.stiffness),
+            dir * n.transpose() * self.mu + q * a,
+        ))
     }
 }
 
@@ -587,15 +610,22 @@ impl Simulation {
         }
         self.work.couplings.clear();
         for load in &self.loads.slip_loads {
-            let x = &self.state.x[load.node];
-            let k = load.stiffness(x);
-            self.work.assembly.add_to_diagonal_block(load.node, &k);
-            if load.mu > 0.0 && load.magnitude > 0.0 {
-                let g = load.force(x) * (load.mu / load.magnitude);
+            let i = load.node;
+            let reaction = -(self.work.f_int[i] + self.loads.f_ext[i]);
+            if let Some((k, g)) = load.linearisation(&self.state.x[i], &reaction) {
+                self.work.assembly.add_to_diagonal_block(i, &k);
+                // The reaction changes with the elements' stiffness alone,
+                // not with the terms added on this node's diagonal.
+                let own = self
+                    .loads
+                    .curvature
+                    .iter()
+                    .filter(|(node, _)| *node == i)
+                    .fold(k, |sum, (_, c)| sum + c);
                 self.work.couplings.push(Coupling {
-                    node: load.node,
-                    g: self.loads.filters[load.node].apply(&g),
-                    n: load.normal,
+                    node: i,
+                    g: self.loads.filters[i].matrix() * g,
+                    own,
                 });
             }
         }

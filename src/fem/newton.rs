@@ -22,13 +22,11 @@ impl Simulation {
         self.work.f_slip.iter_mut().for_each(|f| *f = Vec3::zeros());
         self.work.f_slip.resize(self.num_nodes(), Vec3::zeros());
         for load in &mut self.loads.slip_loads {
+            // Coulomb: the magnitude follows the current normal reaction.
             let i = load.node;
-            if load.mu > 0.0 {
-                // Coulomb: the magnitude follows the current normal reaction.
-                let normal = -load.normal.dot(&(self.work.f_int[i] + self.loads.f_ext[i]));
-                load.magnitude = load.mu * normal.max(0.0);
-            }
-            self.work.f_slip[i] += load.force(&self.state.x[i]);
+            let reaction = -(self.work.f_int[i] + self.loads.f_ext[i]);
+            load.follow(&reaction);
+            self.work.f_slip[i] += load.force(&self.state.x[i], &reaction);
         }
         for i in 0..self.num_nodes() {
             let r = self.work.f_int[i] + self.loads.f_ext[i] + self.work.f_slip[i];
@@ -206,7 +204,7 @@ impl Simulation {
     }
 
     /// The right-hand side of the free directions, `S (r − K d)` plus the
-    /// couplings' `g nᵀ (K d)_i`, from the filtered residual `r_free` and
+    /// couplings' `G (K d)_i`, from the filtered residual `r_free` and
     /// the prescribed move `d`.
     fn step_rhs(&mut self) {
         self.work.rhs.clone_from(&self.work.r_free);
@@ -224,7 +222,8 @@ impl Simulation {
             }
         }
         for c in &self.work.couplings {
-            let w = c.g * c.n.dot(&kd(&self.work.kd, c.node));
+            let d = kd(&self.work.prescribed, c.node);
+            let w = c.apply(&kd(&self.work.kd, c.node), &d);
             for k in 0..3 {
                 self.work.rhs[3 * c.node + k] += w[k];
             }

@@ -103,20 +103,30 @@ pub struct CgWorkspace {
     y: Vec<f64>,
 }
 
-/// A non-symmetric coupling of one node's equations to its own normal
-/// reaction: the node's row of the operator gains `−g nᵀ (K S x)_node`.
-/// A Coulomb friction force `f`, scaled from a magnitude `m = μ F_n` that
-/// follows the normal reaction `F_n = nᵀ λ`, changes by `(μ f / m) nᵀ δλ`
-/// when the positions move, and `δλ = (K δx)_node`; with `g = μ f / m`
-/// this is the full semi-smooth Newton matrix.
+/// A non-symmetric coupling of one node's equations to its own reaction:
+/// the node's row of the operator gains `−G (K S x)_node`. A Coulomb
+/// friction force that follows the node's reaction `λ` changes by `G δλ`
+/// when the positions move, and `δλ = (K δx)_node` (see
+/// [`super::integrate::SlipLoad`]); with it the Newton matrix is the full
+/// semi-smooth one.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Coupling {
     /// The node.
     pub node: usize,
-    /// Free-space vector the normal-reaction change is scaled onto.
-    pub g: Vector3<f64>,
-    /// Unit normal along which the reaction is measured.
-    pub n: Vector3<f64>,
+    /// The reaction's change mapped onto the node's free space (filtered
+    /// on the left).
+    pub g: Matrix3<f64>,
+    /// The part of the node's assembled diagonal block that is not the
+    /// elements' (constraint curvature, friction stiffness): the reaction
+    /// is `(K S x)_node − own (S x)_node`.
+    pub own: Matrix3<f64>,
+}
+
+impl Coupling {
+    /// `G δλ` for the assembled product `k = (K v)_node` of `v = v_node`.
+    pub fn apply(&self, k: &Vector3<f64>, v: &Vector3<f64>) -> Vector3<f64> {
+        self.g * (k - self.own * v)
+    }
 }
 
 /// Entries per chunk of the deterministic reductions (a multiple of 3, so
@@ -170,7 +180,7 @@ pub struct Operator<'a> {
     pub couplings: &'a [Coupling],
 }
 
-/// `y = (S K S + I − S) x`, minus the couplings' `g nᵀ (K S x)_i`;
+/// `y = (S K S + I − S) x`, minus the couplings' `G δλ_i`;
 /// `constrained` lists the nodes whose filter is not free.
 fn apply_operator(op: Operator, constrained: &[usize], x: &[f64], sx: &mut [f64], y: &mut [f64]) {
     let Operator {
@@ -181,11 +191,14 @@ fn apply_operator(op: Operator, constrained: &[usize], x: &[f64], sx: &mut [f64]
     sx.copy_from_slice(x);
     filter_nodes(filters, constrained, sx);
     asm.multiply(sx, y);
-    let reactions: Vec<f64> = couplings
+    let reactions: Vec<Vector3<f64>> = couplings
         .iter()
         .map(|c| {
             let k = 3 * c.node;
-            c.n.dot(&Vector3::new(y[k], y[k + 1], y[k + 2]))
+            c.apply(
+                &Vector3::new(y[k], y[k + 1], y[k + 2]),
+                &Vector3::new(sx[k], sx[k + 1], sx[k + 2]),
+            )
         })
         .collect();
     for &i in constrained {
@@ -197,8 +210,8 @@ fn apply_operator(op: Operator, constrained: &[usize], x: &[f64], sx: &mut [f64]
     }
     for (c, reaction) in couplings.iter().zip(reactions) {
         let k = 3 * c.node;
-        for (yk, gk) in y[k..k + 3].iter_mut().zip(c.g.iter()) {
-            *yk -= gk * reaction;
+        for (yk, gk) in y[k..k + 3].iter_mut().zip(reaction.iter()) {
+            *yk -= gk;
         }
     }
 }
@@ -481,8 +494,8 @@ mod tests {
         let g = filters[4].apply(&Vector3::new(0.8, -0.3, 0.1));
         let couplings = [Coupling {
             node: 4,
-            g,
-            n: normal,
+            g: g * normal.transpose(),
+            own: Matrix3::zeros(),
         }];
         let b: Vec<f64> = (0..15).map(|k| ((k * 7 + 3) as f64).sin()).collect();
         // Dense A = S K S + I − S − E K S, E = g nᵀ at node 4.
