@@ -9,8 +9,9 @@
 //!   normal reaction minus its stiffness times its signed gap is positive;
 //! * frictionless and slipping nodes are held on the tangent plane of their
 //!   closest probe point and slide freely or against a Coulomb slip load of
-//!   magnitude `μ·F_n` opposing their slip (its stiffness is in the Newton
-//!   matrix); a sliding node's plane is re-projected at every Newton
+//!   magnitude `μ·F_n` along the trial force `λ_t − c·s`, which opposes
+//!   their slip at a solution (Alart & Curnier 1991; its derivative is in
+//!   the Newton matrix, see [`super::integrate::SlipLoad`]); a sliding node's plane is re-projected at every Newton
 //!   iteration with the probe's curvature times its normal reaction (and,
 //!   under friction, the turning of that reaction) in the matrix, so Newton
 //!   converges quadratically on the curved surface;
