@@ -33,15 +33,21 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<AnimatedSurface> {
     if !path.exists() {
         return Err(Error::not_found(path));
     }
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let file = ::gltf::Gltf::from_slice(&bytes)
-        .map_err(|e| Error::malformed(path, format!("not a valid glTF 2.0 file: {e}")))?;
-    let doc = &file.document;
-    let buffers = load_buffers(path, doc, file.blob.as_deref())?;
+    let bytes = read_at_most(path, MAX_FILE_BYTES)?;
+    let invalid =
+        |e: ::gltf::Error| Error::malformed(path, format!("not a valid glTF 2.0 file: {e}"));
+    // The crate's own validation indexes without checking: it runs after
+    // ours ([`super::gltf_check`]), which checks every index first.
+    let file = ::gltf::Gltf::from_slice_without_validation(&bytes).map_err(invalid)?;
+    let buffers = load_buffers(path, &file.document, file.blob.as_deref())?;
     let bad = |message: String| Error::InvalidMesh {
         origin: path.display().to_string(),
         message,
     };
+    let declared: Vec<usize> = file.document.buffers().map(|b| b.length()).collect();
+    super::gltf_check::check(file.document.as_json(), &declared).map_err(&bad)?;
+    let document = ::gltf::Document::from_json(file.document.into_json()).map_err(invalid)?;
+    let doc = &document;
     let roots: Vec<::gltf::Node<'_>> = match doc.default_scene().or_else(|| doc.scenes().next()) {
         Some(scene) => scene.nodes().collect(),
         None => Vec::new(),
@@ -385,6 +391,36 @@ fn name_of(name: Option<&str>, kind: &str, index: usize) -> String {
 
 /// The bytes of every buffer: the GLB's binary chunk, a base64 data URI, or
 /// a file beside the glTF.
+/// Largest glTF or GLB file, and largest external buffer, read (4 GiB).
+const MAX_FILE_BYTES: usize = 1 << 32;
+
+/// The first `limit` bytes of the regular file `path` (a device or a pipe,
+/// which may never end, is refused; so is a file longer than
+/// [`MAX_FILE_BYTES`]).
+fn read_at_most(path: &Path, limit: usize) -> Result<Vec<u8>> {
+    use std::io::Read;
+    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    if !meta.is_file() {
+        return Err(Error::malformed(path, "not a regular file"));
+    }
+    let limit = limit.min(MAX_FILE_BYTES);
+    if meta.len() > MAX_FILE_BYTES as u64 && limit == MAX_FILE_BYTES {
+        return Err(Error::malformed(
+            path,
+            format!(
+                "{} bytes: larger than the {MAX_FILE_BYTES} bytes read",
+                meta.len()
+            ),
+        ));
+    }
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut out = Vec::with_capacity(limit.min(meta.len() as usize));
+    file.take(limit as u64)
+        .read_to_end(&mut out)
+        .map_err(|e| Error::io(path, e))?;
+    Ok(out)
+}
+
 fn load_buffers(path: &Path, doc: &::gltf::Document, blob: Option<&[u8]>) -> Result<Vec<Vec<u8>>> {
     use base64::Engine;
     let mut out = Vec::new();
@@ -429,7 +465,7 @@ fn load_buffers(path: &Path, doc: &::gltf::Document, blob: Option<&[u8]>) -> Res
                         ),
                     ));
                 }
-                std::fs::read(&file).map_err(|e| Error::io(&file, e))?
+                read_at_most(&file, buffer.length())?
             }
         };
         if data.len() < buffer.length() {

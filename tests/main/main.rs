@@ -9,6 +9,7 @@ mod common;
 mod bad_input;
 mod cli;
 mod contact;
+mod doors;
 mod fem_verification;
 mod fuzz;
 mod gpu;

@@ -23,7 +23,7 @@ fn read_map(path: &Path) -> skinpatch::micro::DisplacementMap {
     skinpatch::micro::io::read_map(path, &defaults).unwrap()
 }
 
-fn temp(name: &str) -> PathBuf {
+pub(crate) fn temp(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("skinpatch-surface-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
@@ -375,13 +375,13 @@ fn gpu_chain_on_seamed_mirrored_surface_matches_cpu() {
     );
 }
 
-fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+pub(crate) fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     let path = dir.join(name);
     std::fs::write(&path, text).unwrap();
     path
 }
 
-fn read_error(path: &Path, units: Option<f64>) -> String {
+pub(crate) fn read_error(path: &Path, units: Option<f64>) -> String {
     let options = skinpatch::surface::ReadOptions {
         mm_per_unit: units,
         ..Default::default()
@@ -466,7 +466,7 @@ fn bad_obj_input_names_file_and_element() {
 /// A glTF with one triangle, `targets` morph targets and a weight
 /// animation with `values` outputs over two keyframes, buffers embedded as
 /// a data URI; `uv` says whether it has TEXCOORD_0.
-fn tiny_gltf(targets: usize, values: usize, uv: bool, x0: f32) -> String {
+pub(crate) fn tiny_gltf(targets: usize, values: usize, uv: bool, x0: f32) -> String {
     let mut b = GltfBuffers::default();
     let pos = b.f32s(&[x0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0], 3, "VEC3");
     b.bounds(pos, "[0,0,0]", "[1,1,0]");

@@ -1,0 +1,125 @@
+//! The newer input doors (glTF/OBJ surfaces, synth, fit, tiles, viewer
+//! scripts) under bad input: each case once crashed, ran without bound or
+//! overwrote an input, and now fails with an error that names the file and
+//! the element.
+
+use crate::surface::{read_error, temp, tiny_gltf, write};
+
+/// Malformed glTF documents that the `gltf` crate's readers would panic or
+/// recurse on are refused up front, naming the accessor, view or node.
+#[test]
+fn malformed_gltf_is_refused_by_name_not_by_panic() {
+    let dir = temp("gltf_doors");
+    let good = tiny_gltf(1, 2, true, 0.0);
+    // Accessors: 0 POSITION, 1 TEXCOORD_0, 2 morph delta, 3 key times,
+    // 4 morph weights.
+    let cases: Vec<(&str, String, &[&str])> = vec![
+        (
+            "float_indices",
+            good.replacen("\"targets\":[", "\"indices\":3,\"targets\":[", 1),
+            &["indices is accessor 3", "Scalar F32", "U32"],
+        ),
+        (
+            "position_99",
+            good.replacen("\"POSITION\":0", "\"POSITION\":99", 1),
+            &["mesh 0 primitive 0", "POSITION is accessor 99", "has 5"],
+        ),
+        (
+            "position_vec2",
+            good.replacen("\"POSITION\":0", "\"POSITION\":1", 1),
+            &["POSITION is accessor 1 of Vec2 F32", "Vec3"],
+        ),
+        (
+            "missing_target_node",
+            good.replacen("\"target\":{\"node\":0", "\"target\":{\"node\":7", 1),
+            &["animation 0 channel 0", "target node 7", "has 1"],
+        ),
+        (
+            "own_child",
+            good.replacen(
+                "{\"name\":\"Face\",\"mesh\":0}",
+                "{\"name\":\"Face\",\"mesh\":0,\"children\":[0]}",
+                1,
+            ),
+            &["node 0 lists itself as a child"],
+        ),
+        (
+            "overrun",
+            good.replacen("\"count\":3,", "\"count\":3000,", 1),
+            &["accessor 0", "3000 elements", "overrun its buffer view 0"],
+        ),
+        (
+            "view_outside_buffer",
+            good.replacen("\"byteOffset\":0,", "\"byteOffset\":4000000,", 1),
+            &["buffer view 0 spans bytes 4000000"],
+        ),
+    ];
+    for (name, text, wanted) in cases {
+        assert_ne!(text, good, "{name}: the mutation applies");
+        let file = format!("{name}.gltf");
+        let e = read_error(&write(&dir, &file, &text), None);
+        assert!(e.contains(&file), "{name}: {e}");
+        for w in wanted {
+            assert!(e.contains(w), "{name}: {e} lacks {w:?}");
+        }
+    }
+    // Two nodes that are each other's child.
+    let cycle = good.replacen(
+        "\"nodes\":[{\"name\":\"Face\",\"mesh\":0}]",
+        "\"nodes\":[{\"name\":\"Face\",\"mesh\":0,\"children\":[1]},{\"name\":\"B\",\"children\":[0]}]",
+        1,
+    );
+    assert_ne!(cycle, good);
+    let e = read_error(&write(&dir, "cycle.gltf", &cycle), None);
+    assert!(
+        e.contains("cycle.gltf") && e.contains("own ancestor"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// External buffers are read for their declared length only, and only
+/// from regular files: a device such as /dev/zero is refused instead of
+/// read without end.
+#[test]
+fn gltf_buffers_are_read_for_their_declared_length() {
+    let dir = temp("gltf_buffers");
+    let good = tiny_gltf(1, 2, true, 0.0);
+    let start = good.find("data:application").unwrap();
+    let end = start + good[start..].find('"').unwrap();
+    let uri = &good[start..end];
+    use base64::Engine;
+    let mut bin = base64::engine::general_purpose::STANDARD
+        .decode(uri.split_once(";base64,").unwrap().1)
+        .unwrap();
+    // A file longer than declared: the tail is never read.
+    bin.extend(std::iter::repeat_n(0xAB, 1 << 20));
+    std::fs::write(dir.join("data.bin"), &bin).unwrap();
+    let external = good.replacen(uri, "data.bin", 1);
+    let path = write(&dir, "external.gltf", &external);
+    let options = skinpatch::surface::ReadOptions {
+        frame_rate_hz: 4.0,
+        ..Default::default()
+    };
+    let s = skinpatch::surface::AnimatedSurface::read(&path, &options).unwrap();
+    assert_eq!(s.num_frames(), 5);
+    if std::path::Path::new("/dev/zero").exists() {
+        let zero = good.replacen(uri, "/dev/zero", 1);
+        let e = read_error(&write(&dir, "zero.gltf", &zero), None);
+        assert!(
+            e.contains("/dev/zero") && e.contains("not a regular file"),
+            "{e}"
+        );
+        #[cfg(unix)]
+        {
+            let link = dir.join("device.gltf");
+            std::os::unix::fs::symlink("/dev/zero", &link).unwrap();
+            let e = read_error(&link, None);
+            assert!(
+                e.contains("device.gltf") && e.contains("not a regular file"),
+                "{e}"
+            );
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
