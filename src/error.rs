@@ -19,7 +19,7 @@ pub enum Error {
     },
 
     /// A malformed input file, with the 1-based line where the problem was found.
-    #[error("{path}:{line}: {}", clip(.message))]
+    #[error("{path}{}: {}", at_line(*.line), clip(.message))]
     Parse {
         /// The file being parsed.
         path: PathBuf,
@@ -94,6 +94,15 @@ pub enum Error {
 /// Longest message part shown in full; a longer one (e.g. a bad value of a
 /// megabyte echoed in its error) keeps its start and end.
 const MAX_SHOWN: usize = 400;
+
+/// `:line` after a file name, nothing for line 0 (the whole file).
+fn at_line(line: usize) -> String {
+    if line == 0 {
+        String::new()
+    } else {
+        format!(":{line}")
+    }
+}
 
 /// `text`, or for a longer one its first 300 and last 80 characters around
 /// a note of how many were left out. The error keeps the full text.

@@ -153,6 +153,10 @@ pub fn read_png16(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap
         .map_err(|e| bad(format!("not a readable PNG: {e}")))?;
     let info = reader.info();
     let (width, height) = (info.width as usize, info.height as usize);
+    let decoded = reader
+        .output_buffer_size()
+        .ok_or_else(|| bad("image too large".into()))?;
+    check_decoded_size(path, width, height, decoded as u64)?;
     if info.color_type != png::ColorType::Grayscale {
         return Err(bad(format!(
             "a displacement map must be greyscale, this PNG is {:?}",
@@ -210,10 +214,7 @@ pub fn read_png16(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap
             )))
         }
     };
-    let size = reader
-        .output_buffer_size()
-        .ok_or_else(|| bad("image too large".into()))?;
-    let mut buf = vec![0u8; size];
+    let mut buf = vec![0u8; decoded];
     let frame = reader
         .next_frame(&mut buf)
         .map_err(|e| bad(format!("corrupt PNG data: {e}")))?;
@@ -289,6 +290,13 @@ pub fn read_exr(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap> 
     use exr::prelude::{read_first_flat_layer_from_file, AttributeValue, Text};
     let bad = |message: String| Error::malformed(path, message);
     crate::mesh::io::regular_file(path)?;
+    let meta = exr::meta::MetaData::read_from_file(path, false)
+        .map_err(|e| bad(format!("not a readable EXR: {e}")))?;
+    for header in &meta.headers {
+        let size = header.layer_size;
+        let samples = header.channels.list.len() as u64 * size.area() as u64;
+        check_decoded_size(path, size.width(), size.height(), samples * 4)?;
+    }
     let image = read_first_flat_layer_from_file(path)
         .map_err(|e| bad(format!("not a readable EXR: {e}")))?;
     let layer = &image.layer_data;
@@ -375,6 +383,25 @@ pub fn read_exr(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap> 
     map.height_unit_um = height_unit_um;
     map.data = flip_rows(&values, width, height);
     Ok(map)
+}
+
+/// Refuses a map whose header claims more texels than memory holds: its
+/// `decoded` bytes plus two f32 copies of its `width × height` texels
+/// (the decoded values and the map), against the memory available.
+fn check_decoded_size(path: &Path, width: usize, height: usize, decoded: u64) -> Result<()> {
+    let needed = decoded.saturating_add(8u64.saturating_mul(width as u64 * height as u64));
+    match crate::micro::synth::available_memory() {
+        Some(have) if needed > have => Err(Error::malformed(
+            path,
+            format!(
+                "its header claims {width} × {height} texels, which need about {:.1} GB to \
+                 read; {:.1} GB are available",
+                needed as f64 / 1e9,
+                have as f64 / 1e9
+            ),
+        )),
+        _ => Ok(()),
+    }
 }
 
 /// Reads a map by extension: `.png` or `.exr`.

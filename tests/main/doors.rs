@@ -123,3 +123,59 @@ fn gltf_buffers_are_read_for_their_declared_length() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A PNG whose header claims a million texels a side (a hundred bytes on
+/// disk) is refused before anything is allocated, naming the size.
+#[test]
+fn a_map_header_claiming_terabytes_is_refused_before_allocating() {
+    let dir = temp("huge_png");
+    let chunk = |kind: &[u8], data: &[u8]| -> Vec<u8> {
+        let mut c = (data.len() as u32).to_be_bytes().to_vec();
+        let body: Vec<u8> = kind.iter().chain(data).copied().collect();
+        c.extend(&body);
+        c.extend(crc32(&body).to_be_bytes());
+        c
+    };
+    let side: u32 = 1_000_000;
+    let mut ihdr = side.to_be_bytes().to_vec();
+    ihdr.extend(side.to_be_bytes());
+    ihdr.extend([16, 0, 0, 0, 0]);
+    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+    png.extend(chunk(b"IHDR", &ihdr));
+    png.extend(chunk(
+        b"IDAT",
+        &[0x78, 0x01, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01],
+    ));
+    png.extend(chunk(b"IEND", &[]));
+    let path = dir.join("huge.png");
+    std::fs::write(&path, png).unwrap();
+    let defaults = skinpatch::micro::io::MapDefaults {
+        texel: skinpatch::micro::io::TexelSize::Um(10.0),
+        height_unit_um: 1.0,
+        edge: skinpatch::micro::Edge::Wrap,
+    };
+    let e = skinpatch::micro::io::read_map(&path, &defaults)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("huge.png") && e.contains("claims 1000000 × 1000000 texels"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// CRC-32 (the PNG chunk checksum), bit by bit.
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut crc = !0u32;
+    for &b in bytes {
+        crc ^= b as u32;
+        for _ in 0..8 {
+            crc = if crc & 1 != 0 {
+                (crc >> 1) ^ 0xEDB8_8320
+            } else {
+                crc >> 1
+            };
+        }
+    }
+    !crc
+}

@@ -399,6 +399,22 @@ fn bad_inputs_are_named() {
         e.contains("synthesis.exemplar") && e.contains("(5, 3)"),
         "{e}"
     );
+    // Heights near f32's limit (which overflowed the feature distances and
+    // crashed the k-d tree), named by texel.
+    let mut huge = exemplar.clone();
+    huge.data.iter_mut().for_each(|h| *h *= 1e36);
+    huge.data[7 * 64 + 2] = 3e38;
+    let e = err(
+        SynthInputs {
+            exemplar: &huge,
+            ..base
+        },
+        &params(),
+    );
+    assert!(
+        e.contains("synthesis.exemplar") && e.contains("texel (") && e.contains("±1e6 µm"),
+        "{e}"
+    );
     // Memory: the estimate matches the measured peaks within 15 %, and an
     // output beyond what is available is refused before any work.
     use skinpatch::micro::synth::{check_memory, estimated_bytes};
@@ -458,6 +474,21 @@ fn bad_inputs_are_named() {
                 ..params()
             },
             "synthesis.mesostructure_sigma_um",
+        ),
+        // A blur of a kilometre (whose kernel took memory without bound).
+        (
+            SynthParams {
+                mesostructure_sigma_um: Some(1e9),
+                ..params()
+            },
+            "synthesis.mesostructure_sigma_um is 1e9 µm, wider than the largest map",
+        ),
+        (
+            SynthParams {
+                mesostructure_sigma_um: Some(300.0),
+                ..params()
+            },
+            "synthesis.lowpass_sigma_um (by default 4 × mesostructure_sigma_um) is 1200 µm, wider",
         ),
     ] {
         let e = err(base, &p);

@@ -374,6 +374,33 @@ pub fn synthesize(
             None => 4.0 * texel,
         });
     let sigma_l = params.lowpass_sigma_um.unwrap_or(4.0 * sigma_m);
+    // A blur wider than every map leaves only their means (and its kernel
+    // would take memory and time without bound): refused.
+    let widest = (width.max(height).max(ew).max(eh) as f64) * texel;
+    for (key, sigma) in [
+        ("synthesis.mesostructure_sigma_um", sigma_m),
+        (
+            if params.lowpass_sigma_um.is_some() {
+                "synthesis.lowpass_sigma_um"
+            } else {
+                "synthesis.lowpass_sigma_um (by default 4 × mesostructure_sigma_um)"
+            },
+            sigma_l,
+        ),
+    ] {
+        if sigma > widest {
+            return Err(Error::parameter(
+                key,
+                format!(
+                    "is {} µm, wider than the largest map ({} µm = {} texels of {} µm)",
+                    shown(sigma),
+                    shown(widest),
+                    width.max(height).max(ew).max(eh),
+                    shown(texel)
+                ),
+            ));
+        }
+    }
     let a = gauss(&a1, sigma_m / texel);
     let high = |m: &DisplacementMap| -> (DisplacementMap, DisplacementMap) {
         let low = gauss(m, sigma_l / texel);
@@ -704,8 +731,38 @@ fn check_map(key: &str, m: &DisplacementMap) -> Result<()> {
             ),
         ));
     }
+    // Feature distances are squared sums in f32: heights beyond this would
+    // overflow them (and no skin is a metre deep).
+    let unit = m.height_unit_um;
+    if !(unit.is_finite() && unit > 0.0) {
+        return Err(Error::parameter(
+            key,
+            format!(
+                "has height unit {} µm; it must be finite and > 0",
+                shown(unit)
+            ),
+        ));
+    }
+    if let Some(k) = m
+        .data
+        .iter()
+        .position(|&h| (h as f64 * unit).abs() > MAX_HEIGHT_UM)
+    {
+        return Err(Error::parameter(
+            key,
+            format!(
+                "height at texel ({}, {}) is {} µm; heights must be within ±{MAX_HEIGHT_UM:e} µm",
+                k % m.width,
+                k / m.width,
+                shown(m.data[k] as f64 * unit)
+            ),
+        ));
+    }
     Ok(())
 }
+
+/// Largest height of an exemplar or mesostructure map (µm): one metre.
+const MAX_HEIGHT_UM: f64 = 1e6;
 
 /// The map in µm with texel `texel` (its grid as it is).
 fn in_um(m: &DisplacementMap, texel: f64) -> DisplacementMap {
