@@ -20,7 +20,7 @@
 
 use std::time::Instant;
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::gpu::micro::{GpuMicro, StageTimes};
 use crate::mesh::{TetMesh, Vec3};
 use crate::micro::procedural::{generate, SkinParams};
@@ -142,6 +142,42 @@ pub fn bench_map(size: usize, extent_mm: f64) -> Result<DisplacementMap> {
     Ok(map)
 }
 
+/// Largest map side `bench micro` runs (texels).
+pub const MAX_BENCH_SIDE: usize = 65536;
+
+/// Bytes a texel of a benchmarked map takes in host memory at least: the
+/// neutral and deformed heights, the normals and the CPU reference's
+/// copies (f32 each).
+const BYTES_PER_TEXEL: u64 = 32;
+
+/// Every side in 1 ..= [`MAX_BENCH_SIDE`] and within the memory available.
+fn check_sizes(sizes: &[usize]) -> Result<()> {
+    if sizes.is_empty() {
+        return Err(Error::parameter("--sizes", "names no map side"));
+    }
+    let available = crate::micro::synth::available_memory();
+    for &size in sizes {
+        if size == 0 || size > MAX_BENCH_SIDE {
+            return Err(Error::parameter(
+                "--sizes",
+                format!("{size} texels: each side must be in 1 … {MAX_BENCH_SIDE}"),
+            ));
+        }
+        let needed = (size as u64).pow(2) * BYTES_PER_TEXEL;
+        if let Some(have) = available.filter(|&have| needed > have) {
+            return Err(Error::parameter(
+                "--sizes",
+                format!(
+                    "a map of {size}² texels needs about {:.1} GB, {:.1} GB are available",
+                    needed as f64 / 1e9,
+                    have as f64 / 1e9
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Runs the bench over `sizes` with `repetitions` timed GPU frames each,
 /// the strain rasterised at one texel per `raster_step²` map texels (1: the
 /// exact raster; see [`GpuMicro::set_raster_step`]), GPU and CPU alike;
@@ -154,6 +190,7 @@ pub fn bench_micro(
     (layout, raster_step): (MapLayout, usize),
     mut on_row: impl FnMut(&MicroRow),
 ) -> Result<MicroBench> {
+    check_sizes(sizes)?;
     let deformed = bench_deformation(mesh);
     let (lo, hi) = mesh.bounds();
     let patch_mm = hi.x - lo.x;

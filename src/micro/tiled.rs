@@ -70,6 +70,12 @@ pub struct TiledMap {
     pub edge: Edge,
 }
 
+/// Largest side of a tiled map (texels): 2²⁰, 10 m at 10 µm.
+pub const MAX_SIDE: usize = 1 << 20;
+
+/// Largest tile side (texels).
+pub const MAX_TILE: usize = 1 << 16;
+
 /// Whether `path` names a tiled map: a folder, or its `index.toml`.
 pub fn is_tiled(path: &Path) -> bool {
     path.is_dir() || path.file_name().is_some_and(|n| n == INDEX_FILE)
@@ -99,6 +105,12 @@ impl TiledMap {
         if index.width == 0 || index.height == 0 || index.tile == 0 {
             return Err(bad(format!(
                 "width, height and tile must be ≥ 1, got {} × {} in tiles of {}",
+                index.width, index.height, index.tile
+            )));
+        }
+        if index.width.max(index.height) > MAX_SIDE || index.tile > MAX_TILE {
+            return Err(bad(format!(
+                "{} × {} texels in tiles of {}: a side may have at most {MAX_SIDE} texels                  (10 m at 10 µm), a tile at most {MAX_TILE}",
                 index.width, index.height, index.tile
             )));
         }
@@ -231,6 +243,21 @@ impl TiledMap {
     /// has the map's metadata with clamped edges (a window does not wrap
     /// onto itself).
     pub fn read_window(&self, origin: [isize; 2], size: [usize; 2]) -> Result<DisplacementMap> {
+        let texels = size[0] as u64 * size[1] as u64;
+        if let Some(have) = crate::micro::synth::available_memory() {
+            if texels.saturating_mul(4) > have {
+                return Err(Error::malformed(
+                    &self.dir.join(INDEX_FILE),
+                    format!(
+                        "{} × {} texels need {:.1} GB in memory, {:.1} GB are available: read                          the map by tiles",
+                        size[0],
+                        size[1],
+                        texels as f64 * 4.0 / 1e9,
+                        have as f64 / 1e9
+                    ),
+                ));
+            }
+        }
         let source = |x: isize, n: usize| -> usize {
             match self.edge {
                 Edge::Wrap => x.rem_euclid(n as isize) as usize,

@@ -179,3 +179,55 @@ fn crc32(bytes: &[u8]) -> u32 {
     }
     !crc
 }
+
+fn skinpatch(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_skinpatch"))
+        .args(args)
+        .current_dir(crate::common::root())
+        .output()
+        .expect("the skinpatch binary runs")
+}
+
+/// `tiles join` of an index claiming a billion texels a side, and `bench
+/// micro` at a side of 10⁸, are refused with a message instead of aborting
+/// on an allocation (exit 134).
+#[test]
+fn sizes_beyond_memory_are_refused_before_allocating() {
+    use skinpatch::micro::tiled::TiledMap;
+    use skinpatch::micro::{DisplacementMap, Edge};
+    let dir = tempfile::tempdir().unwrap();
+    let map = DisplacementMap::from_fn(8, 8, 10.0, Edge::Wrap, |i, j| (i + j) as f32);
+    let folder = dir.path().join("map.tiles");
+    TiledMap::write(&folder, &map, 4).unwrap();
+    let index = folder.join("index.toml");
+    let text = std::fs::read_to_string(&index).unwrap();
+    let huge = text.replacen("width = 8", "width = 1000000000", 1);
+    assert_ne!(huge, text);
+    std::fs::write(&index, huge).unwrap();
+    let out = dir.path().join("joined.exr");
+    let o = skinpatch(&[
+        "tiles",
+        "join",
+        folder.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(
+        e.contains("index.toml") && e.contains("1000000000 × 8") && e.contains("at most"),
+        "{e}"
+    );
+    assert!(!out.exists());
+    let o = skinpatch(&[
+        "bench",
+        "micro",
+        "--scenario",
+        "tests/fixtures/render_small.toml",
+        "--sizes",
+        "64,99999999",
+    ]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(e.contains("--sizes") && e.contains("99999999"), "{e}");
+}
