@@ -8,6 +8,7 @@
 //! above it):
 //!
 //! * [`error`]: the library's error type;
+//! * [`memory`]: the memory available, for checks before large allocations;
 //! * [`mesh`]: tetrahedral meshes — TetGen generation, file I/O, quality;
 //! * [`fem`]: corotational tetrahedral FEM with a rigid probe;
 //! * [`strain`]: principal strains per tet and the surface deformation field
@@ -34,6 +35,7 @@ pub mod export;
 pub mod fem;
 pub mod gpu;
 pub mod imaging;
+pub mod memory;
 pub mod mesh;
 pub mod micro;
 pub mod pipeline;

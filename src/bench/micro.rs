@@ -155,7 +155,7 @@ fn check_sizes(sizes: &[usize]) -> Result<()> {
     if sizes.is_empty() {
         return Err(Error::parameter("--sizes", "names no map side"));
     }
-    let available = crate::micro::synth::available_memory();
+    let available = crate::memory::available();
     for &size in sizes {
         if size == 0 || size > MAX_BENCH_SIDE {
             return Err(Error::parameter(

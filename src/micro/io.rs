@@ -390,7 +390,7 @@ pub fn read_exr(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap> 
 /// (the decoded values and the map), against the memory available.
 fn check_decoded_size(path: &Path, width: usize, height: usize, decoded: u64) -> Result<()> {
     let needed = decoded.saturating_add(8u64.saturating_mul(width as u64 * height as u64));
-    match crate::micro::synth::available_memory() {
+    match crate::memory::available() {
         Some(have) if needed > have => Err(Error::malformed(
             path,
             format!(

@@ -244,7 +244,7 @@ impl TiledMap {
     /// onto itself).
     pub fn read_window(&self, origin: [isize; 2], size: [usize; 2]) -> Result<DisplacementMap> {
         let texels = size[0] as u64 * size[1] as u64;
-        if let Some(have) = crate::micro::synth::available_memory() {
+        if let Some(have) = crate::memory::available() {
             if texels.saturating_mul(4) > have {
                 return Err(Error::malformed(
                     &self.dir.join(INDEX_FILE),

@@ -84,7 +84,24 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<AnimatedSurface> {
     split.rest = pose(None, &vec![0.0; n_targets]);
     split.frames = match &clip {
         Some(c) => {
-            let frames = ((c.end - c.start) * rate + 1e-4).floor() as usize + 1;
+            let count = ((c.end - c.start) * rate + 1e-4).floor() + 1.0;
+            // Each frame holds every vertex's position (24 bytes), twice
+            // while the surface is built.
+            let bytes = count * raw.positions.len() as f64 * 48.0;
+            if let Some((needed, have)) =
+                crate::memory::shortfall_gb(bytes.min(u64::MAX as f64) as u64)
+            {
+                return Err(bad(format!(
+                    "{} from {} s to {} s at {rate} Hz is {count} frames of {} vertices, which \
+                     need about {needed:.1} GB; {have:.1} GB are available: lower \
+                     frame_rate_hz",
+                    c.name,
+                    c.start,
+                    c.end,
+                    raw.positions.len()
+                )));
+            }
+            let frames = count as usize;
             log::info!(
                 "{}: {} sampled from {} s to {} s at {rate} Hz: {frames} frames",
                 path.display(),

@@ -231,3 +231,24 @@ fn sizes_beyond_memory_are_refused_before_allocating() {
     assert_eq!(o.status.code(), Some(1), "{e}");
     assert!(e.contains("--sizes") && e.contains("99999999"), "{e}");
 }
+
+/// Sampling the forehead's 2 s animation at 10⁹ Hz would hold two billion
+/// frames: refused up front with the count, not sampled until memory runs
+/// out.
+#[test]
+fn a_sampling_rate_beyond_memory_is_refused_up_front() {
+    let glb = crate::common::root().join("examples/surfaces/forehead.glb");
+    let options = skinpatch::surface::ReadOptions {
+        frame_rate_hz: 1e9,
+        ..Default::default()
+    };
+    let start = std::time::Instant::now();
+    let e = skinpatch::surface::AnimatedSurface::read(&glb, &options)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("forehead.glb") && e.contains("frames of") && e.contains("frame_rate_hz"),
+        "{e}"
+    );
+    assert!(start.elapsed().as_secs_f64() < 5.0);
+}

@@ -675,13 +675,9 @@ pub fn estimated_bytes(output_texels: usize, exemplar_texels: usize, params: &Sy
     output_texels as u64 * 48 + exemplar_texels as u64 * (48 + 8 * dims as u64)
 }
 
-/// The memory the system has available (Linux: `MemAvailable` of
-/// /proc/meminfo), if known.
+/// The memory the system has available, if known (see [`crate::memory`]).
 pub fn available_memory() -> Option<u64> {
-    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb * 1024)
+    crate::memory::available()
 }
 
 /// An error when `needed` bytes exceed what is `available`.
