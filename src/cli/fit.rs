@@ -172,6 +172,7 @@ pub fn fit(
     let samples: FitSamples = skinpatch::scenario::read_toml_file(path)?;
     let base = path.parent().unwrap_or(std::path::Path::new("."));
     let bins = checked_bins(&samples)?;
+    refuse_overwriting_inputs(path, base, &samples)?;
     let defaults = MapDefaults {
         texel: TexelSize::Um(samples.texel_um.unwrap_or(1.0)),
         height_unit_um: 1.0,
@@ -237,6 +238,34 @@ pub fn fit(
         written,
         device,
     })
+}
+
+/// The kernel file must not be the samples file or one of its maps.
+fn refuse_overwriting_inputs(
+    path: &std::path::Path,
+    base: &std::path::Path,
+    samples: &FitSamples,
+) -> Result<()> {
+    let Some(output) = &samples.output else {
+        return Ok(());
+    };
+    let mut inputs: Vec<(String, std::path::PathBuf)> =
+        vec![("samples file".into(), path.to_path_buf())];
+    if let Some(n) = &samples.neutral {
+        inputs.push(("neutral map".into(), base.join(n)));
+    }
+    for (k, s) in samples.sample.iter().enumerate() {
+        for (what, file) in [("map", &s.map), ("histogram", &s.histogram)] {
+            if let Some(f) = file {
+                inputs.push((format!("sample[{k}].{what}"), base.join(f)));
+            }
+        }
+    }
+    let inputs: Vec<(&str, &std::path::Path)> = inputs
+        .iter()
+        .map(|(w, p)| (w.as_str(), p.as_path()))
+        .collect();
+    skinpatch::export::outputs::refuse_input_overwrite("output", &base.join(output), &inputs)
 }
 
 /// The histogram cells per side, with `range` checked too.

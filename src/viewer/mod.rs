@@ -185,7 +185,7 @@ pub fn run(options: ViewOptions) -> Result<ViewSummary> {
     let script = options
         .script
         .as_deref()
-        .map(script::Script::load)
+        .map(|path| script::Script::load(path, &options.scenario))
         .transpose()?;
     let loaded = load(&options)?;
     let event_loop = winit::event_loop::EventLoop::<app::Wake>::with_user_event()

@@ -165,14 +165,24 @@ pub struct Script {
 }
 
 impl Script {
-    /// Reads and checks a script file.
-    pub fn load(path: &Path) -> Result<Script> {
+    /// Reads and checks a script file run on `scenario`: every step's
+    /// values, and no file a step writes may be the script or the scenario.
+    pub fn load(path: &Path, scenario: &Path) -> Result<Script> {
         let script: Script = crate::scenario::read_toml_file(path)?;
         for (k, step) in script.step.iter().enumerate() {
-            step.check().map_err(|message| Error::Scenario {
+            let fail = |message: String| Error::Scenario {
                 path: path.to_path_buf(),
                 message: format!("step {} ({}): {message}", k + 1, step.name()),
-            })?;
+            };
+            step.check().map_err(fail)?;
+            if let Step::Screenshot { file, .. } | Step::SavePath { file } = step {
+                crate::export::outputs::refuse_input_overwrite(
+                    "file",
+                    file,
+                    &[("script", path), ("scenario", scenario)],
+                )
+                .map_err(|e| fail(e.to_string()))?;
+            }
         }
         Ok(script)
     }
@@ -234,6 +244,10 @@ impl Step {
                     finite(p[0], "at_mm")?;
                     finite(p[1], "at_mm")?;
                 }
+                if let Some(p) = at_px {
+                    finite(p[0] as f64, "at_px")?;
+                    finite(p[1] as f64, "at_px")?;
+                }
             }
             Step::Drag { to_mm, moves } => {
                 finite(to_mm[0], "to_mm")?;
@@ -269,6 +283,51 @@ impl Step {
             }
             Step::Key { key } if super::keys::from_name(key).is_none() => {
                 return Err(format!("unknown key {key:?}"));
+            }
+            Step::Scrub { t_s } => finite(*t_s, "t_s")?,
+            Step::Play {
+                from_s: Some(t), ..
+            } => finite(*t, "from_s")?,
+            Step::Orbit {
+                azimuth_deg,
+                elevation_deg,
+            } => {
+                finite(*azimuth_deg as f64, "azimuth_deg")?;
+                finite(*elevation_deg as f64, "elevation_deg")?;
+            }
+            Step::Pan { right, up } => {
+                finite(*right as f64, "right")?;
+                finite(*up as f64, "up")?;
+            }
+            Step::Light {
+                azimuth_deg,
+                elevation_deg,
+                intensity,
+            } => {
+                for (v, what) in [
+                    (azimuth_deg, "azimuth_deg"),
+                    (elevation_deg, "elevation_deg"),
+                ] {
+                    if let Some(v) = v {
+                        finite(*v as f64, what)?;
+                    }
+                }
+                if let Some(i) = intensity {
+                    if !(i.is_finite() && *i >= 0.0) {
+                        return Err(format!("intensity must be ≥ 0, got {i}"));
+                    }
+                }
+            }
+            Step::Material {
+                youngs_modulus_kpa,
+                poisson_ratio,
+                ..
+            } => {
+                finite(*youngs_modulus_kpa, "youngs_modulus_kpa")?;
+                finite(*poisson_ratio, "poisson_ratio")?;
+            }
+            Step::Friction { mu } if !(mu.is_finite() && *mu >= 0.0) => {
+                return Err(format!("mu must be ≥ 0, got {mu}"));
             }
             _ => {}
         }
@@ -341,11 +400,19 @@ impl Step {
 mod tests {
     use super::*;
 
+    /// Loads `text` as `s.toml` beside a scenario `scenario.toml`; `{dir}`
+    /// in the text is their folder, `{dir_name}` its name.
     fn parse(text: &str) -> Result<Script> {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("s.toml");
+        let scenario = dir.path().join("scenario.toml");
+        std::fs::write(&scenario, "").unwrap();
+        let name = dir.path().file_name().unwrap().to_str().unwrap();
+        let text = text
+            .replace("{dir_name}", name)
+            .replace("{dir}", dir.path().to_str().unwrap());
         std::fs::write(&path, text).unwrap();
-        Script::load(&path)
+        Script::load(&path, &scenario)
     }
 
     #[test]
@@ -388,6 +455,42 @@ mod tests {
             ),
             ("[[step]]\naction = \"release\"\nextra = 1\n", "extra"),
             ("[[step]]\naction = \"key\"\nkey = \"f13\"\n", "unknown key"),
+            // Non-finite values, which the window accepted and then never
+            // finished (a press at a NaN pixel) or drew only background.
+            (
+                "[[step]]\naction = \"press\"\nat_px = [nan, 0.0]\n",
+                "step 1 (press): at_px must be finite",
+            ),
+            (
+                "[[step]]\naction = \"orbit\"\nazimuth_deg = nan\nelevation_deg = 0.0\n",
+                "azimuth_deg must be finite",
+            ),
+            (
+                "[[step]]\naction = \"pan\"\nright = inf\nup = 0.0\n",
+                "right must be finite",
+            ),
+            (
+                "[[step]]\naction = \"scrub\"\nt_s = nan\n",
+                "t_s must be finite",
+            ),
+            (
+                "[[step]]\naction = \"friction\"\nmu = -1.0\n",
+                "mu must be ≥ 0",
+            ),
+            // Outputs over the run's inputs.
+            (
+                "[[step]]\naction = \"release\"\n\
+                 [[step]]\naction = \"screenshot\"\nfile = \"{dir}/scenario.toml\"\n",
+                "step 2 (screenshot): file /",
+            ),
+            (
+                "[[step]]\naction = \"screenshot\"\nfile = \"{dir}/scenario.toml\"\n",
+                "is the run's scenario",
+            ),
+            (
+                "[[step]]\naction = \"save_path\"\nfile = \"{dir}/../{dir_name}/s.toml\"\n",
+                "is the run's script",
+            ),
         ] {
             let err = parse(text).unwrap_err().to_string();
             assert!(err.contains(needle), "{text:?}: {err}");

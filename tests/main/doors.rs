@@ -252,3 +252,38 @@ fn a_sampling_rate_beyond_memory_is_refused_up_front() {
     );
     assert!(start.elapsed().as_secs_f64() < 5.0);
 }
+
+/// `fit` with its output on its neutral map or on the samples file itself
+/// is refused, naming both, and both files stay as they were.
+#[test]
+fn fit_never_writes_over_its_inputs() {
+    use skinpatch::micro::io::write_png16;
+    use skinpatch::micro::{DisplacementMap, Edge};
+    let dir = tempfile::tempdir().unwrap();
+    let neutral = DisplacementMap::from_fn(32, 32, 5.0, Edge::Wrap, |i, j| {
+        ((i * 7 + j * 3) % 11) as f32
+    });
+    let map = dir.path().join("neutral.png");
+    write_png16(&map, &neutral).unwrap();
+    let before = std::fs::read(&map).unwrap();
+    for (output, what) in [
+        ("neutral.png", "neutral map"),
+        ("samples.toml", "samples file"),
+    ] {
+        let samples = format!(
+            "neutral = \"neutral.png\"\noutput = \"./{output}\"\n\
+             [[sample]]\nmap = \"neutral.png\"\nr = 1.0\naxis = \"u\"\n"
+        );
+        let file = dir.path().join("samples.toml");
+        std::fs::write(&file, &samples).unwrap();
+        let o = skinpatch(&["fit", file.to_str().unwrap()]);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{e}");
+        assert!(
+            e.contains("output") && e.contains(output) && e.contains(&format!("run's {what}")),
+            "{e}"
+        );
+        assert_eq!(std::fs::read(&map).unwrap(), before);
+        assert_eq!(std::fs::read_to_string(&file).unwrap(), samples);
+    }
+}

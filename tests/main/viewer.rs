@@ -330,7 +330,8 @@ fn shipped_scripts_load() {
     for entry in std::fs::read_dir(&dir).unwrap() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "toml") {
-            let script = skinpatch::viewer::script::Script::load(&path)
+            let scenario = common::root().join("examples/press.toml");
+            let script = skinpatch::viewer::script::Script::load(&path, &scenario)
                 .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
             assert!(!script.step.is_empty(), "{}", path.display());
             count += 1;
