@@ -150,6 +150,44 @@ fn clear_tiled_frame(folder: &Path) -> Result<usize> {
     Ok(removed)
 }
 
+/// Whether `a` and `b` name the same existing file (after following links
+/// and `..`; on Unix also two hard links of one file).
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    let (Ok(ma), Ok(mb)) = (std::fs::metadata(a), std::fs::metadata(b)) else {
+        return false;
+    };
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if (ma.dev(), ma.ino()) == (mb.dev(), mb.ino()) {
+            return true;
+        }
+    }
+    let _ = (ma, mb);
+    matches!(
+        (std::fs::canonicalize(a), std::fs::canonicalize(b)),
+        (Ok(x), Ok(y)) if x == y
+    )
+}
+
+/// The rule every command follows: an output file is never one of the
+/// run's inputs. `key` names the output's setting; `inputs` are (what,
+/// path) pairs. The error names both.
+pub fn refuse_input_overwrite(key: &str, output: &Path, inputs: &[(&str, &Path)]) -> Result<()> {
+    match inputs.iter().find(|(_, input)| same_file(output, input)) {
+        Some((what, input)) => Err(Error::parameter(
+            key,
+            format!(
+                "{} is the run's {what} ({}); writing it would overwrite an input: choose \
+                 another file",
+                output.display(),
+                input.display()
+            ),
+        )),
+        None => Ok(()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -234,43 +272,5 @@ mod tests {
         assert!(d.join("micro/height_mine.tiles/index.toml").exists());
         // A folder that does not exist yet is nothing to clear.
         assert_eq!(clear_previous_run(&d.join("new")).unwrap(), 0);
-    }
-}
-
-/// Whether `a` and `b` name the same existing file (after following links
-/// and `..`; on Unix also two hard links of one file).
-pub fn same_file(a: &Path, b: &Path) -> bool {
-    let (Ok(ma), Ok(mb)) = (std::fs::metadata(a), std::fs::metadata(b)) else {
-        return false;
-    };
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::MetadataExt;
-        if (ma.dev(), ma.ino()) == (mb.dev(), mb.ino()) {
-            return true;
-        }
-    }
-    let _ = (ma, mb);
-    matches!(
-        (std::fs::canonicalize(a), std::fs::canonicalize(b)),
-        (Ok(x), Ok(y)) if x == y
-    )
-}
-
-/// The rule every command follows: an output file is never one of the
-/// run's inputs. `key` names the output's setting; `inputs` are (what,
-/// path) pairs. The error names both.
-pub fn refuse_input_overwrite(key: &str, output: &Path, inputs: &[(&str, &Path)]) -> Result<()> {
-    match inputs.iter().find(|(_, input)| same_file(output, input)) {
-        Some((what, input)) => Err(Error::parameter(
-            key,
-            format!(
-                "{} is the run's {what} ({}); writing it would overwrite an input: choose \
-                 another file",
-                output.display(),
-                input.display()
-            ),
-        )),
-        None => Ok(()),
     }
 }
