@@ -44,6 +44,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         quiet,
     } = args;
     let (path, overrides) = (path.as_path(), overrides.as_slice());
+    skinpatch::scenario::check_output_flag(output.as_deref(), overrides)?;
     let mut scenario = Scenario::load_with(path, overrides)?;
     // Before the setup: it places the synthesized map's cache there.
     if let Some(dir) = output {

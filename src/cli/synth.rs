@@ -22,6 +22,7 @@ pub struct SynthArgs {
 /// Runs `skinpatch synth`.
 pub fn run(args: SynthArgs) -> anyhow::Result<()> {
     let (file, output, set) = (&args.file, args.output.as_deref(), &args.set);
+    skinpatch::scenario::check_output_flag(output, set)?;
     let started = std::time::Instant::now();
     let run = skinpatch::pipeline::synth::run(file, set, output, &mut |l| {
         eprintln!(

@@ -330,6 +330,12 @@ pub fn load_with<T: serde::de::DeserializeOwned>(path: &Path, overrides: &[Strin
     let mut table: toml::Table =
         toml::from_str(&text).map_err(|e| fail(describe_toml_error(&e, &text)))?;
     for o in overrides {
+        if o.contains(['\n', '\r']) {
+            return Err(fail(format!(
+                "--set {}: the override spans lines; give each key its own --set",
+                o.lines().next().unwrap_or("")
+            )));
+        }
         let (key, value) = o
             .split_once('=')
             .ok_or_else(|| fail(format!("--set {o}: expected key=value")))?;
@@ -345,6 +351,25 @@ pub fn load_with<T: serde::de::DeserializeOwned>(path: &Path, overrides: &[Strin
             describe_schema_error(&key, e.inner(), "")
         ))
     })
+}
+
+/// `--output` and `--set output.dir=…` both name the output folder: one
+/// of them may be given, not both (one would be dropped without a word).
+pub fn check_output_flag(output: Option<&Path>, overrides: &[String]) -> Result<()> {
+    let sets_dir = overrides.iter().any(|o| {
+        o.split_once('=')
+            .is_some_and(|(k, _)| k.trim() == "output.dir")
+    });
+    match output {
+        Some(dir) if sets_dir => Err(Error::parameter(
+            "--output",
+            format!(
+                "({}) and --set output.dir both name the output folder; give one",
+                dir.display()
+            ),
+        )),
+        _ => Ok(()),
+    }
 }
 
 /// Parses TOML text of type `T`; errors name `path`, the key and line.

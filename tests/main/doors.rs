@@ -287,3 +287,39 @@ fn fit_never_writes_over_its_inputs() {
         assert_eq!(std::fs::read_to_string(&file).unwrap(), samples);
     }
 }
+
+/// An override that spans lines (whose later lines were dropped without a
+/// word) and `--output` beside `--set output.dir` (one of which was
+/// ignored) are refused, for `run` and `synth` alike.
+#[test]
+fn overrides_that_would_be_dropped_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let out = out.to_str().unwrap();
+    for command in [
+        vec!["run", "tests/fixtures/press_small.toml"],
+        vec!["synth", "examples/synth.toml"],
+    ] {
+        let mut args = command.clone();
+        args.extend([
+            "-o",
+            out,
+            "--set",
+            "probe.radius_mm=1.0\nprobe.friction=5.0",
+        ]);
+        let o = skinpatch(&args);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{command:?}: {e}");
+        assert!(e.contains("spans lines"), "{command:?}: {e}");
+        let mut args = command.clone();
+        args.extend(["-o", out, "--set", "output.dir=\"elsewhere\""]);
+        let o = skinpatch(&args);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{command:?}: {e}");
+        assert!(
+            e.contains("--output") && e.contains("output.dir") && e.contains("give one"),
+            "{command:?}: {e}"
+        );
+        assert!(!std::path::Path::new(out).exists());
+    }
+}
