@@ -603,3 +603,32 @@ fn capsule_contact_follows_its_axis() {
     println!("axis x: {along_x:?}, extents {x1:.3} × {y1:.3} mm");
     println!("axis y: {along_y:?}, extents {x2:.3} × {y2:.3} mm");
 }
+
+/// Load steps follow the probe's motion, not the frame's length: a 0.5 mm
+/// press of a 1.5 mm sphere takes 2 steps of at most a quarter radius
+/// whether the frame lasts 1 ms, 1000 s or 10⁶ s (the slow frames once
+/// needed 2048 steps, and failed beyond 10000), and a probe at rest takes
+/// the configured count.
+#[test]
+fn load_steps_follow_the_probe_not_the_clock() {
+    use skinpatch::fem::load_steps::load_steps;
+    for seconds in [1e-3, 1e3, 1e6] {
+        let probe = sphere(
+            vec![
+                (0.0, Vector3::new(0.0, 0.0, 1.5)),
+                (seconds, Vector3::new(0.0, 0.0, 1.0)),
+            ],
+            ContactMode::Coulomb(0.8),
+        );
+        assert_eq!(load_steps(Some(&probe), 1, 0.0, seconds, 1).unwrap(), 2);
+        assert_eq!(load_steps(Some(&probe), 3, 0.0, seconds, 1).unwrap(), 3);
+        let resting = sphere(
+            vec![(0.0, Vector3::new(0.0, 0.0, 1.5))],
+            ContactMode::Coulomb(0.8),
+        );
+        assert_eq!(
+            load_steps(Some(&resting), 1, seconds, 2.0 * seconds, 2).unwrap(),
+            1
+        );
+    }
+}
