@@ -322,6 +322,40 @@ action = "quit"
     }
 }
 
+/// A script that outlives `--exit-after` ends with an error naming the
+/// flag and the step, not as a solver failure.
+#[test]
+fn exit_after_names_itself_not_the_solver() {
+    let Some(mut viewer) = xvfb_run() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let script = dir.path().join("wait.toml");
+    std::fs::write(
+        &script,
+        "[[step]]\naction = \"wait\"\nseconds = 600.0\n[[step]]\naction = \"quit\"\n",
+    )
+    .unwrap();
+    let out = viewer
+        .current_dir(common::root())
+        .args(["view", "tests/fixtures/press_small.toml"])
+        .args(["--width", "160", "--height", "120"])
+        .arg("--script")
+        .arg(&script)
+        .arg("--record-dir")
+        .arg(dir.path().join("view"))
+        .args(["--exit-after", "2"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("--exit-after 2 s ran out with the script still at step 1 of 2")
+            && !stderr.contains("solver failed"),
+        "{stderr}"
+    );
+}
+
 /// The shipped viewer scripts parse and pass their checks.
 #[test]
 fn shipped_scripts_load() {

@@ -611,11 +611,15 @@ impl ApplicationHandler<Wake> for App {
                     .is_some_and(|s| s.next < s.steps.len() || s.waiting.is_some());
                 if unfinished && self.error.is_none() {
                     let run = self.script.as_ref().expect("checked");
-                    self.error = Some(Error::Solver(format!(
-                        "--exit-after {limit} s: the script was still at step {} of {}",
-                        run.next,
-                        run.steps.len()
-                    )));
+                    self.error = Some(Error::parameter(
+                        "--exit-after",
+                        format!(
+                            "{limit} s ran out with the script still at step {} of {} (not \
+                             a solver failure: give it more time)",
+                            run.next,
+                            run.steps.len()
+                        ),
+                    ));
                 }
                 event_loop.exit();
                 return;
