@@ -6,7 +6,7 @@ use std::path::Path;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
-use super::{non_negative, positive};
+use super::non_negative;
 use crate::error::{shown, Error, Result};
 use crate::render::camera::{Camera, Projection};
 use crate::render::light::{Environment, Light, LightKind, GRACE_CATHEDRAL, MAX_LIGHTS};
@@ -195,10 +195,12 @@ pub struct CameraSection {
     /// Up direction. Default `[0, 0, 1]`.
     #[serde(deserialize_with = "super::arrays::exact")]
     pub up: [f64; 3],
-    /// Vertical field of view (degrees, perspective), in (0, 170). Default 35.
-    pub fov_deg: f64,
-    /// Height of the view (mm, orthographic). Default 12.
-    pub height_mm: f64,
+    /// Vertical field of view (degrees, perspective only), in
+    /// [0.01, 170). Default 35.
+    pub fov_deg: Option<f64>,
+    /// Height of the view (mm, orthographic only), in [0.001, 10⁴].
+    /// Default 12.
+    pub height_mm: Option<f64>,
 }
 
 impl Default for CameraSection {
@@ -208,8 +210,8 @@ impl Default for CameraSection {
             eye_mm: [0.0, -14.0, 12.0],
             target_mm: [0.0, 0.0, -0.5],
             up: [0.0, 0.0, 1.0],
-            fov_deg: 35.0,
-            height_mm: 12.0,
+            fov_deg: None,
+            height_mm: None,
         }
     }
 }
@@ -354,22 +356,46 @@ impl CameraSection {
                 format!("must not be parallel to the view direction {view}"),
             ));
         }
+        let unused = |key: &str, kind: &str| {
+            Error::parameter(
+                key,
+                format!(
+                    "has no effect with projection = \"{kind}\"; remove it or change the \
+                     projection"
+                ),
+            )
+        };
         let projection = match self.projection {
             ProjectionKind::Perspective => {
-                let fov = self.fov_deg;
-                if !(fov.is_finite() && fov > 0.0 && fov < 170.0) {
+                if self.height_mm.is_some() {
+                    return Err(unused("render.camera.height_mm", "perspective"));
+                }
+                let fov = self.fov_deg.unwrap_or(35.0);
+                if !(fov.is_finite() && (0.01..170.0).contains(&fov)) {
                     return Err(Error::parameter(
                         "render.camera.fov_deg",
-                        format!("must be in (0, 170), got {fov}"),
+                        format!("must be in [0.01, 170), got {}", shown(fov)),
                     ));
                 }
                 Projection::Perspective {
                     fov_deg: fov as f32,
                 }
             }
-            ProjectionKind::Orthographic => Projection::Orthographic {
-                height_mm: positive("render.camera.height_mm", self.height_mm)? as f32,
-            },
+            ProjectionKind::Orthographic => {
+                if self.fov_deg.is_some() {
+                    return Err(unused("render.camera.fov_deg", "orthographic"));
+                }
+                let height = self.height_mm.unwrap_or(12.0);
+                if !(height.is_finite() && (1e-3..=1e4).contains(&height)) {
+                    return Err(Error::parameter(
+                        "render.camera.height_mm",
+                        format!("must be in [0.001, 10000] mm, got {}", shown(height)),
+                    ));
+                }
+                Projection::Orthographic {
+                    height_mm: height as f32,
+                }
+            }
         };
         Ok(Camera {
             eye,

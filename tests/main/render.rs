@@ -613,12 +613,18 @@ fn render_error(extra: &str) -> String {
 #[test]
 fn bad_camera_and_light_parameters_are_named() {
     for (text, expected) in [
-        ("[render.camera]\nfov_deg = 0\n", "render.camera.fov_deg must be in (0, 170), got 0"),
+        ("[render.camera]\nfov_deg = 0\n", "render.camera.fov_deg must be in [0.01, 170), got 0"),
         ("[render.camera]\nfov_deg = nan\n", "render.camera.fov_deg"),
+        // Values that rendered only background, and keys without effect.
+        ("[render.camera]\nfov_deg = 1e-300\n", "render.camera.fov_deg must be in [0.01, 170), got 1e-300"),
+        ("[render.camera]\nprojection = \"orthographic\"\nheight_mm = 1e300\n", "render.camera.height_mm must be in [0.001, 10000] mm, got 1e300"),
+        ("[render.camera]\nprojection = \"orthographic\"\nheight_mm = 1e-300\n", "render.camera.height_mm must be in [0.001, 10000] mm"),
+        ("[render.camera]\nheight_mm = 5\n", "render.camera.height_mm has no effect with projection = \"perspective\""),
+        ("[render.camera]\nprojection = \"orthographic\"\nfov_deg = 30\n", "render.camera.fov_deg has no effect with projection = \"orthographic\""),
         ("[render.camera]\neye_mm = [0, 0, 5]\ntarget_mm = [0, 0, 5]\n", "render.camera.target_mm must differ"),
         ("[render.camera]\neye_mm = [0, 0, 9]\ntarget_mm = [0, 0, 0]\nup = [0, 0, 1]\n", "render.camera.up must not be parallel"),
         ("[render.camera]\nprojection = \"fisheye\"\n", "render.camera.projection must be \"perspective\" or \"orthographic\", got \"fisheye\""),
-        ("[render.camera]\nprojection = \"orthographic\"\nheight_mm = -2\n", "render.camera.height_mm must be > 0"),
+        ("[render.camera]\nprojection = \"orthographic\"\nheight_mm = -2\n", "render.camera.height_mm must be in [0.001, 10000] mm"),
         ("[[render.lights]]\nkind = \"point\"\nintensity = 1\n", "render.lights[0].position_mm is required"),
         ("[[render.lights]]\nkind = \"directional\"\ndirection = [0, 0, 0]\nintensity = 1\n", "render.lights[0].direction must not be zero"),
         ("[[render.lights]]\nkind = \"directional\"\ndirection = [0, 0, -1]\nintensity = -1\n", "render.lights[0].intensity must be ≥ 0, got -1"),
