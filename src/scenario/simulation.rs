@@ -167,6 +167,12 @@ pub struct SolverSection {
     pub max_inverted_fraction: f64,
 }
 
+/// Largest mass-proportional damping `time.damping_alpha_per_s` (1/s).
+pub const MAX_DAMPING_ALPHA_PER_S: f64 = 1e6;
+
+/// Largest stiffness-proportional damping `time.damping_beta_s` (s).
+pub const MAX_DAMPING_BETA_S: f64 = 1e3;
+
 impl Default for SolverSection {
     fn default() -> Self {
         SolverSection {
@@ -534,6 +540,19 @@ impl TimeSection {
             Integrator::ImplicitEuler => {
                 let a = super::non_negative("time.damping_alpha_per_s", self.damping_alpha_per_s)?;
                 let b = super::non_negative("time.damping_beta_s", self.damping_beta_s)?;
+                // Beyond these the damping swamps the elastic and inertial
+                // terms by many orders (the solve ends where it began).
+                for (key, v, most) in [
+                    ("time.damping_alpha_per_s", a, MAX_DAMPING_ALPHA_PER_S),
+                    ("time.damping_beta_s", b, MAX_DAMPING_BETA_S),
+                ] {
+                    if v > most {
+                        return Err(Error::parameter(
+                            key,
+                            format!("must be at most {most:e}, got {}", shown(v)),
+                        ));
+                    }
+                }
                 Ok(Some(Dynamics {
                     dt: frame_dt / substeps as f64,
                     alpha: a,

@@ -439,6 +439,15 @@ fn keys_without_effect_are_errors() {
              [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]\n",
             "render.environment.preset has no effect together with render.environment.coefficients",
         ),
+        // Damping that swamps everything else (1e308 once ran to the end).
+        (
+            "[time]\nintegrator = \"implicit-euler\"\ndamping_alpha_per_s = 1e308\n",
+            "time.damping_alpha_per_s must be at most 1e6, got 1e308",
+        ),
+        (
+            "[time]\nintegrator = \"implicit-euler\"\ndamping_beta_s = 1e9\n",
+            "time.damping_beta_s must be at most 1e3, got 1e9",
+        ),
     ] {
         let o = run_scenario(dir.path(), &format!("{mesh}{toml}"), &out);
         let stderr = text(&o.stderr);
