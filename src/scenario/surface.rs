@@ -64,7 +64,7 @@ impl SurfaceSetup {
                 "is missing: this scenario simulates the FEM patch (use Setup)",
             ));
         };
-        refuse_fem_sections(scenario)?;
+        refuse_fem_sections(scenario, path)?;
         let name = path
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
@@ -164,16 +164,29 @@ impl SurfaceSetup {
 }
 
 /// The FEM's sections mean nothing beside `[surface]` (its animation
-/// replaces the simulation): each one that differs from its default is an
+/// replaces the simulation): each one the file at `path` holds, even with
+/// its defaults, or that differs from its default (through `--set`), is an
 /// error naming it.
-fn refuse_fem_sections(s: &Scenario) -> Result<()> {
+fn refuse_fem_sections(s: &Scenario, path: &Path) -> Result<()> {
+    let in_file: Vec<String> = std::fs::read_to_string(path)
+        .ok()
+        .and_then(|text| text.parse::<toml::Table>().ok())
+        .map(|t| t.keys().cloned().collect())
+        .unwrap_or_default();
+    let written = |key: &str| in_file.iter().any(|k| k == key);
     let given = [
-        ("mesh", s.mesh != Default::default()),
-        ("material", !s.material.is_empty()),
-        ("boundary", s.boundary != Default::default()),
+        ("mesh", written("mesh") || s.mesh != Default::default()),
+        ("material", written("material") || !s.material.is_empty()),
+        (
+            "boundary",
+            written("boundary") || s.boundary != Default::default(),
+        ),
         ("probe", s.probe.is_some()),
-        ("solver", s.solver != Default::default()),
-        ("time", s.time != Default::default()),
+        (
+            "solver",
+            written("solver") || s.solver != Default::default(),
+        ),
+        ("time", written("time") || s.time != Default::default()),
         ("output.mesh_tetgen", s.output.mesh_tetgen),
         ("output.frames_vtkhdf", s.output.frames_vtkhdf),
         ("output.surface_glb", s.output.surface_glb),

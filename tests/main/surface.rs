@@ -576,6 +576,19 @@ fn surface_scenarios_refuse_fem_sections_and_bad_keys() {
     assert!(e.contains("surface.units"), "{e}");
     let e = load("units = \"mm\"\n[probe]\nshape = \"sphere\"\nradius_mm = 1.0\npath_mm = [[0.0, 0.0, 0.0, 1.0]]\n").unwrap_err();
     assert!(e.contains("probe") && e.contains("[surface]"), "{e}");
+    // FEM sections are refused even when they hold only their defaults.
+    for (section, text) in [
+        ("time", "[time]\nframe_rate_hz = 60.0\n"),
+        ("solver", "[solver]\nlinear = \"two-level\"\n"),
+        ("boundary", "[boundary]\nbottom = \"fixed\"\n"),
+        ("time", "[time]\n"),
+    ] {
+        let e = load(&format!("units = \"mm\"\n{text}")).unwrap_err();
+        assert!(
+            e.starts_with(&format!("{section} has no meaning beside [surface]")),
+            "{section}: {e}"
+        );
+    }
     let e = load("units = \"mm\"\nuv_layout = \"tiles\"\n").unwrap_err();
     assert!(e.contains("surface.uv_layout"), "{e}");
     let e = load("units = \"mm\"\nframe_rate_hz = -3\n").unwrap_err();
