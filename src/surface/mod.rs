@@ -115,6 +115,11 @@ impl SplitSurface {
     }
 }
 
+/// Largest coordinate of a surface's vertex (mm): a kilometre. Beyond it
+/// areas and normals overflow (a coordinate of 10³⁰⁸ made every triangle
+/// degenerate).
+pub const MAX_COORDINATE_MM: f64 = 1e6;
+
 impl AnimatedSurface {
     /// Checks a reader's surface (finite positions and UVs, indices in
     /// range, at least one triangle with area), scales it to millimetres
@@ -158,14 +163,20 @@ impl AnimatedSurface {
                     frame.len()
                 )));
             }
-            if let Some(k) = frame.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+            let fits = |c: f64| c.is_finite() && (c * mm_per_unit).abs() <= MAX_COORDINATE_MM;
+            if let Some(k) = frame.iter().position(|p| !p.iter().all(|&c| fits(c))) {
                 let when = if f == 0 {
                     "at rest".to_string()
                 } else {
                     format!("in frame {}", f - 1)
                 };
+                let what = if frame[k].iter().all(|c| c.is_finite()) {
+                    format!("a position beyond ±{MAX_COORDINATE_MM:e} mm")
+                } else {
+                    "a non-finite position".to_string()
+                };
                 return Err(bad(format!(
-                    "{} has a non-finite position {when}: {:?}",
+                    "{} has {what} {when}: {:?}",
                     split.label(k),
                     frame[k].as_slice()
                 )));

@@ -421,6 +421,17 @@ fn bad_obj_input_names_file_and_element() {
         e.contains("nan.obj") && e.contains("non-finite position"),
         "{e}"
     );
+    // A coordinate of 1e308 (once counted as degenerate triangles).
+    let path = write(
+        &dir,
+        "huge.obj",
+        &format!("{QUAD}v 1e308 0 0\nvt 0.5 0.5\nf 1/1 2/2 3/3\nf 1/1 3/3 5/5\n"),
+    );
+    let e = read_error(&path, Some(1.0));
+    assert!(
+        e.contains("huge.obj") && e.contains("a position beyond ±1e6 mm"),
+        "{e}"
+    );
     // Unparsable number: the line is named.
     let path = write(
         &dir,
