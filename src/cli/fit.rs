@@ -160,6 +160,10 @@ fn fit_on_gpu(ctx: &skinpatch::gpu::Context) -> bool {
     ctx.info.device_type != wgpu::DeviceType::Cpu || skinpatch::gpu::gpu_required()
 }
 
+/// Smallest side (texels) of a map `fit` reads: below it a map has too
+/// few normals for a histogram.
+const MIN_FIT_SIDE: usize = 8;
+
 /// Reads the samples file at `path`, fits its map samples (`progress`
 /// gets the sample, the count and the fraction of its search done), fits
 /// the kernel model to all points and writes it where the file says.
@@ -186,6 +190,17 @@ pub fn fit(
             .as_ref()
             .ok_or_else(|| Error::parameter("neutral", "is required to fit [[sample]] maps"))?;
         let neutral = read_map(&base.join(neutral_path), &defaults)?;
+        if neutral.width.min(neutral.height) < MIN_FIT_SIDE {
+            return Err(Error::parameter(
+                "neutral",
+                format!(
+                    "{} is {} × {} texels; a normal histogram needs at least {MIN_FIT_SIDE} a side",
+                    neutral_path.display(),
+                    neutral.width,
+                    neutral.height
+                ),
+            ));
+        }
         let ctx = skinpatch::gpu::acquire()?.filter(fit_on_gpu);
         device = Some(match &ctx {
             Some(c) => format!("GPU: {}", c.describe()),
@@ -205,7 +220,8 @@ pub fn fit(
             })?);
         }
     }
-    for p in &samples.point {
+    for (k, p) in samples.point.iter().enumerate() {
+        check_point(k, p)?;
         rows.push(FitRow {
             source: "point".into(),
             r: p.r,
@@ -238,6 +254,34 @@ pub fn fit(
         written,
         device,
     })
+}
+
+/// A `[[point]]` fitted elsewhere: r in [0.1, 10], α in the model's
+/// range [−2, 1], σ > 0.
+fn check_point(k: usize, p: &skinpatch::scenario::FitPoint) -> Result<()> {
+    let checks = [
+        ("r", p.r, p.r >= 0.1 && p.r <= 10.0, "[0.1, 10]"),
+        (
+            "alpha",
+            p.alpha,
+            p.alpha >= -2.0 && p.alpha <= 1.0,
+            "[-2, 1]",
+        ),
+        ("sigma_um", p.sigma_um, p.sigma_um > 0.0, "> 0"),
+    ];
+    for (key, v, ok, range) in checks {
+        if !(v.is_finite() && ok) {
+            return Err(Error::parameter(
+                format!("point[{k}].{key}"),
+                format!(
+                    "must be {}{range}, got {}",
+                    if range.starts_with('[') { "in " } else { "" },
+                    skinpatch::error::shown(v)
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// The kernel file must not be the samples file or one of its maps.

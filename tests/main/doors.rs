@@ -323,3 +323,43 @@ fn overrides_that_would_be_dropped_are_refused() {
         assert!(!std::path::Path::new(out).exists());
     }
 }
+
+/// `fit` refuses points outside the model's ranges and maps too small for
+/// a histogram, naming the key.
+#[test]
+fn fit_refuses_points_out_of_range_and_tiny_maps() {
+    use skinpatch::micro::io::write_png16;
+    use skinpatch::micro::{DisplacementMap, Edge};
+    let dir = tempfile::tempdir().unwrap();
+    let points = "[[point]]\nr = 0.8\nalpha = -1.0\nsigma_um = 8.0\n\
+                  [[point]]\nr = 1.2\nalpha = 0.5\nsigma_um = 18.0\n";
+    let tiny = DisplacementMap::from_fn(1, 1, 5.0, Edge::Wrap, |_, _| 1.0);
+    write_png16(&dir.path().join("tiny.png"), &tiny).unwrap();
+    for (extra, wanted) in [
+        (
+            "[[point]]\nr = 1.1\nalpha = 0.2\nsigma_um = -3.0\n",
+            "point[2].sigma_um must be > 0, got -3",
+        ),
+        (
+            "[[point]]\nr = 1.1\nalpha = 5.0\nsigma_um = 3.0\n",
+            "point[2].alpha must be in [-2, 1], got 5",
+        ),
+        (
+            "neutral = \"tiny.png\"\n[[sample]]\nmap = \"tiny.png\"\nr = 1.0\naxis = \"u\"\n",
+            "neutral tiny.png is 1 × 1 texels",
+        ),
+    ] {
+        // Top-level keys first, then the tables.
+        let text = if extra.starts_with("neutral") {
+            format!("{extra}{points}")
+        } else {
+            format!("{points}{extra}")
+        };
+        let file = dir.path().join("samples.toml");
+        std::fs::write(&file, text).unwrap();
+        let o = skinpatch(&["fit", file.to_str().unwrap()]);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{e}");
+        assert!(e.contains(wanted), "{e}");
+    }
+}
