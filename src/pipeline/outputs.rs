@@ -84,7 +84,8 @@ impl<'a, R: MetricsRow + Copy> FrameOutputs<'a, R> {
             }
         }
         let dir = spec.outputs.dir.as_path();
-        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+        // The renderer first: a run refused for lack of a GPU creates no
+        // folder.
         let renderer = match spec.outputs.render.as_ref() {
             Some(r) => Some(RenderEngine::new(
                 dir,
@@ -95,6 +96,7 @@ impl<'a, R: MetricsRow + Copy> FrameOutputs<'a, R> {
             )?),
             None => None,
         };
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
         // Then the previous run's files go, so the folder holds one run.
         clear_previous_run(dir)?;
         for (folder, wanted) in [

@@ -62,7 +62,8 @@ pub fn roughness_curve(setup: &RenderSetup, micro: Option<&MicroSetup>) -> [f32;
 }
 
 impl RenderEngine {
-    /// Builds the renderer; creates `render/<mode>/` folders under `dir`.
+    /// Builds the renderer, then creates `render/<mode>/` folders under
+    /// `dir`.
     pub(super) fn new(
         dir: &Path,
         setup: &RenderSetup,
@@ -77,21 +78,6 @@ impl RenderEngine {
                     .into(),
             ));
         }
-        let mut folders = Vec::new();
-        for &mode in &setup.modes {
-            let folder = dir.join("render").join(mode.name());
-            std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
-            probe_writable(&folder)?;
-            folders.push((mode, folder));
-        }
-        let difference = if setup.difference {
-            let folder = dir.join("render").join("difference");
-            std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
-            probe_writable(&folder)?;
-            Some(folder)
-        } else {
-            None
-        };
         let albedo = Albedo::from_source(&setup.albedo, setup.texture_px, albedo_extent_mm)?;
         let neutral_map = micro.map(|m| m.neutral.whole("[render]")).transpose()?;
         let neutral_normals = neutral_map.map(crate::micro::normals::normal_map);
@@ -124,6 +110,23 @@ impl RenderEngine {
                 let renderer = Renderer::new(&ctx, setup, &albedo, neutral, None, curve, texel_mm)?;
                 (renderer, Some(ctx))
             }
+        };
+        // The folders only once the renderer exists: a run refused for
+        // lack of a GPU leaves none behind.
+        let mut folders = Vec::new();
+        for &mode in &setup.modes {
+            let folder = dir.join("render").join(mode.name());
+            std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
+            probe_writable(&folder)?;
+            folders.push((mode, folder));
+        }
+        let difference = if setup.difference {
+            let folder = dir.join("render").join("difference");
+            std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
+            probe_writable(&folder)?;
+            Some(folder)
+        } else {
+            None
         };
         log::info!(
             "rendering {} × {} px (×{} supersampling), modes {:?}",

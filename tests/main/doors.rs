@@ -363,3 +363,27 @@ fn fit_refuses_points_out_of_range_and_tiny_maps() {
         assert!(e.contains(wanted), "{e}");
     }
 }
+
+/// A render run refused for lack of a GPU (the Vulkan driver hidden)
+/// leaves no folder behind, not empty `render/<mode>` folders.
+#[test]
+fn a_render_refused_for_lack_of_a_gpu_leaves_no_folders() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_skinpatch"))
+        .current_dir(crate::common::root())
+        .args(["run", "-q", "tests/fixtures/render_small.toml", "-o"])
+        .arg(&out)
+        .env("VK_ICD_FILENAMES", "/nonexistent/icd.json")
+        .env("WGPU_BACKEND", "vulkan")
+        .env_remove("SKINPATCH_REQUIRE_GPU")
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    if o.status.success() {
+        // Some adapter was found without the Vulkan driver: nothing to check.
+        return;
+    }
+    assert!(e.contains("[render] needs a GPU adapter"), "{e}");
+    assert!(!out.exists(), "{e}");
+}
