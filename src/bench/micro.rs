@@ -155,7 +155,6 @@ fn check_sizes(sizes: &[usize]) -> Result<()> {
     if sizes.is_empty() {
         return Err(Error::parameter("--sizes", "names no map side"));
     }
-    let available = crate::memory::available();
     for &size in sizes {
         if size == 0 || size > MAX_BENCH_SIDE {
             return Err(Error::parameter(
@@ -164,13 +163,12 @@ fn check_sizes(sizes: &[usize]) -> Result<()> {
             ));
         }
         let needed = (size as u64).pow(2) * BYTES_PER_TEXEL;
-        if let Some(have) = available.filter(|&have| needed > have) {
+        if let Some((needed, have)) = crate::memory::shortfall_gb(needed) {
             return Err(Error::parameter(
                 "--sizes",
                 format!(
-                    "a map of {size}² texels needs about {:.1} GB, {:.1} GB are available",
-                    needed as f64 / 1e9,
-                    have as f64 / 1e9
+                    "a map of {size}² texels needs about {needed:.1} GB, {have:.1} GB are \
+                     available"
                 ),
             ));
         }

@@ -11,7 +11,8 @@
 //!   closest probe point and slide freely or against a Coulomb slip load of
 //!   magnitude `μ·F_n` along the trial force `λ_t − c·s`, which opposes
 //!   their slip at a solution (Alart & Curnier 1991; its derivative is in
-//!   the Newton matrix, see [`super::integrate::SlipLoad`]); a sliding node's plane is re-projected at every Newton
+//!   the Newton matrix, see [`super::integrate::SlipLoad`]); a sliding
+//!   node's plane is re-projected at every Newton
 //!   iteration with the probe's curvature times its normal reaction (and,
 //!   under friction, the turning of that reaction) in the matrix, so Newton
 //!   converges quadratically on the curved surface;

@@ -104,7 +104,8 @@ pub struct CgWorkspace {
 }
 
 /// A non-symmetric coupling of one node's equations to its own reaction:
-/// the node's row of the operator gains `−G (K S x)_node`. A Coulomb
+/// the node's row of the operator gains `−G δλ`, the reaction's change
+/// `δλ = (K S x)_node − own (S x)_node`. A Coulomb
 /// friction force that follows the node's reaction `λ` changes by `G δλ`
 /// when the positions move, and `δλ = (K δx)_node` (see
 /// [`super::integrate::SlipLoad`]); with it the Newton matrix is the full
@@ -191,7 +192,7 @@ fn apply_operator(op: Operator, constrained: &[usize], x: &[f64], sx: &mut [f64]
     sx.copy_from_slice(x);
     filter_nodes(filters, constrained, sx);
     asm.multiply(sx, y);
-    let reactions: Vec<Vector3<f64>> = couplings
+    let changes: Vec<Vector3<f64>> = couplings
         .iter()
         .map(|c| {
             let k = 3 * c.node;
@@ -208,10 +209,10 @@ fn apply_operator(op: Operator, constrained: &[usize], x: &[f64], sx: &mut [f64]
         let w = f.apply(&Vector3::new(y[k], y[k + 1], y[k + 2])) + (xv - f.apply(&xv));
         y[k..k + 3].copy_from_slice(w.as_slice());
     }
-    for (c, reaction) in couplings.iter().zip(reactions) {
+    for (c, change) in couplings.iter().zip(changes) {
         let k = 3 * c.node;
-        for (yk, gk) in y[k..k + 3].iter_mut().zip(reaction.iter()) {
-            *yk -= gk;
+        for (yk, ck) in y[k..k + 3].iter_mut().zip(change.iter()) {
+            *yk -= ck;
         }
     }
 }

@@ -390,17 +390,15 @@ pub fn read_exr(path: &Path, defaults: &MapDefaults) -> Result<DisplacementMap> 
 /// (the decoded values and the map), against the memory available.
 fn check_decoded_size(path: &Path, width: usize, height: usize, decoded: u64) -> Result<()> {
     let needed = decoded.saturating_add(8u64.saturating_mul(width as u64 * height as u64));
-    match crate::memory::available() {
-        Some(have) if needed > have => Err(Error::malformed(
+    match crate::memory::shortfall_gb(needed) {
+        Some((needed, have)) => Err(Error::malformed(
             path,
             format!(
-                "its header claims {width} × {height} texels, which need about {:.1} GB to \
-                 read; {:.1} GB are available",
-                needed as f64 / 1e9,
-                have as f64 / 1e9
+                "its header claims {width} × {height} texels, which need about {needed:.1} GB \
+                 to read; {have:.1} GB are available"
             ),
         )),
-        _ => Ok(()),
+        None => Ok(()),
     }
 }
 

@@ -110,7 +110,8 @@ impl TiledMap {
         }
         if index.width.max(index.height) > MAX_SIDE || index.tile > MAX_TILE {
             return Err(bad(format!(
-                "{} × {} texels in tiles of {}: a side may have at most {MAX_SIDE} texels                  (10 m at 10 µm), a tile at most {MAX_TILE}",
+                "{} × {} texels in tiles of {}: a side may have at most {MAX_SIDE} texels \
+                 (10 m at 10 µm), a tile at most {MAX_TILE}",
                 index.width, index.height, index.tile
             )));
         }
@@ -243,20 +244,18 @@ impl TiledMap {
     /// has the map's metadata with clamped edges (a window does not wrap
     /// onto itself).
     pub fn read_window(&self, origin: [isize; 2], size: [usize; 2]) -> Result<DisplacementMap> {
-        let texels = size[0] as u64 * size[1] as u64;
-        if let Some(have) = crate::memory::available() {
-            if texels.saturating_mul(4) > have {
-                return Err(Error::malformed(
-                    &self.dir.join(INDEX_FILE),
-                    format!(
-                        "{} × {} texels need {:.1} GB in memory, {:.1} GB are available: read                          the map by tiles",
-                        size[0],
-                        size[1],
-                        texels as f64 * 4.0 / 1e9,
-                        have as f64 / 1e9
-                    ),
-                ));
-            }
+        let bytes = (size[0] as u64)
+            .saturating_mul(size[1] as u64)
+            .saturating_mul(4);
+        if let Some((needed, have)) = crate::memory::shortfall_gb(bytes) {
+            return Err(Error::malformed(
+                &self.dir.join(INDEX_FILE),
+                format!(
+                    "{} × {} texels need {needed:.1} GB in memory, {have:.1} GB are available: \
+                     read the map by tiles",
+                    size[0], size[1]
+                ),
+            ));
         }
         let source = |x: isize, n: usize| -> usize {
             match self.edge {
