@@ -21,8 +21,9 @@ pub struct MicrostructureSection {
     /// Texel size (µm) of a map file without skinpatch metadata. Default:
     /// the patch width divided by the map width.
     pub texel_um: Option<f64>,
-    /// Micrometres per height unit of a map file without metadata. Default 1.
-    pub height_unit_um: f64,
+    /// Micrometres per height unit of a map file without metadata (a map
+    /// file only). Default 1.
+    pub height_unit_um: Option<f64>,
     /// Edge handling of a map file without metadata: `wrap` or `clamp`. Default `wrap`.
     pub edge: Edge,
     /// The procedural generator's parameters (used when `map` is not set).
@@ -67,7 +68,7 @@ impl Default for MicrostructureSection {
         MicrostructureSection {
             map: None,
             texel_um: None,
-            height_unit_um: 1.0,
+            height_unit_um: None,
             edge: Edge::Wrap,
             procedural: ProceduralSection::default(),
             synthesis: None,
@@ -262,7 +263,7 @@ impl MicrostructureSection {
                 ),
             ));
         }
-        let unit = self.height_unit_um;
+        let unit = self.height_unit_um.unwrap_or(1.0);
         if !(unit.is_finite() && unit > 0.0) {
             return Err(Error::parameter(
                 "microstructure.height_unit_um",
@@ -296,7 +297,7 @@ impl MicrostructureSection {
     /// The neutral map: synthesized (and cached), a tiled or whole map
     /// file, or generated.
     fn neutral_map(&self, base: &Path, patch_width_mm: f64, cache: &Path) -> Result<NeutralMap> {
-        let (edge, unit) = (self.edge, self.height_unit_um);
+        let (edge, unit) = (self.edge, self.height_unit_um.unwrap_or(1.0));
         Ok(match &self.map {
             _ if self.synthesis.is_some() => {
                 if self.map.is_some() {
@@ -356,6 +357,16 @@ impl MicrostructureSection {
                             "has no effect without microstructure.map (got {}): a generated \
                              map's texel is the patch width over procedural.size_px",
                             crate::error::shown(t)
+                        ),
+                    ));
+                }
+                if let Some(u) = self.height_unit_um {
+                    return Err(Error::parameter(
+                        "microstructure.height_unit_um",
+                        format!(
+                            "has no effect without microstructure.map (got {}): a generated \
+                             map's heights are in µm",
+                            crate::error::shown(u)
                         ),
                     ));
                 }

@@ -424,6 +424,10 @@ fn keys_without_effect_are_errors() {
             "microstructure.texel_um has no effect without microstructure.map (got -5)",
         ),
         (
+            "[microstructure]\nheight_unit_um = 1.0\n[microstructure.procedural]\nsize_px = 32\n",
+            "microstructure.height_unit_um has no effect without microstructure.map (got 1)",
+        ),
+        (
             "[render]\nmodes = [\"none\"]\n[[render.lights]]\nkind = \"point\"\nposition_mm = [0.0, 0.0, 50.0]\nintensity = 1.0\n\
              direction = [0.0, 0.0, -1.0]\n",
             "render.lights[0].direction has no effect on a point light",
