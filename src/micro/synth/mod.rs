@@ -351,7 +351,7 @@ pub fn synthesize(
     }
     check_memory(
         estimated_bytes(width * height, ew * eh, params),
-        available_memory(),
+        crate::memory::available(),
     )?;
 
     // 1. Heights in µm at the output texel.
@@ -673,11 +673,6 @@ pub fn estimated_bytes(output_texels: usize, exemplar_texels: usize, params: &Sy
         None => n,
     };
     output_texels as u64 * 48 + exemplar_texels as u64 * (48 + 8 * dims as u64)
-}
-
-/// The memory the system has available, if known (see [`crate::memory`]).
-pub fn available_memory() -> Option<u64> {
-    crate::memory::available()
 }
 
 /// An error when `needed` bytes exceed what is `available`.
