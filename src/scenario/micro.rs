@@ -318,6 +318,12 @@ impl MicrostructureSection {
                         "has no effect with [microstructure.synthesis] (its texel_um sets the texel)",
                     ));
                 }
+                if self.height_unit_um.is_some() {
+                    return Err(Error::parameter(
+                        "microstructure.height_unit_um",
+                        "has no effect with [microstructure.synthesis] (its heights are in µm)",
+                    ));
+                }
                 let section = self.synthesis.as_ref().expect("checked above");
                 NeutralMap::Whole(section.cached_map(base, cache, "microstructure.synthesis")?)
             }

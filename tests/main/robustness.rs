@@ -428,6 +428,12 @@ fn keys_without_effect_are_errors() {
             "microstructure.height_unit_um has no effect without microstructure.map (got 1)",
         ),
         (
+            "[microstructure]\nheight_unit_um = 2.0\n[microstructure.synthesis]\nsize_px = 128\nlevels = 2\n\
+             [microstructure.synthesis.exemplar_generated]\nextent_mm = 0.64\n\
+             [microstructure.synthesis.exemplar_generated.skin]\nsize_px = 128\n",
+            "microstructure.height_unit_um has no effect with [microstructure.synthesis]",
+        ),
+        (
             "[render]\nmodes = [\"none\"]\n[[render.lights]]\nkind = \"point\"\nposition_mm = [0.0, 0.0, 50.0]\nintensity = 1.0\n\
              direction = [0.0, 0.0, -1.0]\n",
             "render.lights[0].direction has no effect on a point light",
