@@ -72,10 +72,11 @@ pub struct ContactState {
     /// projection.
     reference: std::collections::BTreeMap<usize, Vec3>,
     /// Every node's position at the end of the previous solve (before the
-    /// first, at its start): slip references are carried from here, and the
-    /// candidates start each solve here even when the caller predicted
-    /// another start (a predicted surface node would touch where it never
-    /// was).
+    /// first, at its start): slip references are carried from here. The
+    /// solve itself starts where the caller put the nodes (a predicted
+    /// start moves the surface on with the rest; a surface held back where
+    /// it was solved would leave a start residual of several times the
+    /// load).
     solved: Vec<Vec3>,
     /// Per sliding node the constraint plane in use (point, normal): the
     /// tangent plane where the node is, taken at every iteration (with the
@@ -235,9 +236,6 @@ pub fn solve_with_contact(
     if state.solved.len() != sim.num_nodes() {
         state.solved = sim.state.x.clone();
     }
-    for &v in &state.candidates {
-        sim.state.x[v] = state.solved[v];
-    }
     // A new solve: every active node's slip reference rides along with the
     // probe from where the node is; sticking nodes are held there, sliding
     // ones keep last solve's friction as their first guess.
@@ -383,9 +381,10 @@ fn update_active_set(
     let mut changed = false;
     let mut counts = [0usize; 4];
     // Before the first step the positions and reactions are the last
-    // solve's, not yet moved with the probe: judging the carried-over nodes
-    // on them would release every node the probe moves away from. They keep
-    // the states set up for the solve; only new contacts are found.
+    // solve's (or a prediction from it), not an equilibrium with the moved
+    // probe: judging the carried-over nodes on them would release every
+    // node the probe moves away from. They keep the states set up for the
+    // solve; only new contacts are found.
     let forces: Vec<(usize, Vec3)> = if iteration == 0 {
         Vec::new()
     } else {

@@ -161,14 +161,19 @@ impl Simulation {
             self.work.r_free.clone_from(&self.work.rhs);
             self.assemble_tangent();
             let forcing = self.forcing(norm / scale);
-            let (mut iterations, solved) = self.linear_solve(forcing);
+            // The first step may move constrained nodes (a predicted start,
+            // a probe that moved): its right-hand side then carries that
+            // move's `K·d`, often several times the load, and the forcing
+            // alone would leave a remainder of the load's size.
+            let remainder = (it == 0).then_some(MAX_FIRST_REMAINDER * scale);
+            let (mut iterations, solved) = self.linear_solve(forcing, remainder);
             if !solved && self.work.tangent_kind == TangentKind::Exact {
                 log::debug!(
                     "{context}: Newton {it}: exact tangent not positive definite; projecting"
                 );
                 self.work.tangent_kind = TangentKind::Projected;
                 self.assemble_tangent();
-                let (more, _) = self.linear_solve(forcing);
+                let (more, _) = self.linear_solve(forcing, remainder);
                 iterations += more;
             }
             stats.cg_iterations += iterations;
@@ -234,9 +239,22 @@ impl Simulation {
     /// linear iterations (1 for a direct solve) and whether the solve
     /// succeeded: a factorisation or a conjugate-gradient run that met no
     /// non-positive curvature and reached its tolerance.
-    fn linear_solve(&mut self, forcing: f64) -> (usize, bool) {
+    /// `remainder`, when given, bounds the linear residual left (N): the
+    /// tolerance is tightened when the right-hand side is large.
+    fn linear_solve(&mut self, forcing: f64, remainder: Option<f64>) -> (usize, bool) {
         let start = std::time::Instant::now();
         self.step_rhs();
+        let forcing = match remainder {
+            Some(bound) => {
+                let rhs = self.work.rhs.iter().map(|v| v * v).sum::<f64>().sqrt();
+                if rhs * forcing > bound {
+                    (bound / rhs).max(self.settings.cg.rel_tol)
+                } else {
+                    forcing
+                }
+            }
+            None => forcing,
+        };
         let outcome = self.linear_solve_untimed(forcing);
         self.timings.linear_s += start.elapsed().as_secs_f64();
         outcome
@@ -404,6 +422,10 @@ impl Simulation {
         (norm, scale, false)
     }
 }
+
+/// Largest linear remainder a solve's first step leaves, relative to the
+/// load scale.
+const MAX_FIRST_REMAINDER: f64 = 1e-2;
 
 fn not_converged(context: &str, iterations: usize, rel: f64) -> Error {
     Error::Solver(format!(

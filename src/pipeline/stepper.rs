@@ -9,7 +9,7 @@ use std::time::Instant;
 use crate::error::{Error, Result};
 use crate::export::FrameMetrics;
 use crate::fem::boundary::{rigid_motion_pins, Pin};
-use crate::fem::contact::{solve_with_contact, ContactState};
+use crate::fem::contact::{solve_with_contact, ContactState, ProbePose};
 use crate::fem::integrate::{Dynamics, Simulation};
 use crate::fem::load_steps::{load_steps, press_in, MAX_PROBE_STEP};
 use crate::fem::solve::Filter;
@@ -50,8 +50,9 @@ pub struct Stepper {
     no_loads: Vec<Vec3>,
     frame: usize,
     t_prev: f64,
-    // The last solved state and its time.
-    last_solved: Option<(Vec<Vec3>, f64)>,
+    // The last solved state, and the probe of the last solve.
+    last_solved: Option<Solved>,
+    last_pose: Option<ProbePose>,
     inverted_before: usize,
     split_before: bool,
     // Nodes held so that no rigid motion is free (quasi-static runs).
@@ -93,6 +94,7 @@ impl Stepper {
             frame: 0,
             t_prev: 0.0,
             last_solved: None,
+            last_pose: None,
             inverted_before: 0,
             split_before: false,
             pins,
@@ -181,27 +183,40 @@ impl Stepper {
                 sim.begin_step();
             }
             // Start from the last state moved on by the last increment
-            // (constant velocity), scaled to this step's length (the contact
-            // solve starts its candidates where they were solved).
+            // (constant velocity), scaled to this step's length, unless the
+            // probe turns or stops here.
+            let pose = probe.map(|p| p.pose(ts).lifted(lift * (1.0 - k as f64 / substeps as f64)));
             if s.predict {
                 let solved = sim.positions().to_vec();
                 let t_solved = t_prev + (t - t_prev) * (k - 1) as f64 / substeps as f64;
-                if let Some((before, t_before)) = &self.last_solved {
-                    if t_solved > *t_before {
-                        let ratio = (ts - t_solved) / (t_solved - t_before);
-                        sim.predict(before, ratio.min(MAX_PREDICTION_RATIO));
+                if let Some(last) = &self.last_solved {
+                    if t_solved > last.t
+                        && probe_keeps_going(
+                            last,
+                            self.last_pose.as_ref(),
+                            pose.as_ref(),
+                            t_solved,
+                            ts,
+                            probe.map_or(1.0, |p| p.radius_mm()),
+                        )
+                    {
+                        let ratio = (ts - t_solved) / (t_solved - last.t);
+                        sim.predict(&last.x, ratio.min(MAX_PREDICTION_RATIO));
                     }
                 }
-                self.last_solved = Some((solved, t_solved));
+                self.last_solved = Some(Solved {
+                    x: solved,
+                    t: t_solved,
+                    pose: self.last_pose,
+                });
             }
-            match probe {
-                Some(probe) => {
+            self.last_pose = pose;
+            match (probe, &pose) {
+                (Some(probe), Some(pose)) => {
                     let r = solve_with_contact(
                         sim,
                         (&filters, &targets, &self.no_loads),
-                        &probe
-                            .pose(ts)
-                            .lifted(lift * (1.0 - k as f64 / substeps as f64)),
+                        pose,
                         probe.mode,
                         &mut self.contact,
                         &context,
@@ -214,7 +229,7 @@ impl Stepper {
                     m.linear_iterations += r.cg_iterations;
                     m.rel_residual = r.rel_residual;
                 }
-                None => {
+                _ => {
                     sim.set_constraints(filters, targets);
                     let st = sim.solve_static(&context)?;
                     m.newton_iterations += st.iterations;
@@ -245,6 +260,46 @@ impl Stepper {
         );
         Ok(m)
     }
+}
+
+/// A solved state kept for the next solve's predicted start.
+#[derive(Clone)]
+struct Solved {
+    x: Vec<Vec3>,
+    t: f64,
+    /// The probe it was solved with.
+    pose: Option<ProbePose>,
+}
+
+/// Largest change of the probe's velocity between two steps, relative to
+/// its speed, for which the next start is predicted.
+const MAX_PROBE_TURN: f64 = 0.1;
+
+/// Whether the probe moves on from `solved` (the last solve's probe, at
+/// `t_solved`) to `next` (at `t_next`) at nearly the velocity it had from
+/// `before` to `solved`. Where it turns or stops — the end of a press — the
+/// skin's velocity is no guide to where it goes next, and a start predicted
+/// from it would carry the skin on past the probe.
+fn probe_keeps_going(
+    before: &Solved,
+    solved: Option<&ProbePose>,
+    next: Option<&ProbePose>,
+    t_solved: f64,
+    t_next: f64,
+    lever: f64,
+) -> bool {
+    let (Some(b), Some(s), Some(n)) = (before.pose.as_ref(), solved, next) else {
+        return true;
+    };
+    // Two points of the probe: its centre and one `lever` (its radius)
+    // along its axis.
+    let points = |p: &ProbePose| [p.centre, p.centre + p.axis * lever];
+    let (pb, ps, pn) = (points(b), points(s), points(n));
+    (0..2).all(|i| {
+        let v_old = (ps[i] - pb[i]) / (t_solved - before.t);
+        let v_new = (pn[i] - ps[i]) / (t_next - t_solved);
+        (v_new - v_old).norm() <= MAX_PROBE_TURN * v_new.norm().max(v_old.norm())
+    })
 }
 
 /// How many directions `filter` holds.
