@@ -25,6 +25,11 @@ pub struct MeshArgs {
     /// Write BASE.node/.ele/.face, BASE.vtu (and BASE.poly when generating).
     #[arg(long, value_name = "BASE")]
     out: Option<PathBuf>,
+    /// Renumber the --input mesh for memory locality (reverse Cuthill–McKee
+    /// vertices, tets by their lowest vertex), as generated meshes are: the
+    /// FEM runs faster on it. The geometry, regions and markers stay.
+    #[arg(long, requires = "input")]
+    renumber: bool,
     /// Patch extent in x (mm) [default 10].
     #[arg(long)]
     width_mm: Option<f64>,
@@ -128,6 +133,11 @@ impl MeshArgs {
 pub fn run(args: MeshArgs) -> anyhow::Result<()> {
     let (mesh, poly) = if let Some(input) = &args.input {
         let mesh = io::read_mesh(input)?;
+        let mesh = if args.renumber {
+            mesh.renumbered()?
+        } else {
+            mesh
+        };
         (mesh, None)
     } else {
         let section = match &args.scenario {
@@ -142,6 +152,7 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
         (mesh, Some(poly_text(&spec, scale)))
     };
     let mut report = QualityReport::of(&mesh).to_string();
+    report += &numbering_line(&mesh, args.input.is_some() && !args.renumber);
     if let Some(e) = &args.edges_within {
         let [x, y, z, r] = e[..] else {
             bail!("--edges-within takes X,Y,Z,R, got {e:?}");
@@ -155,6 +166,22 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
         report += &write_mesh_files(&mesh, base, poly.as_deref())?;
     }
     print_stdout(&report)
+}
+
+/// How spread the vertex numbering is, with a hint to renumber a loaded
+/// mesh whose tets span more than three times `n^(2/3)` indices on average
+/// (`n` vertices): a banded numbering of a solid spans about a cross-section,
+/// `n^(2/3)`; TetGen's own spans a good part of the whole.
+fn numbering_line(mesh: &TetMesh, loaded: bool) -> String {
+    let span = mesh.mean_tet_index_span();
+    let mut line = format!(
+        "numbering: a tet's vertex indices span {span:.0} on average ({} vertices)\n",
+        mesh.num_vertices()
+    );
+    if loaded && span > 3.0 * (mesh.num_vertices() as f64).powf(2.0 / 3.0) {
+        line += "  scattered: `--renumber --out BASE` writes it renumbered, which the FEM runs faster on\n";
+    }
+    line
 }
 
 fn write_mesh_files(mesh: &TetMesh, base: &Path, poly: Option<&str>) -> anyhow::Result<String> {

@@ -21,6 +21,7 @@
 
 pub mod generate;
 pub mod io;
+pub mod order;
 pub mod quality;
 mod surface;
 

@@ -210,6 +210,67 @@ fn mesh_inspects_a_file() {
     );
 }
 
+/// `--renumber` writes a loaded mesh with a banded numbering: the same
+/// tets, regions and boundary markers, each tet's vertices closer together
+/// than in the file, and the report says so.
+#[test]
+fn mesh_renumbers_a_loaded_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = "tests/fixtures/two_layer_box.msh";
+    let span = |stdout: &str| -> f64 {
+        let line = stdout
+            .lines()
+            .find(|l| l.starts_with("numbering:"))
+            .unwrap_or_else(|| panic!("no numbering line in {stdout}"));
+        line.split("span ")
+            .nth(1)
+            .unwrap()
+            .split(' ')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    let o = skinpatch(&["mesh", "--input", input]);
+    assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    let before = span(&text(&o.stdout));
+    let base = dir.path().join("box");
+    let o = skinpatch(&[
+        "mesh",
+        "--input",
+        input,
+        "--renumber",
+        "--out",
+        base.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    let stdout = text(&o.stdout);
+    let after = span(&stdout);
+    assert!(after < 0.5 * before, "span {after} against {before}");
+    assert!(!stdout.contains("scattered"), "{stdout}");
+    let old = io::read_mesh(Path::new(input)).unwrap();
+    let new = io::read_tetgen(&base).unwrap();
+    assert_eq!(
+        (new.num_tets(), new.num_vertices()),
+        (old.num_tets(), old.num_vertices())
+    );
+    assert!((new.total_volume() - old.total_volume()).abs() < 1e-12);
+    assert_eq!(new.region_tet_counts(), old.region_tet_counts());
+    let markers = |m: &skinpatch::mesh::TetMesh| {
+        let mut counts = std::collections::BTreeMap::new();
+        for f in &m.boundary {
+            *counts.entry(f.marker).or_insert(0) += 1;
+        }
+        counts
+    };
+    assert_eq!(markers(&new), markers(&old));
+    assert_eq!(new.top.vertices.len(), old.top.vertices.len());
+    // Without --input there is nothing to renumber.
+    let o = skinpatch(&["mesh", "--renumber"]);
+    assert!(!o.status.success());
+    assert!(text(&o.stderr).contains("--input"), "{}", text(&o.stderr));
+}
+
 #[test]
 fn help_explains_the_commands() {
     let o = skinpatch(&["mesh", "--help"]);
