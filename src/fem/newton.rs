@@ -126,6 +126,7 @@ impl Simulation {
         let mut stats = NewtonStats::default();
         self.work.tangent_kind = TangentKind::Exact;
         self.work.coarse_stale = true;
+        self.work.element_tangent_kind = None;
         let mut refinements = 0;
         for it in 0..=self.settings.max_iterations {
             let changed = update(self, it, false);
@@ -159,7 +160,17 @@ impl Simulation {
                 break;
             }
             self.work.r_free.clone_from(&self.work.rhs);
-            self.assemble_tangent();
+            // Near the solution the last step was small and so is the
+            // element tangent's change: the last one, with the current
+            // contact terms, still gives a step that lands within the
+            // tolerance, and the assembly is skipped.
+            let lagged = !changed
+                && it > 0
+                && stats.rel_residual <= LAG_TANGENT_BELOW
+                && self.reuse_element_tangent();
+            if !lagged {
+                self.assemble_tangent();
+            }
             let forcing = self.forcing(norm / scale);
             // The first step may move constrained nodes (a predicted start,
             // a probe that moved): its right-hand side then carries that
@@ -379,7 +390,7 @@ impl Simulation {
     /// Takes the step, halving its free part while the residual does not
     /// decrease (at most 6 times). When the step also moves constrained
     /// directions, descent after a failed full step is measured from the
-    /// moved state (`alpha = 0`). Without descent the trial with the smallest
+    /// moved state (`alpha = 0`), and a full step below that is taken. Without descent the trial with the smallest
     /// residual is kept (the Newton loop decides). Returns the new
     /// (‖S r‖, scale) and whether the residual decreased.
     fn line_search(&mut self, old_norm: f64) -> (f64, f64, bool) {
@@ -401,11 +412,20 @@ impl Simulation {
             if k == 0 && moves {
                 self.set_trial(0.0);
                 self.evaluate_forces();
-                let (norm, _) = self.residual();
-                if norm.is_finite() {
-                    reference = norm;
-                    if best.is_none_or(|(n, _)| norm < n) {
-                        best = Some((norm, 0.0));
+                let (moved, _) = self.residual();
+                if moved.is_finite() {
+                    reference = moved;
+                    if norm.is_finite() && norm < moved {
+                        // The full step descends from the moved state: take
+                        // it whole (a shortened one would cost Newton its
+                        // quadratic convergence).
+                        self.set_trial(1.0);
+                        self.evaluate_forces();
+                        let (norm, scale) = self.residual();
+                        return (norm, scale, true);
+                    }
+                    if best.is_none_or(|(n, _)| moved < n) {
+                        best = Some((moved, 0.0));
                     }
                 }
             }
@@ -422,6 +442,10 @@ impl Simulation {
         (norm, scale, false)
     }
 }
+
+/// Relative residual below which a Newton iteration reuses the last
+/// element tangent of its solve.
+const LAG_TANGENT_BELOW: f64 = 1e-4;
 
 /// Largest linear remainder a solve's first step leaves, relative to the
 /// load scale.
