@@ -318,8 +318,8 @@ pub(super) struct Workspace {
     pub(super) prescribed: Vec<f64>,
     pub(super) kd: Vec<f64>,
     pub(super) tangent_kind: TangentKind,
-    /// The matrix values of the last element tangent before any contact
-    /// term, and its kind; `None` when stale (a new solve).
+    /// The matrix values of the solve's last element tangent, before any
+    /// contact term, and its kind (`None`: none yet in this solve).
     pub(super) element_tangent: Vec<f64>,
     pub(super) element_tangent_kind: Option<TangentKind>,
 }

@@ -390,8 +390,9 @@ impl Simulation {
     /// Takes the step, halving its free part while the residual does not
     /// decrease (at most 6 times). When the step also moves constrained
     /// directions, descent after a failed full step is measured from the
-    /// moved state (`alpha = 0`), and a full step below that is taken. Without descent the trial with the smallest
-    /// residual is kept (the Newton loop decides). Returns the new
+    /// moved state (`alpha = 0`), and a full step below that is taken.
+    /// Without descent the trial with the smallest residual is kept (the
+    /// Newton loop decides). Returns the new
     /// (‖S r‖, scale) and whether the residual decreased.
     fn line_search(&mut self, old_norm: f64) -> (f64, f64, bool) {
         self.work.x_start.clone_from(&self.state.x);

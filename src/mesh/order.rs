@@ -6,7 +6,7 @@
 //! apart on average, and the tets at one vertex are spread over the whole
 //! tet array. Every FEM pass then reads scattered memory: the per-node
 //! gather of the stiffness reads each incident tet's blocks from anywhere in
-//! 19 MB. Renumbered, a tet's vertices lie ~500 apart and a vertex's tets
+//! 19 MB. Renumbered, a tet's vertices lie ~390 apart and a vertex's tets
 //! sit together (docs/PERFORMANCE.md has the figures). The geometry, the
 //! regions and the boundary markers are unchanged; only the numbering is.
 
@@ -296,7 +296,6 @@ mod tests {
         // levels of four vertices; the shuffled numbering spans most of
         // the 164.
         let after = bandwidth(&new.tets);
-        eprintln!("bandwidth {after} (before {before})");
         assert!(after <= 8, "bandwidth {after} (before {before})");
         assert!(before > 100, "the shuffle spreads the tets: {before}");
         // Tets sorted by their lowest vertex.

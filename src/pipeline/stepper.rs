@@ -50,9 +50,7 @@ pub struct Stepper {
     no_loads: Vec<Vec3>,
     frame: usize,
     t_prev: f64,
-    // The last solved state, and the probe of the last solve.
-    last_solved: Option<Solved>,
-    last_pose: Option<ProbePose>,
+    prediction: Prediction,
     inverted_before: usize,
     split_before: bool,
     // Nodes held so that no rigid motion is free (quasi-static runs).
@@ -93,8 +91,7 @@ impl Stepper {
             no_loads: vec![Vec3::zeros(); mesh.num_vertices()],
             frame: 0,
             t_prev: 0.0,
-            last_solved: None,
-            last_pose: None,
+            prediction: Prediction::default(),
             inverted_before: 0,
             split_before: false,
             pins,
@@ -182,35 +179,15 @@ impl Stepper {
             if sim.dynamics.is_some() {
                 sim.begin_step();
             }
-            // Start from the last state moved on by the last increment
-            // (constant velocity), scaled to this step's length, unless the
-            // probe turns or stops here.
             let pose = probe.map(|p| p.pose(ts).lifted(lift * (1.0 - k as f64 / substeps as f64)));
-            if s.predict {
-                let solved = sim.positions().to_vec();
-                let t_solved = t_prev + (t - t_prev) * (k - 1) as f64 / substeps as f64;
-                if let Some(last) = &self.last_solved {
-                    if t_solved > last.t
-                        && probe_keeps_going(
-                            last,
-                            self.last_pose.as_ref(),
-                            pose.as_ref(),
-                            t_solved,
-                            ts,
-                            probe.map_or(1.0, |p| p.radius_mm()),
-                        )
-                    {
-                        let ratio = (ts - t_solved) / (t_solved - last.t);
-                        sim.predict(&last.x, ratio.min(MAX_PREDICTION_RATIO));
-                    }
-                }
-                self.last_solved = Some(Solved {
-                    x: solved,
-                    t: t_solved,
-                    pose: self.last_pose,
-                });
-            }
-            self.last_pose = pose;
+            let t_solved = t_prev + (t - t_prev) * (k - 1) as f64 / substeps as f64;
+            self.prediction.start(
+                sim,
+                s.predict,
+                pose,
+                (t_solved, ts),
+                probe.map_or(1.0, |p| p.radius_mm()),
+            );
             match (probe, &pose) {
                 (Some(probe), Some(pose)) => {
                     let r = solve_with_contact(
@@ -269,6 +246,55 @@ struct Solved {
     t: f64,
     /// The probe it was solved with.
     pose: Option<ProbePose>,
+}
+
+/// What the predicted start of a solve needs: the last solved state and
+/// the probe of the last solve.
+#[derive(Clone, Default)]
+struct Prediction {
+    last_solved: Option<Solved>,
+    last_pose: Option<ProbePose>,
+}
+
+impl Prediction {
+    /// Before the solve at `ts` with the probe at `pose`: keeps the state
+    /// solved at `t_solved` and, when `predict`, moves `sim` on from it by
+    /// its last increment (constant velocity) scaled to this step's length,
+    /// unless the probe turns or stops here ([`probe_keeps_going`], `lever`
+    /// the probe's radius).
+    fn start(
+        &mut self,
+        sim: &mut Simulation,
+        predict: bool,
+        pose: Option<ProbePose>,
+        (t_solved, ts): (f64, f64),
+        lever: f64,
+    ) {
+        if predict {
+            let solved = sim.positions().to_vec();
+            if let Some(last) = &self.last_solved {
+                if t_solved > last.t
+                    && probe_keeps_going(
+                        last,
+                        self.last_pose.as_ref(),
+                        pose.as_ref(),
+                        t_solved,
+                        ts,
+                        lever,
+                    )
+                {
+                    let ratio = (ts - t_solved) / (t_solved - last.t);
+                    sim.predict(&last.x, ratio.min(MAX_PREDICTION_RATIO));
+                }
+            }
+            self.last_solved = Some(Solved {
+                x: solved,
+                t: t_solved,
+                pose: self.last_pose,
+            });
+        }
+        self.last_pose = pose;
+    }
 }
 
 /// Largest change of the probe's velocity between two steps, relative to
