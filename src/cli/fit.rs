@@ -101,6 +101,20 @@ pub fn run(args: FitArgs) -> anyhow::Result<()> {
         "       σ = {:.2}·r {:+.2} µm for r < 1, {:.2}·r {:+.2} µm for r ≥ 1 (at least 1 µm)",
         l.sigma_compression.0, l.sigma_compression.1, l.sigma_stretch.0, l.sigma_stretch.1
     ));
+    if !l.alpha_at_clamp.is_empty() {
+        let at: Vec<String> = l
+            .alpha_at_clamp
+            .iter()
+            .map(|(r, a)| format!("({r:.3}, {a:.2})"))
+            .collect();
+        line(format!(
+            "note: {} sample(s) at α's clamp, (r, α) = {}: the line through the others runs \
+             past the clamp there, so the clamped model meets them and they are left out of \
+             its least squares",
+            at.len(),
+            at.join(", ")
+        ));
+    }
     if let Some(path) = &report.written {
         line(format!("wrote {}", path.display()));
     }

@@ -698,6 +698,66 @@ fn fitting_the_seed_points_gives_a_neutral_model() {
     );
 }
 
+/// Samples at α's clamp beyond which the line through the others runs are
+/// met by the clamped model and left out of the least squares; the model
+/// says which, and the report prints them (a model that silently ignored a
+/// sample would contradict the table printed above it).
+#[test]
+fn samples_at_the_alpha_clamp_are_named() {
+    use skinpatch::micro::fit::{fit_model, FittedPoint};
+    let point = |r: f64, alpha: f64| FittedPoint {
+        r,
+        alpha,
+        sigma_um: 10.0,
+    };
+    // Below r = 1 the free samples lie on α = 6·(r − 1), which reaches −2
+    // at r ≈ 0.667: the saturated samples at r = 0.5 and 0.6 lie beyond.
+    let points = [
+        point(0.5, -2.0),
+        point(0.6, -2.0),
+        point(0.9, -0.6),
+        point(0.95, -0.3),
+        point(1.1, 0.3),
+        point(1.2, 0.6),
+    ];
+    let (model, lines) = fit_model(&points, &[]).unwrap();
+    assert_eq!(lines.alpha_at_clamp, vec![(0.5, -2.0), (0.6, -2.0)]);
+    for p in &points[..2] {
+        assert_eq!(model.params(p.r).alpha, -2.0, "the clamp meets r = {}", p.r);
+    }
+    assert!(
+        (lines.alpha_compression_slope - 6.0).abs() < 1e-9,
+        "{lines:?}"
+    );
+    // A saturated sample the line does not reach counts like any other.
+    let (_, lines) =
+        fit_model(&[point(0.5, -2.0), point(0.9, -0.2), point(1.2, 0.6)], &[]).unwrap();
+    assert!(lines.alpha_at_clamp.is_empty(), "{lines:?}");
+    // The CLI report names them.
+    let dir = tempfile::tempdir().unwrap();
+    let file: String = points
+        .iter()
+        .map(|p| {
+            format!(
+                "[[point]]\nr = {}\nalpha = {}\nsigma_um = {}\n",
+                p.r, p.alpha, p.sigma_um
+            )
+        })
+        .collect();
+    let samples = dir.path().join("samples.toml");
+    std::fs::write(&samples, file).unwrap();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_skinpatch"))
+        .args(["fit", samples.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        out.contains("note: 2 sample(s) at α's clamp, (r, α) = (0.500, -2.00), (0.600, -2.00)"),
+        "{out}"
+    );
+}
+
 /// Fed the paper's Fig. 11 table with one α break at r = 0.87 (where the
 /// lines of its eq. 8 meet), the fitted model reproduces the table at least
 /// as closely as the paper's own eq. 8–9 (RMS over the eight points: α

@@ -511,9 +511,14 @@ pub struct FittedPoint {
 }
 
 /// The lines of a fitted model, for reports: α's slope on each side of
-/// r = 1 (its segments adjacent to (1, 0)), σ = a·r + b on each side.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// r = 1 (its segments adjacent to (1, 0)), σ = a·r + b on each side, and
+/// the samples the α fit left to the clamp.
+#[derive(Clone, Debug, PartialEq)]
 pub struct ModelLines {
+    /// Samples (r, α) at α's clamp (−2 or 1) where the line through the
+    /// others runs past the clamp: the clamped model meets them exactly, so
+    /// they do not enter its least squares.
+    pub alpha_at_clamp: Vec<(f64, f64)>,
     /// α slope just below r = 1.
     pub alpha_compression_slope: f64,
     /// α slope just above r = 1.
@@ -536,7 +541,12 @@ const ALPHA_LIMITS: (f64, f64) = (-2.0, 1.0);
 /// the unclamped model is inside the clamp there: beyond it the clamped
 /// model meets it exactly. The knot values are the unknowns (hat
 /// functions); the value at 1 is 0.
-fn fit_alpha(points: &[(f64, f64)], ends: (f64, f64), breaks: &[f64]) -> Result<PiecewiseLinear> {
+/// Returns the model and the points left to the clamp.
+fn fit_alpha(
+    points: &[(f64, f64)],
+    ends: (f64, f64),
+    breaks: &[f64],
+) -> Result<(PiecewiseLinear, Vec<(f64, f64)>)> {
     let mut knots: Vec<f64> = vec![ends.0, 1.0, ends.1];
     knots.extend_from_slice(breaks);
     knots.sort_by(f64::total_cmp);
@@ -620,12 +630,21 @@ fn fit_alpha(points: &[(f64, f64)], ends: (f64, f64), breaks: &[f64]) -> Result<
     table.push(knot_values.pop().expect("three knots at least"));
     table.sort_by(|x, y| x.0.total_cmp(&y.0));
     table.dedup_by(|x, y| x.0 == y.0);
-    Ok(PiecewiseLinear {
-        points: table
-            .into_iter()
-            .map(|(r, v)| (r, v.clamp(ALPHA_LIMITS.0, ALPHA_LIMITS.1)))
-            .collect(),
-    })
+    let at_clamp = points
+        .iter()
+        .zip(&left_out)
+        .filter(|(_, &out)| out)
+        .map(|(&p, _)| p)
+        .collect();
+    Ok((
+        PiecewiseLinear {
+            points: table
+                .into_iter()
+                .map(|(r, v)| (r, v.clamp(ALPHA_LIMITS.0, ALPHA_LIMITS.1)))
+                .collect(),
+        },
+        at_clamp,
+    ))
 }
 
 /// Least-squares line y = a·r + b (a constant for a single point).
@@ -688,7 +707,7 @@ pub fn fit_model(
         }
     }
     let samples: Vec<(f64, f64)> = points.iter().map(|p| (p.r, p.alpha)).collect();
-    let alpha = fit_alpha(&samples, (r_min, r_max), alpha_breaks)?;
+    let (alpha, alpha_at_clamp) = fit_alpha(&samples, (r_min, r_max), alpha_breaks)?;
     let slope_at_one = |below: bool| {
         let p = &alpha.points;
         let k = p.partition_point(|q| q.0 < 1.0);
@@ -720,6 +739,7 @@ pub fn fit_model(
     Ok((
         model,
         ModelLines {
+            alpha_at_clamp,
             alpha_compression_slope: kc,
             alpha_stretch_slope: ks,
             sigma_compression: sc,
