@@ -369,3 +369,76 @@ fn check_inversion(
     *inverted_before = m.inverted_tets;
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fem::probe::ProbeShape;
+
+    fn pose(x: f64, z: f64) -> ProbePose {
+        ProbePose {
+            shape: ProbeShape::Sphere { radius_mm: 1.0 },
+            centre: Vec3::new(x, 0.0, z),
+            axis: Vec3::x(),
+        }
+    }
+
+    fn solved(p: ProbePose, t: f64) -> Solved {
+        Solved {
+            x: Vec::new(),
+            t,
+            pose: Some(p),
+        }
+    }
+
+    /// The prediction runs on while the probe keeps its velocity (steps of
+    /// different lengths included) and stops where it turns, stops or
+    /// speeds up by more than [`MAX_PROBE_TURN`].
+    #[test]
+    fn prediction_stops_where_the_probe_turns() {
+        let keeps = |before: (f64, f64), now: (f64, f64), next: (f64, f64), times: [f64; 3]| {
+            probe_keeps_going(
+                &solved(pose(before.0, before.1), times[0]),
+                Some(&pose(now.0, now.1)),
+                Some(&pose(next.0, next.1)),
+                times[1],
+                times[2],
+                1.0,
+            )
+        };
+        // Pressing down at 1 mm/s, then a step twice as long.
+        assert!(keeps((0.0, 0.0), (0.0, -0.1), (0.0, -0.3), [0.0, 0.1, 0.3]));
+        // The press ends and the drag begins: the velocity turns.
+        assert!(!keeps(
+            (0.0, -0.1),
+            (0.0, -0.2),
+            (0.1, -0.2),
+            [0.1, 0.2, 0.3]
+        ));
+        // The probe stops.
+        assert!(!keeps(
+            (0.0, -0.1),
+            (0.0, -0.2),
+            (0.0, -0.2),
+            [0.1, 0.2, 0.3]
+        ));
+        // 5 % faster still counts as going on; 20 % does not.
+        assert!(keeps((0.0, 0.0), (0.1, 0.0), (0.205, 0.0), [0.0, 0.1, 0.2]));
+        assert!(!keeps((0.0, 0.0), (0.1, 0.0), (0.22, 0.0), [0.0, 0.1, 0.2]));
+        // A resting probe: the skin's own motion is predicted.
+        assert!(keeps((0.0, 0.0), (0.0, 0.0), (0.0, 0.0), [0.0, 0.1, 0.2]));
+        // No probe pose to compare: predict as before.
+        assert!(probe_keeps_going(
+            &Solved {
+                x: Vec::new(),
+                t: 0.0,
+                pose: None
+            },
+            None,
+            None,
+            0.1,
+            0.2,
+            1.0
+        ));
+    }
+}
