@@ -249,9 +249,9 @@ impl Simulation {
     /// Solves for the free part of the Newton step into `dx`; returns the
     /// linear iterations (1 for a direct solve) and whether the solve
     /// succeeded: a factorisation or a conjugate-gradient run that met no
-    /// non-positive curvature and reached its tolerance.
-    /// `remainder`, when given, bounds the linear residual left (N): the
-    /// tolerance is tightened when the right-hand side is large.
+    /// non-positive curvature and reached its tolerance. `remainder`, when
+    /// given, bounds the linear residual left (N): the tolerance is
+    /// tightened when the right-hand side is large.
     fn linear_solve(&mut self, forcing: f64, remainder: Option<f64>) -> (usize, bool) {
         let start = std::time::Instant::now();
         self.step_rhs();
@@ -392,8 +392,8 @@ impl Simulation {
     /// directions, descent after a failed full step is measured from the
     /// moved state (`alpha = 0`), and a full step below that is taken.
     /// Without descent the trial with the smallest residual is kept (the
-    /// Newton loop decides). Returns the new
-    /// (‖S r‖, scale) and whether the residual decreased.
+    /// Newton loop decides). Returns the new (‖S r‖, scale) and whether the
+    /// residual decreased.
     fn line_search(&mut self, old_norm: f64) -> (f64, f64, bool) {
         self.work.x_start.clone_from(&self.state.x);
         let moves = self.work.prescribed.iter().any(|&d| d != 0.0);
