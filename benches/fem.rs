@@ -1,6 +1,6 @@
 //! Criterion benchmarks of the FEM stages on the press scenario
 //! (`examples/press.toml`, patch_25k): the element loop (rotations and
-//! forces), tangent assembly, and whole press frames with contact.
+//! forces; at one state and alternating between two), tangent assembly, and whole press frames with contact.
 //!
 //! Run: `cargo bench --bench fem`. The figures and their ratios are kept in
 //! docs/PERFORMANCE.md beside those of `skinpatch bench fem`.
@@ -63,6 +63,23 @@ fn fem(c: &mut Criterion) {
 
     let mut sim = base.sim.clone();
     group.bench_function("element_loop", |b| b.iter(|| sim.evaluate_forces()));
+    // Between the states of two frames, as Newton iterations move: each
+    // tet's rotation starts from the other state's (the warm start sees a
+    // real change, where evaluating one state again would see none).
+    let states = {
+        let mut next = base.sim.clone();
+        let mut contact = base.contact.clone();
+        frame(&base.setup, &mut next, &mut contact, 2);
+        [base.sim.positions().to_vec(), next.positions().to_vec()]
+    };
+    let mut which = 0;
+    group.bench_function("element_loop_moving", |b| {
+        b.iter(|| {
+            which = 1 - which;
+            sim.positions_mut().copy_from_slice(&states[which]);
+            sim.evaluate_forces();
+        })
+    });
     group.bench_function("forces_and_tangent_assembly", |b| {
         b.iter(|| {
             sim.stiffness(TangentKind::Exact);

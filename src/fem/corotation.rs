@@ -283,33 +283,38 @@ impl Corotation {
             };
         }
         let frame = orthonormal(guess);
-        let (eigenvalues, w) =
-            symmetric_eigen_jacobi(&(frame.transpose() * (f.transpose() * f) * frame));
-        let mut v = frame * w;
+        // `FᵀF` in the guessed frame as `GᵀG` with `G = F·frame`; `G` then
+        // gives `B = F V = G W` without another product with `F`.
+        let g = f * frame;
+        let (eigenvalues, w) = symmetric_eigen_jacobi(&g.tr_mul(&g));
+        let mut w = w;
         // Sort descending.
         let mut order = [0usize, 1, 2];
         order.sort_by(|&i, &j| eigenvalues[j].total_cmp(&eigenvalues[i]));
         if order != [0, 1, 2] {
-            let v0 = v;
+            let w0 = w;
             for (k, &i) in order.iter().enumerate() {
-                v.set_column(k, &v0.column(i));
+                w.set_column(k, &w0.column(i));
             }
         }
-        if v.determinant() < 0.0 {
-            v.column_mut(2).neg_mut();
+        // det V = det W, as the frame is a rotation.
+        if w.determinant() < 0.0 {
+            w.column_mut(2).neg_mut();
         }
-        let b = f * v;
-        let scale = f.norm();
+        let v = frame * w;
+        let b = g * w;
+        let tiny = SVD_TINY * f.norm();
         let (b1, b2, b3) = (b.column(0), b.column(1), b.column(2));
         let s1 = b1.norm();
-        let u1 = if s1 > SVD_TINY * scale {
-            b1 / s1
+        let u1 = if s1 > tiny {
+            b1 * (1.0 / s1)
         } else {
             Vector3::x()
         };
         let b2_perp = b2 - u1 * u1.dot(&b2);
-        let u2 = if b2_perp.norm() > SVD_TINY * scale {
-            b2_perp.normalize()
+        let n2 = b2_perp.norm();
+        let u2 = if n2 > tiny {
+            b2_perp * (1.0 / n2)
         } else {
             any_orthogonal(&u1)
         };
@@ -336,52 +341,99 @@ const MAX_JACOBI_SWEEPS: usize = 12;
 
 /// Eigenvalues and eigenvectors (columns) of the symmetric `a`, by cyclic
 /// Jacobi rotations until the off-diagonal part is at round-off.
-fn symmetric_eigen_jacobi(a: &Matrix3<f64>) -> (Vector3<f64>, Matrix3<f64>) {
-    let mut a = *a;
-    let mut v = Matrix3::identity();
+///
+/// The matrix lives in plain arrays and each plane's rotation is its own
+/// instance of [`jacobi_rotate`], so every index is a constant and the
+/// whole solve stays in registers (this is the element pass's inner loop).
+fn symmetric_eigen_jacobi(m: &Matrix3<f64>) -> (Vector3<f64>, Matrix3<f64>) {
+    // Far from 1 (never so in the element pass), scaled to a largest entry
+    // of 1, so that no square below over- or underflows.
+    let amax = m.amax();
+    if !(amax > 0.0 && amax.is_finite()) {
+        return (m.diagonal(), Matrix3::identity());
+    }
+    let size = if (1e-100..=1e100).contains(&amax) {
+        1.0
+    } else {
+        amax
+    };
+    let unit = 1.0 / size;
+    let mut a: [[f64; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)] * unit));
+    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
     for _ in 0..MAX_JACOBI_SWEEPS {
-        let off = a[(0, 1)].powi(2) + a[(0, 2)].powi(2) + a[(1, 2)].powi(2);
-        let diag = a[(0, 0)].powi(2) + a[(1, 1)].powi(2) + a[(2, 2)].powi(2);
+        let off = a[0][1].powi(2) + a[0][2].powi(2) + a[1][2].powi(2);
+        let diag = a[0][0].powi(2) + a[1][1].powi(2) + a[2][2].powi(2);
         if off <= 1e-32 * diag || off == 0.0 {
             break;
         }
-        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
-            jacobi_rotate(&mut a, &mut v, p, q);
-        }
+        jacobi_rotate::<0, 1, 2>(&mut a, &mut v);
+        jacobi_rotate::<0, 2, 1>(&mut a, &mut v);
+        jacobi_rotate::<1, 2, 0>(&mut a, &mut v);
     }
-    (Vector3::new(a[(0, 0)], a[(1, 1)], a[(2, 2)]), v)
+    (
+        Vector3::new(a[0][0], a[1][1], a[2][2]) * size,
+        Matrix3::from_fn(|i, j| v[i][j]),
+    )
 }
 
-/// One Jacobi rotation in the (p, q) plane that zeroes `a[(p, q)]`:
-/// `a ← Jᵀ a J`, `v ← v J`.
-fn jacobi_rotate(a: &mut Matrix3<f64>, v: &mut Matrix3<f64>, p: usize, q: usize) {
-    let apq = a[(p, q)];
+/// One Jacobi rotation in the (P, Q) plane (R the third index) that zeroes
+/// `a[P][Q]`: `a ← Jᵀ a J`, `v ← v J`.
+fn jacobi_rotate<const P: usize, const Q: usize, const R: usize>(
+    a: &mut [[f64; 3]; 3],
+    v: &mut [[f64; 3]; 3],
+) {
+    let apq = a[P][Q];
     if apq == 0.0 {
         return;
     }
-    let theta = (a[(q, q)] - a[(p, p)]) / (2.0 * apq);
-    // The smaller rotation angle, t = tan φ; written to avoid overflow of θ².
-    let t = if theta.abs() > 1e150 {
-        0.5 / theta
-    } else {
-        theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt())
-    };
-    let c = 1.0 / (t * t + 1.0).sqrt();
-    let s = t * c;
-    a[(p, p)] -= t * apq;
-    a[(q, q)] += t * apq;
-    a[(p, q)] = 0.0;
-    a[(q, p)] = 0.0;
-    let r = 3 - p - q;
-    let (arp, arq) = (a[(r, p)], a[(r, q)]);
-    a[(r, p)] = c * arp - s * arq;
-    a[(p, r)] = a[(r, p)];
-    a[(r, q)] = s * arp + c * arq;
-    a[(q, r)] = a[(r, q)];
-    for k in 0..3 {
-        let (vkp, vkq) = (v[(k, p)], v[(k, q)]);
-        v[(k, p)] = c * vkp - s * vkq;
-        v[(k, q)] = s * vkp + c * vkq;
+    // With d = a_qq − a_pp, h = 2 a_pq and r = √(d² + h²), the smaller
+    // angle φ has tan φ = sgn(d)·h / (|d| + r), cos φ = √((r + |d|)/(2r))
+    // and sin φ = sgn(d)·h / √(2r(r + |d|)): two square roots and one
+    // division in a row, where tan φ first and cos φ from it take five.
+    let d = a[Q][Q] - a[P][P];
+    let h = 2.0 * apq;
+    let sh = if d >= 0.0 { h } else { -h };
+    if h * h < 1e-17 * (d * d) {
+        // A tiny angle (the last sweep of a warm start): r = |d| and
+        // cos φ = 1 to round-off, tan φ = sin φ.
+        let t = sh / (2.0 * d.abs());
+        return rotate_by::<P, Q, R>(a, v, (1.0, t, t));
+    }
+    let r2 = d * d + h * h;
+    if !(r2 > f64::MIN_POSITIVE) {
+        // Both below 1e-154: nothing to rotate at the matrix's scale.
+        return;
+    }
+    let r = r2.sqrt();
+    let sum = r + d.abs();
+    let inv = 1.0 / (2.0 * r * sum).sqrt();
+    let c = sum * inv;
+    let s = sh * inv;
+    let t = sh / sum;
+    rotate_by::<P, Q, R>(a, v, (c, s, t));
+}
+
+/// Applies the Jacobi rotation with cosine, sine and tangent `(c, s, t)`
+/// in the (P, Q) plane.
+fn rotate_by<const P: usize, const Q: usize, const R: usize>(
+    a: &mut [[f64; 3]; 3],
+    v: &mut [[f64; 3]; 3],
+    (c, s, t): (f64, f64, f64),
+) {
+    let apq = a[P][Q];
+    a[P][P] -= t * apq;
+    a[Q][Q] += t * apq;
+    a[P][Q] = 0.0;
+    a[Q][P] = 0.0;
+    let (arp, arq) = (a[R][P], a[R][Q]);
+    a[R][P] = c * arp - s * arq;
+    a[P][R] = a[R][P];
+    a[R][Q] = s * arp + c * arq;
+    a[Q][R] = a[R][Q];
+    for row in v.iter_mut() {
+        let (vkp, vkq) = (row[P], row[Q]);
+        row[P] = c * vkp - s * vkq;
+        row[Q] = s * vkp + c * vkq;
     }
 }
 
@@ -394,13 +446,13 @@ fn orthonormal(m: &Matrix3<f64>) -> Matrix3<f64> {
     if !(n1 > 0.5 && n1 < 2.0) {
         return Matrix3::identity();
     }
-    let e1 = c1 / n1;
+    let e1 = c1 * (1.0 / n1);
     let p2 = c2 - e1 * e1.dot(&c2);
     let n2 = p2.norm();
     if !(n2 > 0.5 && n2 < 2.0) {
         return Matrix3::identity();
     }
-    let e2 = p2 / n2;
+    let e2 = p2 * (1.0 / n2);
     Matrix3::from_columns(&[e1, e2, e1.cross(&e2)])
 }
 
@@ -714,6 +766,9 @@ mod tests {
             Vector3::new(1.0, 2.0, -0.5) * Vector3::new(0.3, -0.1, 0.9).transpose(),
             Matrix3::new(1.0, 0.1, 0.0, 0.0, 1.0, 0.2, 0.1, 0.0, -0.4),
             Matrix3::identity() + Matrix3::from_fn(|i, j| 1e-9 * (i as f64 - j as f64 * 0.7)),
+            // Entries of `FᵀF` whose squares overflow and underflow.
+            Matrix3::new(1.0, 0.1, 0.0, 0.3, 1.0, 0.2, 0.1, -0.6, 0.4) * 1e80,
+            Matrix3::new(1.0, 0.1, 0.0, 0.3, 1.0, 0.2, 0.1, -0.6, 0.4) * 1e-100,
         ];
         for _ in 0..500 {
             cases.push(Matrix3::from_fn(|_, _| random()));
