@@ -400,7 +400,7 @@ fn jacobi_rotate<const P: usize, const Q: usize, const R: usize>(
         return rotate_by::<P, Q, R>(a, v, (1.0, t, t));
     }
     let r2 = d * d + h * h;
-    if !(r2 > f64::MIN_POSITIVE) {
+    if r2 <= f64::MIN_POSITIVE {
         // Both below 1e-154: nothing to rotate at the matrix's scale.
         return;
     }
