@@ -1,6 +1,7 @@
 //! Criterion benchmarks of the FEM stages on the press scenario
 //! (`examples/press.toml`, patch_25k): the element loop (rotations and
-//! forces; at one state and alternating between two), tangent assembly, and whole press frames with contact.
+//! forces; at one state and alternating between two), tangent assembly,
+//! and whole press frames with contact.
 //!
 //! Run: `cargo bench --bench fem`. The figures and their ratios are kept in
 //! docs/PERFORMANCE.md beside those of `skinpatch bench fem`.
