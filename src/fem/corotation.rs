@@ -286,8 +286,7 @@ impl Corotation {
         // `FᵀF` in the guessed frame as `GᵀG` with `G = F·frame`; `G` then
         // gives `B = F V = G W` without another product with `F`.
         let g = f * frame;
-        let (eigenvalues, w) = symmetric_eigen_jacobi(&g.tr_mul(&g));
-        let mut w = w;
+        let (eigenvalues, mut w) = symmetric_eigen_jacobi(&g.tr_mul(&g));
         // Sort descending.
         let mut order = [0usize, 1, 2];
         order.sort_by(|&i, &j| eigenvalues[j].total_cmp(&eigenvalues[i]));
