@@ -463,7 +463,7 @@ fn update_active_set(
         if state.active.contains_key(&v) {
             continue;
         }
-        let (gap, _) = frame.pose.distance(&sim.state.x[v]);
+        let (gap, n) = frame.pose.distance(&sim.state.x[v]);
         if gap < -activate_below * state.tolerance[v] {
             let q = frame.pose.project(&sim.state.x[v]).0;
             let (c, reference) = match frame.mode {
@@ -477,14 +477,28 @@ fn update_active_set(
                 // Coulomb slip over the solve is relative to the probe:
                 // measured from where the node would be had it moved with
                 // the probe since the solve started (the probe slides over
-                // a node it reaches during the step). The node starts
-                // sliding; its friction follows its normal reaction.
-                ContactMode::Coulomb(_) => (
-                    NodeContact::Slide {
-                        friction: Vec3::zeros(),
-                    },
-                    frame.previous.carry(frame.pose, &state.solved[v]),
-                ),
+                // a node it reaches during the step). The node has no
+                // reaction yet; its penalty trial force (c·|g| normal,
+                // c·|s_t| tangential for its tangential offset s_t from
+                // the anchor) decides: inside the cone it starts sticking,
+                // otherwise sliding with its friction following its
+                // normal reaction. (New nodes that all started sliding
+                // cost most pressing frames a Newton iteration: they stick.)
+                ContactMode::Coulomb(mu) => {
+                    let reference = frame.previous.carry(frame.pose, &state.solved[v]);
+                    let anchor = frame.pose.project(&reference).0;
+                    let shift = tangential(&(sim.state.x[v] - anchor), &n).norm();
+                    if shift <= -mu * gap {
+                        (NodeContact::Stick { anchor }, reference)
+                    } else {
+                        (
+                            NodeContact::Slide {
+                                friction: Vec3::zeros(),
+                            },
+                            reference,
+                        )
+                    }
+                }
             };
             state.active.insert(v, c);
             state.reference.insert(v, reference);
