@@ -19,7 +19,7 @@ use super::print_stdout;
 #[derive(Args)]
 pub struct FitArgs {
     /// Samples file (TOML).
-    samples: PathBuf,
+    pub samples: PathBuf,
 }
 
 /// Runs `skinpatch fit` and prints its report.

@@ -104,13 +104,31 @@ pub fn dispatch(command: Command) -> anyhow::Result<()> {
     match command {
         Command::Run(args) => run::run(args),
         Command::Mesh(args) => mesh::run(*args),
-        Command::Fit(args) => fit::run(args),
-        Command::Synth(args) => synth::run(args),
+        Command::Fit(args) => {
+            let file = args.samples.clone();
+            fit::run(args).map_err(|e| naming(&file, "samples file", e))
+        }
+        Command::Synth(args) => {
+            let file = args.file.clone();
+            synth::run(args).map_err(|e| naming(&file, "synthesis file", e))
+        }
         Command::Tiles(command) => tiles::run(command),
         Command::Bench(command) => bench::run(command),
         Command::GpuInfo => gpu_info::run(),
         #[cfg(feature = "viewer")]
         Command::View(args) => view::run(*args),
+    }
+}
+
+/// `e`, led by the input file it came from (`what file`) unless its
+/// message already names that file: every error of a command that reads
+/// one file names the file.
+fn naming(file: &std::path::Path, what: &str, e: anyhow::Error) -> anyhow::Error {
+    let name = file.file_name().map(|n| n.to_string_lossy());
+    if name.is_some_and(|n| format!("{e:#}").contains(n.as_ref())) {
+        e
+    } else {
+        e.context(format!("{what} {}", file.display()))
     }
 }
 

@@ -10,7 +10,7 @@ use clap::Args;
 #[derive(Args)]
 pub struct SynthArgs {
     /// Synthesis file (TOML).
-    file: PathBuf,
+    pub file: PathBuf,
     /// Output folder, overriding the file's [output] dir.
     #[arg(short, long)]
     output: Option<PathBuf>,

@@ -88,7 +88,16 @@ fn split(input: &Path, output: &Path, tile: usize, texel_um: Option<f64>) -> any
 }
 
 fn join(input: &Path, output: &Path) -> anyhow::Result<()> {
-    let map = TiledMap::open(input)?.read_all()?;
+    let tiled = TiledMap::open(input)?;
+    if tiled.owns(output) {
+        bail!(
+            "--output {} is a file of the tiled map being joined ({}); writing it would \
+             overwrite an input: choose another file",
+            output.display(),
+            tiled.dir.display()
+        );
+    }
+    let map = tiled.read_all()?;
     match output.extension().and_then(|e| e.to_str()) {
         Some("exr") => write_exr(output, &map)?,
         Some("png") => write_png16(output, &map)?,

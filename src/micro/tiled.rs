@@ -187,6 +187,39 @@ impl TiledMap {
         self.dir.join(format!("normal_{col:04}_{row:04}.exr"))
     }
 
+    /// Whether `path` is one of this map's own files (its index, or a
+    /// tile's heights or normals), which a command writing there would
+    /// overwrite.
+    pub fn owns(&self, path: &Path) -> bool {
+        let (Some(parent), Some(name)) = (path.parent(), path.file_name().and_then(|n| n.to_str()))
+        else {
+            return false;
+        };
+        let parent = if parent.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            parent
+        };
+        if !crate::export::outputs::same_file(parent, &self.dir) {
+            return false;
+        }
+        if name == INDEX_FILE {
+            return true;
+        }
+        let (cols, rows) = self.grid();
+        let tile = |prefix: &str| -> Option<(usize, usize)> {
+            let (col, row) = name
+                .strip_prefix(prefix)?
+                .strip_suffix(".exr")?
+                .split_once('_')?;
+            Some((col.parse().ok()?, row.parse().ok()?))
+        };
+        ["tile_", "normal_"]
+            .into_iter()
+            .filter_map(tile)
+            .any(|(col, row)| col < cols && row < rows)
+    }
+
     /// An empty map with the whole map's metadata and `width × height`.
     pub fn metadata(&self, width: usize, height: usize) -> DisplacementMap {
         DisplacementMap {

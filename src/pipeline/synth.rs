@@ -60,6 +60,7 @@ pub fn run(
         .map(Path::to_path_buf)
         .or(file.output.dir.clone())
         .unwrap_or_else(|| Path::new("out").join(stem));
+    refuse_overwriting_inputs(path, base, &file, &dir, (exr, png))?;
     std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
 
     let synthesis = synthesize(&sources.inputs(), &params, on_level)?;
@@ -102,6 +103,44 @@ pub fn run(
         statistics,
         rendered_on_gpu,
     })
+}
+
+/// Refuses a run whose output folder `dir` would take a file over one
+/// of its inputs (the synthesis file, the exemplar, its albedo, the
+/// mesostructure map): a result synthesized again from the last one's
+/// `synthesized.exr` would otherwise replace its own exemplar.
+fn refuse_overwriting_inputs(
+    path: &Path,
+    base: &Path,
+    file: &SynthFile,
+    dir: &Path,
+    (exr, png): (bool, bool),
+) -> Result<()> {
+    let s = &file.synthesis;
+    let mut inputs: Vec<(&str, PathBuf)> = vec![("synthesis file", path.to_path_buf())];
+    for (what, input) in [
+        ("exemplar", &s.exemplar),
+        ("exemplar albedo", &s.exemplar_albedo),
+        ("mesostructure map", &s.mesostructure),
+    ] {
+        if let Some(input) = input {
+            inputs.push((what, base.join(input)));
+        }
+    }
+    let inputs: Vec<(&str, &Path)> = inputs.iter().map(|(w, p)| (*w, p.as_path())).collect();
+    let mut outputs = vec!["albedo.png", "preview.png", "synthesis.json"];
+    for (wanted, names) in [
+        (exr, ["synthesized.exr", "synthesized_normals.exr"]),
+        (png, ["synthesized.png", "synthesized_normals.png"]),
+    ] {
+        if wanted {
+            outputs.extend(names);
+        }
+    }
+    for name in outputs {
+        crate::export::outputs::refuse_input_overwrite("output.dir", &dir.join(name), &inputs)?;
+    }
+    Ok(())
 }
 
 /// The synthesized map and its normal map in the asked formats (`exr`,

@@ -288,6 +288,41 @@ fn fit_never_writes_over_its_inputs() {
     }
 }
 
+/// `synth` run again on its own last result (the exemplar is the output
+/// folder's `synthesized.exr`) is refused, naming both, and the result
+/// stays as it was.
+#[test]
+fn synth_never_writes_over_its_inputs() {
+    use skinpatch::micro::io::write_exr;
+    use skinpatch::micro::{DisplacementMap, Edge};
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("out")).unwrap();
+    let earlier = DisplacementMap::from_fn(32, 32, 5.0, Edge::Wrap, |i, j| {
+        ((i * 7 + j * 3) % 11) as f32
+    });
+    let result = dir.path().join("out/synthesized.exr");
+    write_exr(&result, &earlier).unwrap();
+    let before = std::fs::read(&result).unwrap();
+    let file = dir.path().join("again.toml");
+    std::fs::write(
+        &file,
+        format!(
+            "[synthesis]\nexemplar = \"out/synthesized.exr\"\nsize_px = 48\n\
+             mesostructure_sigma_um = 10.0\n[output]\ndir = {:?}\nformats = [\"exr\"]\n",
+            dir.path().join("out")
+        ),
+    )
+    .unwrap();
+    let o = skinpatch(&["synth", file.to_str().unwrap()]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(
+        e.contains("again.toml") && e.contains("synthesized.exr") && e.contains("run's exemplar"),
+        "{e}"
+    );
+    assert_eq!(std::fs::read(&result).unwrap(), before);
+}
+
 /// An override that spans lines (whose later lines were dropped without a
 /// word) and `--output` beside `--set output.dir` (one of which was
 /// ignored) are refused, for `run` and `synth` alike.

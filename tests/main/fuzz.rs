@@ -11,7 +11,7 @@ use proptest::test_runner::{Config, RngSeed};
 
 use common::{cube_tetgen, root, write_tetgen_text};
 
-fn config(cases: u32) -> Config {
+pub(crate) fn config(cases: u32) -> Config {
     Config {
         cases,
         rng_seed: RngSeed::Fixed(0x5eed_2026),

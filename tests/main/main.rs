@@ -12,6 +12,7 @@ mod contact;
 mod doors;
 mod fem_verification;
 mod fuzz;
+mod fuzz_doors;
 mod gpu;
 mod mesh_generation;
 mod mesh_invariants;
