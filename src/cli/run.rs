@@ -96,8 +96,19 @@ fn report_run(
     if let Some(device) = micro_device {
         report += &format!("microstructure stages: {device}\n");
     }
+    // The output folder's own files by name, a subfolder's as a count
+    // (summary.json lists each).
+    let dir = summary_path.parent().unwrap_or(Path::new(""));
+    let mut folders = std::collections::BTreeMap::<&Path, usize>::new();
     for file in written.iter().map(|p| p.as_path()).chain([summary_path]) {
-        report += &format!("wrote {}\n", file.display());
+        match file.parent() {
+            Some(folder) if folder != dir => *folders.entry(folder).or_default() += 1,
+            _ => report += &format!("wrote {}\n", file.display()),
+        }
+    }
+    for (folder, count) in folders {
+        let files = if count == 1 { "file" } else { "files" };
+        report += &format!("wrote {count} {files} in {}\n", folder.display());
     }
     if quiet {
         return Ok(());

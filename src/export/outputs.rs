@@ -100,9 +100,12 @@ fn is_temporary(name: &str) -> bool {
         .is_some_and(|(_, pid)| !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()))
 }
 
-/// Removes every earlier run's file from `dir` (see [`is_run_output`]) and
-/// returns how many. Folders that do not exist are skipped.
-pub fn clear_previous_run(dir: &Path) -> Result<usize> {
+/// Every file in `dir` with a name a run writes (see [`is_run_output`]),
+/// the files of tiled frame folders and the temporaries of a killed run
+/// included, sorted by path: after a finished run, the files it wrote;
+/// before one, the files it will remove. Folders that do not exist are
+/// skipped.
+pub fn run_files(dir: &Path) -> Vec<PathBuf> {
     let mut folders: Vec<(String, PathBuf)> = vec![(String::new(), dir.to_path_buf())];
     folders.extend(SUBFOLDERS.iter().map(|f| (f.to_string(), dir.join(f))));
     if let Ok(entries) = std::fs::read_dir(dir.join("render")) {
@@ -113,7 +116,7 @@ pub fn clear_previous_run(dir: &Path) -> Result<usize> {
             }
         }
     }
-    let mut removed = 0;
+    let mut files = Vec::new();
     for (label, folder) in folders {
         let Ok(entries) = std::fs::read_dir(&folder) else {
             continue;
@@ -122,32 +125,50 @@ pub fn clear_previous_run(dir: &Path) -> Result<usize> {
             let name = entry.file_name().to_string_lossy().into_owned();
             let kind = entry.file_type();
             if kind.as_ref().is_ok_and(|t| t.is_file()) && is_run_output(&label, &name) {
-                let path = entry.path();
-                std::fs::remove_file(&path).map_err(|e| Error::io(&path, e))?;
-                removed += 1;
+                files.push(entry.path());
             } else if label == "micro" && kind.is_ok_and(|t| t.is_dir()) && is_tiled_frame(&name) {
-                removed += clear_tiled_frame(&entry.path())?;
+                let Ok(tiles) = std::fs::read_dir(entry.path()) else {
+                    continue;
+                };
+                files.extend(tiles.flatten().filter_map(|tile| {
+                    let name = tile.file_name().to_string_lossy().into_owned();
+                    (tile.file_type().is_ok_and(|t| t.is_file()) && is_tile_file(&name))
+                        .then(|| tile.path())
+                }));
             }
         }
     }
-    Ok(removed)
+    files.sort();
+    files
 }
 
-/// Removes a tiled frame folder's run files, and the folder once empty.
-fn clear_tiled_frame(folder: &Path) -> Result<usize> {
-    let mut removed = 0;
-    let entries = std::fs::read_dir(folder).map_err(|e| Error::io(folder, e))?;
-    for entry in entries.flatten() {
-        let name = entry.file_name().to_string_lossy().into_owned();
-        if entry.file_type().is_ok_and(|t| t.is_file()) && is_tile_file(&name) {
-            let path = entry.path();
-            std::fs::remove_file(&path).map_err(|e| Error::io(&path, e))?;
-            removed += 1;
+/// Bytes the files of [`run_files`] take: the space a run in `dir` frees
+/// before it writes.
+pub fn run_files_bytes(dir: &Path) -> u64 {
+    run_files(dir)
+        .iter()
+        .filter_map(|f| std::fs::metadata(f).ok())
+        .map(|m| m.len())
+        .sum()
+}
+
+/// Removes every earlier run's file from `dir` (see [`run_files`]), and
+/// tiled frame folders left empty; returns how many files.
+pub fn clear_previous_run(dir: &Path) -> Result<usize> {
+    let files = run_files(dir);
+    for path in &files {
+        std::fs::remove_file(path).map_err(|e| Error::io(path, e))?;
+    }
+    if let Ok(entries) = std::fs::read_dir(dir.join("micro")) {
+        for entry in entries.flatten() {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if entry.file_type().is_ok_and(|t| t.is_dir()) && is_tiled_frame(&name) {
+                // Kept when the user put files of their own there.
+                let _ = std::fs::remove_dir(entry.path());
+            }
         }
     }
-    // Kept when the user put files of their own there.
-    let _ = std::fs::remove_dir(folder);
-    Ok(removed)
+    Ok(files.len())
 }
 
 /// Whether `a` and `b` name the same existing file (after following links

@@ -229,11 +229,7 @@ fn link_or_copy(src: &Path, dst: &Path) -> Result<()> {
 
 /// Writes the neutral map (and its normals) under `micro/`; warns when the
 /// map's texel size disagrees with the patch it is stretched over.
-pub(crate) fn write_neutral(
-    dir: &Path,
-    patch_width_mm: f64,
-    micro: &MicroSetup,
-) -> Result<Vec<PathBuf>> {
+pub(crate) fn write_neutral(dir: &Path, patch_width_mm: f64, micro: &MicroSetup) -> Result<()> {
     let folder = dir.join("micro");
     std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
     let map = match &micro.neutral {
@@ -250,7 +246,7 @@ pub(crate) fn write_neutral(
             patch_texel_um
         );
     }
-    let mut written = write_micro_frame(&folder, "neutral", micro, map, None)?;
+    write_micro_frame(&folder, "neutral", micro, map, None)?;
     if micro.roughness_table {
         let ratios: Vec<f64> = (0..=14).map(|k| 0.7 + 0.05 * k as f64).collect();
         let table = crate::micro::roughness::tabulate(map, &micro.model, &ratios);
@@ -260,20 +256,15 @@ pub(crate) fn write_neutral(
         }
         let path = folder.join("roughness.csv");
         io::write_atomically(&path, csv.as_bytes())?;
-        written.push(path);
     }
-    Ok(written)
+    Ok(())
 }
 
 /// The neutral tiled map as `micro/height_neutral.tiles`: its tiles linked
 /// (or copied) from the input and, when asked, each tile's normals (from the
 /// tile and the one-texel ring of its neighbours around it, so they equal
 /// the whole map's).
-fn write_neutral_tiles(
-    folder: &Path,
-    micro: &MicroSetup,
-    tiled: &TiledMap,
-) -> Result<Vec<PathBuf>> {
+fn write_neutral_tiles(folder: &Path, micro: &MicroSetup, tiled: &TiledMap) -> Result<()> {
     let dir = folder.join("height_neutral.tiles");
     let out = TiledMap::create(&dir, &tiled.metadata(tiled.width, tiled.height), tiled.tile)?;
     let (cols, rows) = tiled.grid();
@@ -290,7 +281,7 @@ fn write_neutral_tiles(
             }
         }
     }
-    Ok(vec![dir])
+    Ok(())
 }
 
 /// Writes a map as `height_TAG.{png,exr}` and, when asked, its normals as

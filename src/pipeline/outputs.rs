@@ -65,8 +65,6 @@ pub(super) struct FrameOutputs<'a, R: MetricsRow> {
     renderer: Option<RenderEngine>,
     metrics: Option<MetricsWriter<R>>,
     collection: Vec<(f64, PathBuf)>,
-    /// Files written before the frames, in order.
-    pub written: Vec<PathBuf>,
     /// Every frame's row, in order.
     pub rows: Vec<R>,
 }
@@ -115,7 +113,6 @@ impl<'a, R: MetricsRow + Copy> FrameOutputs<'a, R> {
             renderer,
             metrics: None,
             collection: Vec::new(),
-            written: Vec::new(),
             rows: Vec::new(),
         })
     }
@@ -123,16 +120,14 @@ impl<'a, R: MetricsRow + Copy> FrameOutputs<'a, R> {
     /// Writes the neutral microstructure and the header of `metrics.csv`.
     pub fn start(&mut self) -> Result<()> {
         if let Some(micro) = self.spec.outputs.micro.as_ref() {
-            let neutral = write_neutral(
+            write_neutral(
                 self.spec.outputs.dir.as_path(),
                 self.spec.extent_mm.0,
                 micro,
             )?;
-            self.written.extend(neutral);
         }
         let path = self.spec.outputs.dir.as_path().join("metrics.csv");
         self.metrics = Some(MetricsWriter::create(&path)?);
-        self.written.push(path);
         Ok(())
     }
 
@@ -203,37 +198,18 @@ impl<'a, R: MetricsRow + Copy> FrameOutputs<'a, R> {
         Ok(())
     }
 
-    /// After the last frame: the collection file and the folders of
-    /// per-frame files (when `folders`) added to the files written, the MP4
-    /// files encoded, and where the microstructure ran.
-    pub fn finish(mut self, folders: bool) -> Result<Finished<R>> {
-        let dir = self.spec.outputs.dir.as_path();
-        if !self.collection.is_empty() {
-            self.written.push(dir.join("frames.pvd"));
+    /// After the last frame: the MP4 files encoded, and where the
+    /// microstructure ran.
+    pub fn finish(self) -> Result<Finished<R>> {
+        if let (Some(r), Some(renderer)) = (self.spec.outputs.render.as_ref(), &self.renderer) {
+            renderer.finish(r, self.spec.frame_rate_hz)?;
         }
-        if folders {
-            for (folder, wanted) in [
-                ("frames", self.spec.outputs.write_frames),
-                ("strain", self.spec.outputs.strain_images.is_some()),
-                ("micro", self.spec.outputs.micro.as_ref().is_some()),
-            ] {
-                if wanted {
-                    self.written.push(dir.join(folder));
-                }
-            }
-        }
-        let rendered = match (self.spec.outputs.render.as_ref(), &self.renderer) {
-            (Some(r), Some(renderer)) => renderer.finish(r, self.spec.frame_rate_hz)?,
-            _ => Vec::new(),
-        };
         let micro_device = self
             .engines
             .first()
             .zip(self.spec.outputs.micro.as_ref())
             .map(|(e, m)| e.summary(m));
         Ok(Finished {
-            written: self.written,
-            rendered,
             rows: self.rows,
             micro_device,
         })
@@ -256,8 +232,8 @@ pub enum RunKind {
 pub struct RunSummary<R> {
     /// The kind of run.
     pub kind: RunKind,
-    /// Files written, in order (per-frame files are summarised by the
-    /// collection or their folder).
+    /// Every file the run wrote, sorted by path (see
+    /// [`crate::export::outputs::run_files`]; `summary.json` follows).
     pub written: Vec<PathBuf>,
     /// Quality of the mesh (the FEM run; `None` for a surface).
     pub quality: Option<crate::mesh::QualityReport>,
@@ -269,11 +245,6 @@ pub struct RunSummary<R> {
 
 /// What the output stage wrote, for the run's summary.
 pub(super) struct Finished<R> {
-    /// Files written before the frames, the collection, the per-frame
-    /// folders.
-    pub written: Vec<PathBuf>,
-    /// The renderer's closing files (MP4s).
-    pub rendered: Vec<PathBuf>,
     /// Every frame's row.
     pub rows: Vec<R>,
     /// Where the microstructure stages ran.

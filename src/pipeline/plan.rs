@@ -179,6 +179,25 @@ fn refuse(
     force: bool,
     rate_key: &str,
 ) -> Result<()> {
+    refuse_within(
+        planned,
+        frames,
+        output_dir,
+        force,
+        rate_key,
+        free_bytes(output_dir),
+    )
+}
+
+/// [`refuse`] with `free` bytes free where the run goes.
+fn refuse_within(
+    planned: u64,
+    frames: usize,
+    output_dir: &std::path::Path,
+    force: bool,
+    rate_key: &str,
+    free: Option<u64>,
+) -> Result<()> {
     let gb = |b: u64| b as f64 / 1e9;
     if planned > MAX_PLANNED_BYTES && !force {
         return Err(Error::parameter(
@@ -192,16 +211,28 @@ fn refuse(
             ),
         ));
     }
-    if let Some(free) = free_bytes(output_dir) {
-        if planned > free {
+    if let Some(free) = free {
+        // The previous run's files go before this run writes: their space
+        // is this run's too.
+        let previous = crate::export::outputs::run_files_bytes(output_dir);
+        if planned > free.saturating_add(previous) {
+            let freed = if previous > 0 {
+                format!(
+                    " (counting the {:.2} GB of the previous run's files it replaces)",
+                    gb(previous)
+                )
+            } else {
+                String::new()
+            };
             return Err(Error::io(
                 output_dir,
                 std::io::Error::new(
                     std::io::ErrorKind::StorageFull,
                     format!(
-                        "the run would write about {:.2} GB but only {:.2} GB are free there",
+                        "the run would write about {:.2} GB but only {:.2} GB are free \
+                         there{freed}",
                         gb(planned),
-                        gb(free)
+                        gb(free.saturating_add(previous)),
                     ),
                 ),
             ));
@@ -226,5 +257,27 @@ mod tests {
         setup.simulation.frames *= 10;
         assert!(planned_bytes(&setup) as f64 > 9.0 * planned);
         assert!(free_bytes(std::path::Path::new("no/such/folder")).is_some_and(|b| b > 0));
+    }
+
+    /// The free-space check counts the previous run's files, which the
+    /// run removes before it writes, and only those.
+    #[test]
+    fn the_previous_runs_files_count_as_free() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path();
+        std::fs::create_dir(out.join("frames")).unwrap();
+        std::fs::write(out.join("frames/frame_0001.vtu"), vec![0u8; 3000]).unwrap();
+        std::fs::write(out.join("notes.txt"), vec![0u8; 5000]).unwrap();
+        let check =
+            |planned| refuse_within(planned, 2, out, false, "time.frame_rate_hz", Some(1000));
+        check(4000).unwrap();
+        let e = check(4001).unwrap_err().to_string();
+        assert!(
+            e.contains("only 0.00 GB are free") && e.contains("counting the 0.00 GB"),
+            "{e}"
+        );
+        std::fs::remove_file(out.join("frames/frame_0001.vtu")).unwrap();
+        assert!(check(1001).is_err());
+        check(1000).unwrap();
     }
 }

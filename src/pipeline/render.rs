@@ -197,18 +197,16 @@ impl RenderEngine {
         Ok(())
     }
 
-    /// Encodes the MP4s (when asked) and returns the files written.
-    pub(super) fn finish(&self, setup: &RenderSetup, frame_rate_hz: f64) -> Result<Vec<PathBuf>> {
-        let mut written: Vec<PathBuf> = self.folders.iter().map(|(_, f)| f.clone()).collect();
-        written.extend(self.difference.iter().cloned());
+    /// Encodes the MP4s (when asked).
+    pub(super) fn finish(&self, setup: &RenderSetup, frame_rate_hz: f64) -> Result<()> {
         if setup.mp4 && !self.rendered.is_empty() {
             let fps = frame_rate_hz / setup.frame_stride as f64;
             for (mode, folder) in &self.folders {
                 let out = folder.with_file_name(format!("{}.mp4", mode.name()));
-                written.push(frames::encode_mp4(folder, &self.rendered, fps, &out)?);
+                frames::encode_mp4(folder, &self.rendered, fps, &out)?;
             }
         }
-        Ok(written)
+        Ok(())
     }
 }
 

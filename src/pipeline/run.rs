@@ -5,8 +5,6 @@
 //! failing frame stops the run with an error naming it; everything written
 //! before stays.
 
-use std::path::PathBuf;
-
 use super::outputs::{FrameInput, FrameOutputs, MapPiece, OutputSpec, RunKind, RunSummary};
 use super::{plan, stepper::simulate, texel_mm, vtkhdf};
 use crate::error::{Error, Result};
@@ -88,9 +86,8 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<FemRun
         triangles: None,
     };
     let mut outputs = FrameOutputs::open(output_spec(setup), vec![whole])?;
-    let mut written = write_rest_mesh(setup)?;
+    write_rest_mesh(setup)?;
     outputs.start()?;
-    let mut written_after = Vec::new();
     let mut hdf = None;
     let mut exported = SurfaceExport::open(setup)?;
     let result = simulate(setup, |m, sim| {
@@ -135,15 +132,12 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<FemRun
     // run's own error, if any, is the one reported.
     let closed = vtkhdf::finish(hdf);
     result?;
-    written_after.extend(closed?);
-    exported.finish(&mut written_after)?;
-    let finished = outputs.finish(false)?;
-    written.extend(finished.written);
-    written.extend(written_after);
-    written.extend(finished.rendered);
+    closed?;
+    exported.finish()?;
+    let finished = outputs.finish()?;
     Ok(RunSummary {
         kind: RunKind::Fem,
-        written,
+        written: export::outputs::run_files(&setup.outputs.dir),
         quality: Some(QualityReport::of(mesh)),
         frames: finished.rows,
         micro_device: finished.micro_device,
@@ -164,21 +158,17 @@ fn output_spec(setup: &Setup) -> OutputSpec<'_> {
     }
 }
 
-/// The rest mesh as VTU and TetGen files, as asked for; returns the paths.
-fn write_rest_mesh(setup: &Setup) -> Result<Vec<PathBuf>> {
+/// The rest mesh as VTU and TetGen files, as asked for.
+fn write_rest_mesh(setup: &Setup) -> Result<()> {
     let (dir, mesh) = (&setup.outputs.dir, &setup.mesh);
-    let mut written = Vec::new();
     if setup.write_mesh_vtu {
         let path = dir.join("mesh.vtu");
         io::write_vtu_as(&path, &io::Grid::from_mesh(mesh), setup.outputs.vtu_format)?;
-        written.push(path);
     }
     if setup.write_mesh_tetgen {
-        let base = dir.join("mesh");
-        io::write_tetgen(mesh, &base)?;
-        written.extend(io::tetgen_paths(&base));
+        io::write_tetgen(mesh, &dir.join("mesh"))?;
     }
-    Ok(written)
+    Ok(())
 }
 
 /// The top surface's animation, when exported: an OBJ per frame as the
@@ -228,16 +218,11 @@ impl<'a> SurfaceExport<'a> {
         Ok(())
     }
 
-    /// Writes the GLB; adds what was written to `written`.
-    fn finish(self, written: &mut Vec<PathBuf>) -> Result<()> {
-        let dir = &self.setup.outputs.dir;
-        if self.setup.write_surface_obj {
-            written.push(dir.join("surface"));
-        }
+    /// Writes the GLB.
+    fn finish(self) -> Result<()> {
         if let (true, Some(surface)) = (self.setup.write_surface_glb, &self.surface) {
-            let path = dir.join("surface.glb");
+            let path = self.setup.outputs.dir.join("surface.glb");
             crate::surface::gltf::write_glb(&path, surface)?;
-            written.push(path);
         }
         Ok(())
     }

@@ -70,13 +70,11 @@ pub fn run(
         })
         .collect();
     let mut outputs = FrameOutputs::open(spec, pieces)?;
-    let mut written = Vec::new();
     if setup.write_surface_vtu {
         let rest_field = SurfaceField::new(&surface.top, &surface.positions, &surface.positions);
         let path = dir.join("surface.vtu");
         let grid = export::surface_grid(surface, &surface.positions, &rest_field);
         io::write_vtu_as(&path, &grid, setup.outputs.vtu_format)?;
-        written.push(path);
     }
     outputs.start()?;
     let total_frames = surface.num_frames();
@@ -115,13 +113,10 @@ pub fn run(
             field: &field,
         });
     }
-    let finished = outputs.finish(true)?;
-    let mut all = finished.written;
-    all.splice(0..0, written);
-    all.extend(finished.rendered);
+    let finished = outputs.finish()?;
     Ok(RunSummary {
         kind: RunKind::Surface,
-        written: all,
+        written: export::outputs::run_files(dir),
         quality: None,
         frames: finished.rows,
         micro_device: finished.micro_device,

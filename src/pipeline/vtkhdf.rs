@@ -2,7 +2,7 @@
 //! (scenario validation refuses `output.frames_vtkhdf` without it, so the
 //! stand-ins below are never asked to write).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use crate::error::Result;
 use crate::mesh::io::Grid;
@@ -52,13 +52,13 @@ pub(super) fn push(
     ))
 }
 
-/// Closes the file, if one was written, and returns its path.
-pub(super) fn finish(writer: Option<Writer>) -> Result<Option<PathBuf>> {
+/// Closes the file, if one was written.
+pub(super) fn finish(writer: Option<Writer>) -> Result<()> {
     #[cfg(feature = "vtkhdf")]
-    return writer.map(Writer::finish).transpose();
+    return writer.map(Writer::finish).transpose().map(drop);
     #[cfg(not(feature = "vtkhdf"))]
     match writer {
-        None => Ok(None),
+        None => Ok(()),
         Some(never) => match never {},
     }
 }
