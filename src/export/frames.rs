@@ -44,8 +44,14 @@ pub fn encode_mp4(folder: &Path, frame_numbers: &[usize], fps: f64, out: &Path) 
     let mut child = Command::new("ffmpeg")
         .args(["-y", "-loglevel", "error", "-f", "image2pipe", "-framerate"])
         .arg(format!("{fps}"))
-        .args(["-i", "-", "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2"])
+        // Converted to video levels with the BT.709 matrix and tagged so:
+        // an untagged file leaves players to guess (often BT.601, which
+        // shifts skin tones).
+        .args(["-i", "-", "-vf"])
+        .arg("pad=ceil(iw/2)*2:ceil(ih/2)*2,scale=out_color_matrix=bt709:out_range=tv")
         .args(["-c:v", "libx264", "-pix_fmt", "yuv420p"])
+        .args(["-colorspace", "bt709", "-color_primaries", "bt709"])
+        .args(["-color_trc", "bt709", "-color_range", "tv"])
         .arg(&partial)
         .stdin(Stdio::piped())
         .stdout(Stdio::null())
