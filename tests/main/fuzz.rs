@@ -216,8 +216,9 @@ const MESH_NASTY: [&str; 10] = [
     "2 3 4 5 6 7 8 9",
 ];
 
-/// Replaces field `f` of line `l` (or drops / repeats the line).
-fn mutate_mesh(text: &str, edits: &[(usize, usize, usize)]) -> String {
+/// Replaces field `f` of line `l` with `nasty[v]` (or, for `v` past the
+/// list, drops or repeats the line).
+pub(crate) fn mutate_lines(text: &str, edits: &[(usize, usize, usize)], nasty: &[&str]) -> String {
     let mut lines: Vec<Vec<String>> = text
         .lines()
         .map(|l| l.split_whitespace().map(str::to_string).collect())
@@ -227,17 +228,17 @@ fn mutate_mesh(text: &str, edits: &[(usize, usize, usize)]) -> String {
             break;
         }
         let l = l % lines.len();
-        match v {
-            v if v < MESH_NASTY.len() => {
+        match v.checked_sub(nasty.len()) {
+            None => {
                 if !lines[l].is_empty() {
                     let f = f % lines[l].len();
-                    lines[l][f] = MESH_NASTY[v].to_string();
+                    lines[l][f] = nasty[v].to_string();
                 }
             }
-            v if v == MESH_NASTY.len() => {
+            Some(0) => {
                 lines.remove(l);
             }
-            _ => {
+            Some(_) => {
                 let line = lines[l].clone();
                 lines.insert(l, line);
             }
@@ -268,8 +269,8 @@ proptest! {
         let base = write_tetgen_text(
             dir.path(),
             "cube",
-            &mutate_mesh(&node, &node_edits),
-            &mutate_mesh(&ele, &ele_edits),
+            &mutate_lines(&node, &node_edits, &MESH_NASTY),
+            &mutate_lines(&ele, &ele_edits, &MESH_NASTY),
         );
         if let Err(e) = skinpatch::mesh::io::read_tetgen(&base) {
             prop_assert!(e.to_string().contains("cube"), "{}", e);
@@ -285,7 +286,7 @@ proptest! {
         });
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("box.msh");
-        std::fs::write(&path, mutate_mesh(text, &edits)).unwrap();
+        std::fs::write(&path, mutate_lines(text, &edits, &MESH_NASTY)).unwrap();
         if let Err(e) = skinpatch::mesh::io::read_gmsh(&path) {
             prop_assert!(e.to_string().contains("box.msh"), "{}", e);
         }

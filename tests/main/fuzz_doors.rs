@@ -15,7 +15,7 @@ use proptest::prelude::*;
 use skinpatch::micro::{DisplacementMap, Edge};
 
 use crate::common::root;
-use crate::fuzz::config;
+use crate::fuzz::{config, mutate_lines};
 
 /// The shipped animated surface.
 fn forehead() -> &'static [u8] {
@@ -226,40 +226,6 @@ const OBJ_NASTY: [&str; 12] = [
     "1/2/3/4",
     "2//",
 ];
-
-/// Replaces field `f` of line `l` (or drops or repeats the line).
-fn mutate_lines(text: &str, edits: &[(usize, usize, usize)], nasty: &[&str]) -> String {
-    let mut lines: Vec<Vec<String>> = text
-        .lines()
-        .map(|l| l.split_whitespace().map(str::to_string).collect())
-        .collect();
-    for &(l, f, v) in edits {
-        if lines.is_empty() {
-            break;
-        }
-        let l = l % lines.len();
-        match v.checked_sub(nasty.len()) {
-            None => {
-                if !lines[l].is_empty() {
-                    let f = f % lines[l].len();
-                    lines[l][f] = nasty[v].to_string();
-                }
-            }
-            Some(0) => {
-                lines.remove(l);
-            }
-            Some(_) => {
-                let line = lines[l].clone();
-                lines.insert(l, line);
-            }
-        }
-    }
-    lines
-        .iter()
-        .map(|l| l.join(" "))
-        .collect::<Vec<_>>()
-        .join("\n")
-}
 
 proptest! {
     #![proptest_config(config(150))]
