@@ -200,8 +200,10 @@ impl TiledMap {
         } else {
             parent
         };
-        if !crate::export::outputs::same_file(parent, &self.dir) {
-            return false;
+        // Folders cannot be hard links: their canonical paths decide.
+        match (std::fs::canonicalize(parent), std::fs::canonicalize(&self.dir)) {
+            (Ok(a), Ok(b)) if a == b => {}
+            _ => return false,
         }
         if name == INDEX_FILE {
             return true;
