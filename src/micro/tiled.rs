@@ -201,7 +201,10 @@ impl TiledMap {
             parent
         };
         // Folders cannot be hard links: their canonical paths decide.
-        match (std::fs::canonicalize(parent), std::fs::canonicalize(&self.dir)) {
+        match (
+            std::fs::canonicalize(parent),
+            std::fs::canonicalize(&self.dir),
+        ) {
             (Ok(a), Ok(b)) if a == b => {}
             _ => return false,
         }
