@@ -129,6 +129,44 @@ impl MeshArgs {
     }
 }
 
+impl MeshArgs {
+    /// The flag the user typed for the scenario key `key`, if any: a value
+    /// refused by the mesh checks is named as it was given.
+    fn flag_for(&self, key: &str) -> Option<&'static str> {
+        let given = |set: bool, flag: &'static str| set.then_some(flag);
+        match key {
+            "mesh.width_mm" => given(self.width_mm.is_some(), "--width-mm"),
+            "mesh.depth_mm" => given(self.depth_mm.is_some(), "--depth-mm"),
+            "mesh.top_layer_mm" => given(self.top_layer_mm.is_some(), "--top-layer-mm"),
+            "mesh.bottom_layer_mm" => given(self.bottom_layer_mm.is_some(), "--bottom-layer-mm"),
+            "mesh.top_max_volume_mm3" => {
+                given(self.top_max_volume_mm3.is_some(), "--top-max-volume-mm3")
+            }
+            "mesh.bottom_max_volume_mm3" => {
+                given(self.bottom_max_volume_mm3.is_some(), "--bottom-max-volume-mm3")
+            }
+            "mesh.target_tets" => given(self.target_tets.is_some(), "--target-tets"),
+            "mesh.radius_edge_max" => given(self.radius_edge_max.is_some(), "--radius-edge-max"),
+            "mesh.min_dihedral_deg" => given(self.min_dihedral_deg.is_some(), "--min-dihedral-deg"),
+            "mesh.refine" => given(self.refine_sphere.is_some(), "--refine-sphere")
+                .or(given(self.refine_box.is_some(), "--refine-box"))
+                .or(given(self.refine_max_volume_mm3.is_some(), "--refine-max-volume-mm3")),
+            _ => None,
+        }
+    }
+
+    /// `e` with its scenario key replaced by the flag that set it.
+    fn name_flag(&self, e: skinpatch::Error) -> anyhow::Error {
+        match e {
+            skinpatch::Error::Parameter { key, reason } => match self.flag_for(&key) {
+                Some(flag) => anyhow::anyhow!("{flag}: {reason}"),
+                None => skinpatch::Error::Parameter { key, reason }.into(),
+            },
+            e => e.into(),
+        }
+    }
+}
+
 /// Runs `skinpatch mesh`.
 pub fn run(args: MeshArgs) -> anyhow::Result<()> {
     let (mesh, poly) = if let Some(input) = &args.input {
@@ -147,8 +185,11 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
         if section.file.is_some() {
             bail!("the scenario's [mesh] loads a file; use --input to inspect a mesh file");
         }
-        let spec = args.overlay(section)?.patch_spec()?;
-        let (mesh, scale) = generate_scaled(&spec)?;
+        let spec = args
+            .overlay(section)?
+            .patch_spec()
+            .map_err(|e| args.name_flag(e))?;
+        let (mesh, scale) = generate_scaled(&spec).map_err(|e| args.name_flag(e))?;
         (mesh, Some(poly_text(&spec, scale)))
     };
     let mut report = QualityReport::of(&mesh).to_string();

@@ -59,6 +59,20 @@ const HEADER: &str = "frame,time_s,probe_force_x_n,probe_force_y_n,probe_force_z
 contact_nodes,contact_area_mm2,max_penetration_mm,newton_iterations,linear_iterations,rel_residual,\
 rs_min,rs_max,rt_min,rt_max,folded_vertices,inverted_tets,min_volume_ratio,step_wall_s";
 
+/// A real number as every `metrics.csv` writes it: the shortest digits
+/// that read back to the same bits, in plain decimal from 1e-4 up to 1e16
+/// and in scientific notation (`1.5e-7`) outside that range, as spreadsheet
+/// and data-frame readers parse both. (Wall times alone are fixed to
+/// microseconds.)
+pub fn csv_number(x: f64) -> String {
+    let magnitude = x.abs();
+    if x == 0.0 || !x.is_finite() || (1e-4..1e16).contains(&magnitude) {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
+    }
+}
+
 /// A row type of `metrics.csv`: its header and how a row is written.
 pub trait MetricsRow {
     /// The header line (column names, comma-separated, no newline).
@@ -74,22 +88,25 @@ impl MetricsRow for FrameMetrics {
         let m = self;
         let [fx, fy, fz] = m.probe_force_n;
         format!(
-            "{},{},{fx:e},{fy:e},{fz:e},{},{:e},{:e},{},{},{:e},{:e},{:e},{:e},{:e},{},{},{:e},{:.6}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.6}\n",
             m.frame,
-            m.time_s,
+            csv_number(m.time_s),
+            csv_number(fx),
+            csv_number(fy),
+            csv_number(fz),
             m.contact_nodes,
-            m.contact_area_mm2,
-            m.max_penetration_mm,
+            csv_number(m.contact_area_mm2),
+            csv_number(m.max_penetration_mm),
             m.newton_iterations,
             m.linear_iterations,
-            m.rel_residual,
-            m.rs_range[0],
-            m.rs_range[1],
-            m.rt_range[0],
-            m.rt_range[1],
+            csv_number(m.rel_residual),
+            csv_number(m.rs_range[0]),
+            csv_number(m.rs_range[1]),
+            csv_number(m.rt_range[0]),
+            csv_number(m.rt_range[1]),
             m.folded_vertices,
             m.inverted_tets,
-            m.min_volume_ratio,
+            csv_number(m.min_volume_ratio),
             m.step_wall_s
         )
     }
@@ -123,11 +140,11 @@ impl MetricsRow for SurfaceMetrics {
         format!(
             "{},{},{},{},{},{},{},{},{:.6}\n",
             m.frame,
-            m.time_s,
-            m.rs_range[0],
-            m.rs_range[1],
-            m.rt_range[0],
-            m.rt_range[1],
+            csv_number(m.time_s),
+            csv_number(m.rs_range[0]),
+            csv_number(m.rs_range[1]),
+            csv_number(m.rt_range[0]),
+            csv_number(m.rt_range[1]),
             m.folded_vertices,
             m.degenerate_triangles,
             m.wall_s
@@ -384,6 +401,58 @@ pub fn write_collection(dir: &Path, frames: &[(f64, PathBuf)]) -> Result<PathBuf
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every real column reads back to its bits, and the FEM and surface
+    /// rows write the same value the same way.
+    #[test]
+    fn metrics_numbers_round_trip_in_one_format() {
+        let values = [
+            0.0,
+            1.0,
+            0.25,
+            1.0000000000000007,
+            0.016666666666666666,
+            -0.13623,
+            1e-4,
+            9.99e-5,
+            -7.397313997013684e-5,
+            6.2e-17,
+            1e16,
+            123456.789,
+        ];
+        for x in values {
+            let text = csv_number(x);
+            assert_eq!(text.parse::<f64>().unwrap().to_bits(), x.to_bits(), "{text}");
+        }
+        assert_eq!(csv_number(0.016666666666666666), "0.016666666666666666");
+        assert_eq!(csv_number(-7.397313997013684e-5), "-7.397313997013684e-5");
+        assert_eq!(csv_number(1.0), "1");
+        let fem = FrameMetrics {
+            time_s: 0.1,
+            rs_range: [0.98, 1.0000000000000007],
+            ..FrameMetrics::default()
+        };
+        let surface = SurfaceMetrics {
+            frame: 0,
+            time_s: 0.1,
+            rs_range: [0.98, 1.0000000000000007],
+            rt_range: [0.0; 2],
+            folded_vertices: 0,
+            degenerate_triangles: 0,
+            wall_s: 0.0,
+        };
+        let column = |header: &str, row: &str, name: &str| {
+            let i = header.split(',').position(|c| c == name).unwrap();
+            row.trim_end().split(',').nth(i).unwrap().to_string()
+        };
+        for name in ["time_s", "rs_min", "rs_max"] {
+            assert_eq!(
+                column(FrameMetrics::HEADER, &fem.csv_row(), name),
+                column(SurfaceMetrics::HEADER, &surface.csv_row(), name),
+                "{name}"
+            );
+        }
+    }
 
     /// A sink that takes `room` bytes, then fails like a full disk (after a
     /// partial write).

@@ -198,12 +198,17 @@ impl PatchSpec {
             ));
         }
         let tol = 1e-6 * h;
+        let what = match zone.shape {
+            ZoneShape::Sphere { .. } => "the zone's depth (a hemisphere's radius)",
+            ZoneShape::Box { .. } => "the zone's depth",
+        };
         for z in self.interface_depths() {
             if (zd - z).abs() < tol {
                 return Err(Error::parameter(
                     key,
                     format!(
-                        "zone depth {zd} mm coincides with the layer interface at {z} mm; move it"
+                        "{what} {zd} mm coincides with the layer interface at {z} mm; \
+                         make it larger or smaller"
                     ),
                 ));
             }
