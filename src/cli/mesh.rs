@@ -62,17 +62,28 @@ pub struct MeshArgs {
         long,
         value_delimiter = ',',
         value_name = "X,Y,R",
-        conflicts_with = "refine_box"
+        conflicts_with = "refine_box",
+        allow_hyphen_values = true
     )]
     refine_sphere: Option<Vec<f64>>,
     /// Refine a box hanging from the top surface: X,Y,SIZE_X,SIZE_Y,DEPTH (mm).
-    #[arg(long, value_delimiter = ',', value_name = "X,Y,SX,SY,D")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        value_name = "X,Y,SX,SY,D",
+        allow_hyphen_values = true
+    )]
     refine_box: Option<Vec<f64>>,
     /// Largest tet volume inside the refinement zone (mm³).
     #[arg(long)]
     refine_max_volume_mm3: Option<f64>,
     /// Also report the longest edge of the tets within R of the point (X, Y, Z) (mm).
-    #[arg(long, value_delimiter = ',', value_name = "X,Y,Z,R")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        value_name = "X,Y,Z,R",
+        allow_hyphen_values = true
+    )]
     edges_within: Option<Vec<f64>>,
 }
 

@@ -198,6 +198,39 @@ fn mesh_from_flags_writes_all_files() {
     assert!(stdout.contains("dihedral angles: min"), "{stdout}");
 }
 
+/// A value refused by the mesh checks is named by the flag that gave it,
+/// not by the scenario key the user never typed.
+#[test]
+fn mesh_flags_are_named_in_refusals() {
+    let dir = tempfile::tempdir().unwrap();
+    let base = dir.path().join("m");
+    let cases: [(&[&str], &str); 3] = [
+        (
+            &["--top-layer-mm", "1", "--refine-sphere", "0.5,0,1"],
+            "--refine-sphere: the zone's depth (a hemisphere's radius) 1 mm coincides with \
+             the layer interface at 1 mm",
+        ),
+        (&["--width-mm=-2"], "--width-mm: must be > 0, got -2"),
+        // A negative coordinate is a value, not a flag.
+        (
+            &["--refine-sphere", "-5.5,0,0.5"],
+            "--refine-sphere: zone x ∈ [-6, -5]",
+        ),
+    ];
+    for (flags, expected) in cases {
+        let mut args = vec!["mesh", "--refine-max-volume-mm3", "0.001"];
+        if !flags.contains(&"--refine-sphere") {
+            args.truncate(1);
+        }
+        args.extend_from_slice(flags);
+        args.extend_from_slice(&["--out", base.to_str().unwrap()]);
+        let o = skinpatch(&args);
+        let stderr = text(&o.stderr);
+        assert!(!o.status.success() && stderr.contains(expected), "{args:?}: {stderr}");
+        assert!(!stderr.contains("mesh."), "{stderr}");
+    }
+}
+
 #[test]
 fn mesh_inspects_a_file() {
     let o = skinpatch(&["mesh", "--input", "tests/fixtures/two_layer_box.msh"]);
