@@ -53,9 +53,11 @@ pub enum BenchCommand {
 /// `bench gpu`.
 #[derive(Args)]
 pub struct GpuArgs {
-    /// Scenario (its mesh, kernel model, render settings and first frames).
-    #[arg(long, default_value = "examples/press.toml")]
-    scenario: PathBuf,
+    /// Scenario (its mesh, kernel model, render settings and first frames)
+    /// [default: examples/press.toml of the working directory or of the
+    /// source tree this binary was built from].
+    #[arg(long)]
+    scenario: Option<PathBuf>,
     /// Small sizes for a software adapter (CI): the same parts, in seconds.
     #[arg(long)]
     quick: bool,
@@ -67,9 +69,11 @@ pub struct GpuArgs {
 /// Options every stage takes.
 #[derive(Args)]
 pub struct Common {
-    /// Scenario (its mesh and, for `micro`, its kernel model).
-    #[arg(long, default_value = "examples/press.toml")]
-    scenario: PathBuf,
+    /// Scenario (its mesh and, for `micro`, its kernel model) [default:
+    /// examples/press.toml of the working directory or of the source tree
+    /// this binary was built from].
+    #[arg(long)]
+    scenario: Option<PathBuf>,
     /// Frames to simulate (`fem`, `render`) or timed GPU frames per size
     /// (`micro`).
     #[arg(long, default_value_t = 10)]
@@ -130,25 +134,48 @@ pub struct RenderArgs {
 /// Runs one stage's benchmark and prints its figures.
 pub fn run(command: BenchCommand) -> anyhow::Result<()> {
     match command {
-        BenchCommand::Fem(a) => bench_fem(&a.common.scenario, a.common.frames),
+        BenchCommand::Fem(a) => bench_fem(&scenario_path(&a.common.scenario)?, a.common.frames),
         BenchCommand::Micro(a) => bench_micro(
-            &a.common.scenario,
+            &scenario_path(&a.common.scenario)?,
             a.common.frames,
             &a.sizes,
             (a.texel_um, a.cpu_up_to, a.tile),
             (a.bandwidth_gbs, a.raster_step),
         ),
         BenchCommand::Render(a) => {
-            bench_render(&a.common.scenario, a.common.frames, a.width, a.height)
+            bench_render(&scenario_path(&a.common.scenario)?, a.common.frames, a.width, a.height)
         }
         BenchCommand::Gpu(a) => bench_gpu(&a),
     }
 }
 
+/// The scenario a benchmark runs: the one given, else the press example,
+/// looked for in the working directory and then in the source tree the
+/// binary was built from (so that `bench` runs from any folder on the
+/// machine that built it).
+fn scenario_path(given: &Option<PathBuf>) -> anyhow::Result<PathBuf> {
+    if let Some(path) = given {
+        return Ok(path.clone());
+    }
+    let relative = Path::new("examples/press.toml");
+    let built_from = Path::new(env!("CARGO_MANIFEST_DIR")).join(relative);
+    for candidate in [relative.to_path_buf(), built_from.clone()] {
+        if candidate.is_file() {
+            return Ok(candidate);
+        }
+    }
+    bail!(
+        "no --scenario given, and the default {} is neither in the working directory nor at {}; \
+         pass --scenario FILE (examples/press.toml of the repository, or any scenario)",
+        relative.display(),
+        built_from.display()
+    )
+}
+
 /// `bench gpu`: the report, then its Markdown on stdout.
 fn bench_gpu(args: &GpuArgs) -> anyhow::Result<()> {
     use skinpatch::bench::gpu::{bench_gpu, write_report, GpuBenchSizes};
-    let path = &args.scenario;
+    let path = &scenario_path(&args.scenario)?;
     let setup = Setup::load(path).with_context(|| format!("scenario {}", path.display()))?;
     let sizes = if args.quick {
         GpuBenchSizes::quick()
