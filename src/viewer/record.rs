@@ -13,11 +13,14 @@ use crate::scenario::Scenario;
 /// file in `base`) with its probe path replaced by the solved frames'
 /// keyframes (`path`, `axis`: rows `[t, x, y, z]` at the frame times), the
 /// duration covering them, the materials and friction as last set, and
-/// relative input paths made absolute (the file may be written anywhere).
+/// its input paths rewritten for a file in the folder `dest`: relative to
+/// `dest` where the two share a folder below the file-system root (so that
+/// a project moved or shared as a whole keeps working), absolute otherwise.
 /// The output folder is left to the default (`out/<file stem>`).
 pub fn recorded_scenario(
     original: &Scenario,
     base: &Path,
+    dest: &Path,
     path: &[[f64; 4]],
     axis: &[[f64; 4]],
     materials: &[(String, f64, f64)],
@@ -48,12 +51,13 @@ pub fn recorded_scenario(
         m.youngs_modulus_kpa = Some(*e);
         m.poisson_ratio = Some(*nu);
     }
+    let dest = dest.canonicalize().ok();
     let absolute = |p: &Path| -> PathBuf {
-        if p.is_absolute() {
-            p.to_path_buf()
-        } else {
-            let joined = base.join(p);
-            joined.canonicalize().unwrap_or(joined)
+        let joined = base.join(p);
+        let target = joined.canonicalize().unwrap_or(joined);
+        match &dest {
+            Some(dest) => relative_path(&target, dest).unwrap_or(target),
+            None => target,
         }
     };
     if let Some(file) = &s.mesh.file {
@@ -70,6 +74,33 @@ pub fn recorded_scenario(
     }
     s.output.dir = None;
     Ok(s)
+}
+
+/// `target` as a path relative to the folder `from` (both absolute), or
+/// `None` where they share nothing below the file-system root.
+fn relative_path(target: &Path, from: &Path) -> Option<PathBuf> {
+    use std::path::Component;
+    if !(target.is_absolute() && from.is_absolute()) {
+        return None;
+    }
+    let (t, f): (Vec<Component>, Vec<Component>) =
+        (target.components().collect(), from.components().collect());
+    let common = t.iter().zip(&f).take_while(|(a, b)| a == b).count();
+    let below_root = t[..common]
+        .iter()
+        .filter(|c| matches!(c, Component::Normal(_)))
+        .count();
+    if below_root == 0 {
+        return None;
+    }
+    let mut out = PathBuf::new();
+    for _ in common..f.len() {
+        out.push("..");
+    }
+    for c in &t[common..] {
+        out.push(c);
+    }
+    Some(out)
 }
 
 /// Writes `scenario` to `file` (atomically) under a comment header.
@@ -146,5 +177,30 @@ impl FrameRecorder {
             );
         }
         Ok(written)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paths_are_relative_below_a_shared_folder() {
+        let rel = |t: &str, f: &str| relative_path(Path::new(t), Path::new(f));
+        assert_eq!(
+            rel("/home/ana/skin/meshes/patch.node", "/home/ana/skin/out/view"),
+            Some(PathBuf::from("../../meshes/patch.node"))
+        );
+        assert_eq!(
+            rel("/home/ana/skin/patch.node", "/home/ana/skin"),
+            Some(PathBuf::from("patch.node"))
+        );
+        assert_eq!(
+            rel("/home/ana/skin/out/v/map.png", "/home/ana/skin/out"),
+            Some(PathBuf::from("v/map.png"))
+        );
+        // Nothing shared but the root: stays absolute.
+        assert_eq!(rel("/data/patch.node", "/tmp/view"), None);
+        assert_eq!(rel("meshes/patch.node", "/tmp"), None);
     }
 }

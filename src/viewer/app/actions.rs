@@ -74,9 +74,15 @@ impl App {
             .scenario
             .parent()
             .unwrap_or(std::path::Path::new("."));
+        let dest = file
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty())
+            .unwrap_or(std::path::Path::new("."));
+        std::fs::create_dir_all(dest).map_err(|e| crate::error::Error::io(dest, e))?;
         let recorded = record::recorded_scenario(
             &self.loaded.scenario,
             base,
+            dest,
             &path,
             &axis,
             &self.state.materials,
