@@ -56,7 +56,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let mut setup = Setup::from_scenario(&scenario, path)
         .with_context(|| format!("scenario {}", path.display()))?;
     setup.outputs.force_large_output = force;
-    let progress = (!quiet).then(Progress::new);
+    let progress = (!quiet).then(|| Progress::new(setup.simulation.frames + 1));
     let result = skinpatch::pipeline::run(&setup, |frame| {
         if let Some(p) = &progress {
             p.frame(frame.metrics, frame.total_frames)
@@ -172,7 +172,7 @@ fn run_surface(
     let mut setup = skinpatch::scenario::SurfaceSetup::from_scenario(scenario, path)
         .with_context(|| format!("scenario {}", path.display()))?;
     setup.outputs.force_large_output = force;
-    let progress = (!quiet).then(Progress::new);
+    let progress = (!quiet).then(|| Progress::new(setup.surface.num_frames()));
     let result = skinpatch::pipeline::surface::run(&setup, |frame| {
         if let Some(p) = &progress {
             p.frame(frame.metrics, frame.total_frames)
@@ -248,25 +248,34 @@ impl ProgressLine for SurfaceMetrics {
     }
 }
 
+fn bar_style(template: &str) -> indicatif::ProgressStyle {
+    indicatif::ProgressStyle::with_template(template)
+        .expect("valid template")
+        .progress_chars("=> ")
+}
+
 /// A progress bar on a terminal, plain lines otherwise.
 struct Progress {
     bar: Option<indicatif::ProgressBar>,
 }
 
 impl Progress {
-    fn new() -> Progress {
+    /// A bar for `total` frames, shown at once with the set-up (mesh, GPU
+    /// device, neutral map, first renders) as its message and a running
+    /// clock, so that the seconds before the first frame do not look like
+    /// a hang; from the first frame on it also shows the time left.
+    fn new(total: usize) -> Progress {
         use std::io::IsTerminal;
         let bar = std::io::stderr().is_terminal().then(|| {
-            let bar = indicatif::ProgressBar::new(0);
-            bar.set_style(
-                indicatif::ProgressStyle::with_template(
-                    "{elapsed_precise} [{bar:30}] frame {pos}/{len} {msg}",
-                )
-                .expect("valid template")
-                .progress_chars("=> "),
-            );
+            let bar = indicatif::ProgressBar::new(total as u64);
+            bar.set_style(bar_style("{elapsed_precise} [{bar:30}] frame {pos}/{len}: {msg}"));
+            bar.set_message("setting up (mesh, GPU device, maps)");
+            bar.enable_steady_tick(std::time::Duration::from_millis(250));
             bar
         });
+        if bar.is_none() {
+            eprintln!("setting up {total} frames (mesh, GPU device, maps)");
+        }
         Progress { bar }
     }
 
@@ -275,6 +284,12 @@ impl Progress {
         let (frame, msg) = (row.index(), row.line());
         match &self.bar {
             Some(bar) => {
+                if bar.position() == 0 {
+                    // From the first frame on the rate is known.
+                    bar.set_style(bar_style(
+                        "{elapsed_precise} [{bar:30}] frame {pos}/{len}, {eta} left: {msg}",
+                    ));
+                }
                 bar.set_length(total as u64);
                 bar.set_position(frame as u64 + 1);
                 bar.set_message(msg);
