@@ -142,9 +142,12 @@ pub fn run(command: BenchCommand) -> anyhow::Result<()> {
             (a.texel_um, a.cpu_up_to, a.tile),
             (a.bandwidth_gbs, a.raster_step),
         ),
-        BenchCommand::Render(a) => {
-            bench_render(&scenario_path(&a.common.scenario)?, a.common.frames, a.width, a.height)
-        }
+        BenchCommand::Render(a) => bench_render(
+            &scenario_path(&a.common.scenario)?,
+            a.common.frames,
+            a.width,
+            a.height,
+        ),
         BenchCommand::Gpu(a) => bench_gpu(&a),
     }
 }

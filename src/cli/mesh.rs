@@ -153,15 +153,19 @@ impl MeshArgs {
             "mesh.top_max_volume_mm3" => {
                 given(self.top_max_volume_mm3.is_some(), "--top-max-volume-mm3")
             }
-            "mesh.bottom_max_volume_mm3" => {
-                given(self.bottom_max_volume_mm3.is_some(), "--bottom-max-volume-mm3")
-            }
+            "mesh.bottom_max_volume_mm3" => given(
+                self.bottom_max_volume_mm3.is_some(),
+                "--bottom-max-volume-mm3",
+            ),
             "mesh.target_tets" => given(self.target_tets.is_some(), "--target-tets"),
             "mesh.radius_edge_max" => given(self.radius_edge_max.is_some(), "--radius-edge-max"),
             "mesh.min_dihedral_deg" => given(self.min_dihedral_deg.is_some(), "--min-dihedral-deg"),
             "mesh.refine" => given(self.refine_sphere.is_some(), "--refine-sphere")
                 .or(given(self.refine_box.is_some(), "--refine-box"))
-                .or(given(self.refine_max_volume_mm3.is_some(), "--refine-max-volume-mm3")),
+                .or(given(
+                    self.refine_max_volume_mm3.is_some(),
+                    "--refine-max-volume-mm3",
+                )),
             _ => None,
         }
     }

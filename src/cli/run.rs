@@ -268,7 +268,9 @@ impl Progress {
         use std::io::IsTerminal;
         let bar = std::io::stderr().is_terminal().then(|| {
             let bar = indicatif::ProgressBar::new(total as u64);
-            bar.set_style(bar_style("{elapsed_precise} [{bar:30}] frame {pos}/{len}: {msg}"));
+            bar.set_style(bar_style(
+                "{elapsed_precise} [{bar:30}] frame {pos}/{len}: {msg}",
+            ));
             bar.set_message("setting up (mesh, GPU device, maps)");
             bar.enable_steady_tick(std::time::Duration::from_millis(250));
             bar

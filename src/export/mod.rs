@@ -422,7 +422,11 @@ mod tests {
         ];
         for x in values {
             let text = csv_number(x);
-            assert_eq!(text.parse::<f64>().unwrap().to_bits(), x.to_bits(), "{text}");
+            assert_eq!(
+                text.parse::<f64>().unwrap().to_bits(),
+                x.to_bits(),
+                "{text}"
+            );
         }
         assert_eq!(csv_number(0.016666666666666666), "0.016666666666666666");
         assert_eq!(csv_number(-7.397313997013684e-5), "-7.397313997013684e-5");

@@ -111,18 +111,36 @@ fn edge_name(edge: Edge) -> &'static str {
     }
 }
 
-/// Writes `map` as a 16-bit greyscale PNG with its metadata.
+/// Writes `map` as a 16-bit greyscale PNG with its metadata, quantised
+/// over the map's own height range.
 pub fn write_png16(path: &Path, map: &DisplacementMap) -> Result<()> {
-    let (lo, hi) = map.range();
-    let (lo, hi) = if lo.is_finite() {
-        (lo as f64, hi as f64)
-    } else {
-        (0.0, 0.0)
-    };
+    write_png16_in(path, map, None).map(|_| ())
+}
+
+/// Writes `map` as a 16-bit greyscale PNG quantised over `range` (height
+/// units; `None`: the map's own range), so that a sequence written over one
+/// range shares one offset and scale. Returns the number of texels outside
+/// `range`, stored clipped to its ends.
+pub fn write_png16_in(
+    path: &Path,
+    map: &DisplacementMap,
+    range: Option<[f64; 2]>,
+) -> Result<usize> {
+    let [lo, hi] = range.unwrap_or_else(|| {
+        let (lo, hi) = map.range();
+        if lo.is_finite() {
+            [lo as f64, hi as f64]
+        } else {
+            [0.0, 0.0]
+        }
+    });
     let scale = if hi > lo { (hi - lo) / 65535.0 } else { 1.0 };
     let mut bytes = Vec::with_capacity(2 * map.data.len());
+    let mut clipped = 0;
     for h in flip_rows(&map.data, map.width, map.height) {
-        let q = ((h as f64 - lo) / scale).round().clamp(0.0, 65535.0) as u16;
+        let q = ((h as f64 - lo) / scale).round();
+        clipped += usize::from(!(0.0..=65535.0).contains(&q));
+        let q = q.clamp(0.0, 65535.0) as u16;
         bytes.extend_from_slice(&q.to_be_bytes());
     }
     let mut out = Vec::new();
@@ -139,7 +157,8 @@ pub fn write_png16(path: &Path, map: &DisplacementMap) -> Result<()> {
         writer.write_image_data(&bytes).map_err(failed)?;
         writer.finish().map_err(failed)?;
     }
-    write_atomically(path, &out)
+    write_atomically(path, &out)?;
+    Ok(clipped)
 }
 
 /// Reads a 16-bit (or 8-bit) greyscale PNG.

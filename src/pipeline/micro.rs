@@ -297,7 +297,20 @@ pub(crate) fn write_micro_frame(
     let mut written = Vec::new();
     if micro.png16 {
         let path = folder.join(format!("height_{tag}.png"));
-        io::write_png16(&path, map)?;
+        let clipped = io::write_png16_in(&path, map, micro.png_range)?;
+        if clipped > 0 {
+            let [lo, hi] = micro
+                .png_range
+                .unwrap_or_default()
+                .map(|h| h * map.height_unit_um);
+            log::warn!(
+                "{}: {clipped} texels ({:.3} %) lie outside the run's PNG height range \
+                 [{lo:.2}, {hi:.2}] µm and were clipped; widen [microstructure] height_range_um \
+                 (or read the .exr maps, which are not clipped)",
+                path.display(),
+                100.0 * clipped as f64 / map.data.len() as f64
+            );
+        }
         written.push(path);
     }
     if micro.exr {

@@ -11,6 +11,14 @@ use crate::micro::procedural::{generate, SkinParams};
 use crate::micro::tiled::TiledMap;
 use crate::micro::{DisplacementMap, Edge, KernelModel, PiecewiseLinear};
 
+/// How far the default height range of a run's PNG maps reaches beyond the
+/// neutral map's, as a fraction of the neutral map's span on each side.
+/// Sharpening where the skin compresses deepens the grooves and raises the
+/// ridges: on the main job (`examples/press.toml`) the deformed maps reach
+/// 0.20 of the neutral span above its highest texel and 0.18 below its
+/// lowest.
+pub const HEIGHT_RANGE_MARGIN: f64 = 0.25;
+
 /// `[microstructure]`.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
@@ -40,6 +48,13 @@ pub struct MicrostructureSection {
     pub kernel_file: Option<PathBuf>,
     /// Per-frame map formats: any of `png16`, `exr`. Default `["png16"]`.
     pub formats: Vec<MapFormat>,
+    /// Heights (µm) that the 16-bit PNG maps of a run span, `[low, high]`:
+    /// every frame (and the neutral map) shares this offset and scale, so a
+    /// sequence does not flicker in tools that ignore the scale metadata;
+    /// heights outside are clipped, counted and reported. Default: the
+    /// neutral map's range widened by [`HEIGHT_RANGE_MARGIN`] of its span on
+    /// each side.
+    pub height_range_um: Option<[f64; 2]>,
     /// Also write the normal map of each deformed map. Default true.
     pub normal_maps: bool,
     /// Write the maps of every n-th frame (frame 0 always). Default 1.
@@ -75,6 +90,7 @@ impl Default for MicrostructureSection {
             kernel: None,
             kernel_file: None,
             formats: vec![MapFormat::Png16],
+            height_range_um: None,
             normal_maps: true,
             frame_stride: 1,
             roughness_table: false,
@@ -183,6 +199,9 @@ pub struct MicroSetup {
     pub model: KernelModel,
     /// Write 16-bit PNG maps.
     pub png16: bool,
+    /// The heights (map units) every 16-bit PNG of the run spans; `None`
+    /// for a tiled map (whose frames are EXR tiles).
+    pub png_range: Option<[f64; 2]>,
     /// Write EXR maps.
     pub exr: bool,
     /// Write normal maps.
@@ -224,10 +243,15 @@ impl MicrostructureSection {
         let neutral = self.neutral_map(base, patch_width_mm, cache)?;
         let png16 = self.formats.contains(&MapFormat::Png16);
         let exr = self.formats.contains(&MapFormat::Exr);
+        let png_range = match &neutral {
+            NeutralMap::Whole(map) => Some(self.png_range(map)?),
+            NeutralMap::Tiled(_) => None,
+        };
         Ok(MicroSetup {
             neutral,
             model,
             png16,
+            png_range,
             exr,
             normal_maps: self.normal_maps,
             frame_stride: self.frame_stride,
@@ -235,6 +259,32 @@ impl MicrostructureSection {
             incremental_tolerance: self.incremental_tolerance,
             raster_step: self.strain_raster_step,
         })
+    }
+
+    /// The heights (map units) the PNG maps span: `height_range_um`, or the
+    /// neutral map's range widened by [`HEIGHT_RANGE_MARGIN`] of its span on
+    /// each side.
+    fn png_range(&self, neutral: &DisplacementMap) -> Result<[f64; 2]> {
+        let unit = neutral.height_unit_um;
+        if let Some([lo, hi]) = self.height_range_um {
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                return Err(Error::parameter(
+                    "microstructure.height_range_um",
+                    format!(
+                        "must be two finite heights [low, high] with low < high (µm), got [{}, {}]",
+                        crate::error::shown(lo),
+                        crate::error::shown(hi)
+                    ),
+                ));
+            }
+            return Ok([lo / unit, hi / unit]);
+        }
+        let (lo, hi) = neutral.range();
+        if !(lo.is_finite() && hi.is_finite()) {
+            return Ok([0.0, 0.0]);
+        }
+        let margin = HEIGHT_RANGE_MARGIN * (hi - lo) as f64;
+        Ok([lo as f64 - margin, hi as f64 + margin])
     }
 
     /// The per-frame settings: stride, incremental tolerance, raster step

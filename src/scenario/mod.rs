@@ -32,7 +32,7 @@ mod synth;
 pub use mesh::{MeshSection, RefineSection, ZoneKind};
 pub use micro::{
     FitPoint, FitSample, FitSamples, KernelSection, MapFormat, MicroSetup, MicrostructureSection,
-    NeutralMap, ProceduralSection,
+    NeutralMap, ProceduralSection, HEIGHT_RANGE_MARGIN,
 };
 pub use render::{CameraSection, EnvironmentSection, LightSection, RenderSection};
 pub use simulation::{

@@ -188,7 +188,10 @@ mod tests {
     fn paths_are_relative_below_a_shared_folder() {
         let rel = |t: &str, f: &str| relative_path(Path::new(t), Path::new(f));
         assert_eq!(
-            rel("/home/ana/skin/meshes/patch.node", "/home/ana/skin/out/view"),
+            rel(
+                "/home/ana/skin/meshes/patch.node",
+                "/home/ana/skin/out/view"
+            ),
             Some(PathBuf::from("../../meshes/patch.node"))
         );
         assert_eq!(

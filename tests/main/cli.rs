@@ -226,7 +226,10 @@ fn mesh_flags_are_named_in_refusals() {
         args.extend_from_slice(&["--out", base.to_str().unwrap()]);
         let o = skinpatch(&args);
         let stderr = text(&o.stderr);
-        assert!(!o.status.success() && stderr.contains(expected), "{args:?}: {stderr}");
+        assert!(
+            !o.status.success() && stderr.contains(expected),
+            "{args:?}: {stderr}"
+        );
         assert!(!stderr.contains("mesh."), "{stderr}");
     }
 }
@@ -889,6 +892,114 @@ fn microstructure_maps_per_frame() {
     );
     let normals = image::open(micro.join("normal_0006.png")).unwrap();
     assert_eq!(normals.color(), image::ColorType::Rgb16);
+
+    // One offset and scale for the whole sequence: the neutral map's range
+    // widened by the stated margin, the same bytes in every file, and each
+    // PNG within half a quantisation step of its unquantised EXR twin.
+    let margin = skinpatch::scenario::HEIGHT_RANGE_MARGIN * (hi - lo) as f64;
+    let [offset, scale] = png_quantisation(&micro.join("height_neutral.png"));
+    let expected_offset = lo as f64 - margin;
+    let expected_scale = ((hi - lo) as f64 + 2.0 * margin) / 65535.0;
+    // (`lo`, `hi` come from the quantised neutral map: within a step.)
+    assert!(
+        (offset - expected_offset).abs() < 2.0 * scale,
+        "{offset} vs {expected_offset}"
+    );
+    assert!(
+        (scale / expected_scale - 1.0).abs() < 1e-4,
+        "{scale} vs {expected_scale}"
+    );
+    for tag in ["0000", "0003", "0006"] {
+        let png = micro.join(format!("height_{tag}.png"));
+        assert_eq!(png_quantisation(&png), [offset, scale], "{tag}");
+        let exr =
+            skinpatch::micro::io::read_map(&micro.join(format!("height_{tag}.exr")), &defaults)
+                .unwrap();
+        let quantised = read(&format!("height_{tag}.png"));
+        let worst = quantised
+            .data
+            .iter()
+            .zip(&exr.data)
+            .map(|(a, b)| (a - b).abs() as f64)
+            .fold(0.0, f64::max);
+        assert!(
+            worst <= 0.5001 * scale + 1e-6 * (hi - lo) as f64,
+            "{tag}: {worst} vs step {scale}"
+        );
+    }
+}
+
+/// The `skinpatch:height_offset` and `skinpatch:height_scale` texts of a PNG.
+fn png_quantisation(path: &Path) -> [f64; 2] {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let reader = decoder.read_info().unwrap();
+    let text = &reader.info().uncompressed_latin1_text;
+    let value = |key: &str| -> f64 {
+        text.iter()
+            .find(|c| c.keyword == key)
+            .unwrap_or_else(|| panic!("{key} in {}", path.display()))
+            .text
+            .parse()
+            .unwrap()
+    };
+    [
+        value("skinpatch:height_offset"),
+        value("skinpatch:height_scale"),
+    ]
+}
+
+/// A `height_range_um` narrower than the heights clips them to its ends,
+/// and the run says how many texels it clipped, in which file; the EXR maps
+/// keep the heights.
+#[test]
+fn a_narrow_height_range_clips_and_says_so() {
+    use skinpatch::micro::io::{read_map, MapDefaults, TexelSize};
+    let dir = tempfile::tempdir().unwrap();
+    let (out, o) = run_press_small_with(
+        dir.path(),
+        "\n[microstructure]\nframe_stride = 6\nformats = [\"png16\", \"exr\"]\nnormal_maps = false\n\
+         height_range_um = [-20.0, 0.0]\n[microstructure.procedural]\nsize_px = 128\n",
+    );
+    let stderr = text(&o.stderr);
+    assert!(o.status.success(), "stderr: {stderr}");
+    let micro = out.join("micro");
+    let defaults = MapDefaults {
+        texel: TexelSize::Um(1.0),
+        height_unit_um: 1.0,
+        edge: skinpatch::micro::Edge::Wrap,
+    };
+    let exr = read_map(&micro.join("height_0006.exr"), &defaults).unwrap();
+    let png = read_map(&micro.join("height_0006.png"), &defaults).unwrap();
+    let outside = exr
+        .data
+        .iter()
+        .filter(|&&h| !(-20.0..=0.0).contains(&h))
+        .count();
+    assert!(outside > 0, "the fixture's grooves reach below -20 µm");
+    let step = 20.0 / 65535.0;
+    for (p, e) in png.data.iter().zip(&exr.data) {
+        let expected = e.clamp(-20.0, 0.0);
+        assert!((p - expected).abs() <= 0.51 * step, "{p} vs {e}");
+    }
+    // Clipping is counted texel by texel (a texel within half a step of an
+    // end rounds onto it without being clipped).
+    let counted = stderr
+        .lines()
+        .find(|l| l.contains("height_0006.png") && l.contains("clipped"))
+        .unwrap_or_else(|| panic!("no clipping report: {stderr}"));
+    let n: usize = counted
+        .split(": ")
+        .nth(1)
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{counted}"));
+    let near_ends = exr
+        .data
+        .iter()
+        .filter(|&&h| !(-20.0 - 0.5 * step as f32..=0.5 * step as f32).contains(&h))
+        .count();
+    assert_eq!(n, near_ends, "{counted}");
+    assert!(counted.contains("-20.00, 0.00"), "{counted}");
 }
 
 /// `incremental_tolerance = 0` reuses only tiles whose inputs are
