@@ -1,7 +1,9 @@
-//! PNG maps of the surface strain in texture space, like Nagano et al. 2015's strain
-//! figure: `strain/rs_NNNN.png` and `strain/rt_NNNN.png` (stretch ratios
-//! with a diverging colour map centred at 1 and a colour bar on the right)
-//! and `strain/axes_NNNN.png` (direction of the s axis).
+//! Maps of the surface strain in texture space. Previews like Nagano et
+//! al. 2015's strain figure: `strain/rs_NNNN.png` and `strain/rt_NNNN.png`
+//! (stretch ratios with a diverging colour map centred at 1 and a colour
+//! bar on the right) and `strain/axes_NNNN.png` (direction of the s axis);
+//! and the same field as float data, `strain/strain_NNNN.exr`
+//! ([`write_strain_data`]).
 //!
 //! The maps show UV space with u to the right and v up (the raster's row 0,
 //! v = 0, is the image's bottom row). Colours:
@@ -107,5 +109,121 @@ impl StrainImages {
             written.push(path);
         }
         Ok(written)
+    }
+}
+
+/// Writes the raster's strain as float data, `strain/strain_[TAG]NNNN.exr`
+/// under `dir`: channels `rs`, `rt` (stretch ratios), `su`, `sv` (the s
+/// axis, a unit vector in UV; an axis has no sign, so `su ≥ 0`, and
+/// `sv > 0` where `su = 0`) and `A` (1 on the surface, 0 outside, where the
+/// ratios are 1 and the axis is u). Rows run with v up, as the previews
+/// and the microstructure maps. Returns the path.
+pub fn write_strain_data(
+    raster: &StrainRaster,
+    dir: &Path,
+    tag: &str,
+    frame: usize,
+) -> Result<PathBuf> {
+    use exr::prelude::{AnyChannel, FlatSamples, LayerAttributes};
+    let (w, h) = (raster.width, raster.height);
+    let mut planes = [(); 5].map(|_| Vec::with_capacity(w * h));
+    for j in (0..h).rev() {
+        for i in 0..w {
+            let idx = raster.index(i, j);
+            let texel = if raster.inside[idx] {
+                let svd = Svd2::of(&raster.t[idx]);
+                let s = raster.uv_frame[idx] * svd.s_axis();
+                let s = if s.norm() > 0.0 {
+                    s / s.norm()
+                } else {
+                    nalgebra::Vector2::x()
+                };
+                let s = if s.x < 0.0 || (s.x == 0.0 && s.y < 0.0) {
+                    -s
+                } else {
+                    s
+                };
+                [svd.rs, svd.rt, s.x, s.y, 1.0]
+            } else {
+                [1.0, 1.0, 1.0, 0.0, 0.0]
+            };
+            for (plane, v) in planes.iter_mut().zip(texel) {
+                plane.push(v as f32);
+            }
+        }
+    }
+    let channels = ["rs", "rt", "su", "sv", "A"]
+        .into_iter()
+        .zip(planes)
+        .map(|(name, plane)| AnyChannel::new(name, FlatSamples::F32(plane)))
+        .collect();
+    let path = dir
+        .join("strain")
+        .join(format!("strain_{tag}{frame:04}.exr"));
+    crate::micro::io::write_exr_channels(
+        &path,
+        (w, h),
+        LayerAttributes::named("strain"),
+        channels,
+    )?;
+    Ok(path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Matrix2, Vector2};
+
+    /// The data map holds the ratios and the axis of a known stretch, and
+    /// the neutral values with A = 0 outside the surface.
+    #[test]
+    fn strain_data_reads_back_as_the_stretch_it_was_given() {
+        let (w, h) = (6, 4);
+        let mut raster = StrainRaster::outside(w, h);
+        let theta = 2.5f64; // the axis (cos θ, sin θ) has su < 0: flipped
+        let rot = Matrix2::new(theta.cos(), -theta.sin(), theta.sin(), theta.cos());
+        let t = rot * Matrix2::new(1.2, 0.0, 0.0, 0.9) * rot.transpose();
+        for j in 0..h {
+            for i in 0..w / 2 {
+                let k = raster.index(i, j);
+                raster.inside[k] = true;
+                raster.t[k] = t;
+                raster.uv_frame[k] = Matrix2::identity();
+            }
+        }
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir_all(dir.path().join("strain")).unwrap();
+        let path = write_strain_data(&raster, dir.path(), "", 7).unwrap();
+        assert!(path.ends_with("strain/strain_0007.exr"));
+        let image = exr::prelude::read_first_flat_layer_from_file(&path).unwrap();
+        let layer = &image.layer_data;
+        assert_eq!((layer.size.width(), layer.size.height()), (w, h));
+        let channel = |name: &str| -> Vec<f32> {
+            let c = layer
+                .channel_data
+                .list
+                .iter()
+                .find(|c| c.name.eq(name))
+                .unwrap_or_else(|| panic!("channel {name}"));
+            c.sample_data.values_as_f32().collect()
+        };
+        let axis = -Vector2::new(theta.cos(), theta.sin());
+        let expected_inside = [1.2, 0.9, axis.x, axis.y, 1.0];
+        let expected_outside = [1.0, 1.0, 1.0, 0.0, 0.0];
+        for (c, name) in ["rs", "rt", "su", "sv", "A"].iter().enumerate() {
+            let values = channel(name);
+            for (k, v) in values.iter().enumerate() {
+                let i = k % w;
+                let expected = if i < w / 2 {
+                    expected_inside[c]
+                } else {
+                    expected_outside[c]
+                };
+                assert!(
+                    (*v as f64 - expected).abs() < 1e-6,
+                    "{name}[{k}] = {v}, expected {expected}"
+                );
+            }
+        }
     }
 }

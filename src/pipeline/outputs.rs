@@ -158,9 +158,15 @@ impl<'a, R: MetricsRow + Copy> FrameOutputs<'a, R> {
                 }
             };
             if let Some(images) = self.spec.outputs.strain_images {
-                let raster = StrainRaster::new(field, images.px, images.px);
-                export::strain_images::StrainImages::new(&raster, images.range)
-                    .write_tagged(dir, &piece.tag, f)?;
+                if images.previews {
+                    let raster = StrainRaster::new(field, images.px, images.px);
+                    export::strain_images::StrainImages::new(&raster, images.range)
+                        .write_tagged(dir, &piece.tag, f)?;
+                }
+                if let Some([w, h]) = images.data {
+                    let raster = StrainRaster::new(field, w, h);
+                    export::strain_images::write_strain_data(&raster, dir, &piece.tag, f)?;
+                }
             }
             if let (Some(micro), Some(engine)) =
                 (self.spec.outputs.micro.as_ref(), self.engines.get_mut(k))

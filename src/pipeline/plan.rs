@@ -50,8 +50,14 @@ impl Outputs<'_> {
         add(u64::from(self.rest_vtu), self.vtu);
         add(frames * self.vtu_copies, self.vtu);
         if let Some(images) = self.strain_images {
-            // Three RGB maps a frame and map.
-            add(frames * self.maps, 3 * 3 * (images.px as u64).pow(2));
+            if images.previews {
+                // Three RGB maps a frame and map.
+                add(frames * self.maps, 3 * 3 * (images.px as u64).pow(2));
+            }
+            if let Some([w, h]) = images.data {
+                // Five f32 channels.
+                add(frames * self.maps, 5 * 4 * (w as u64) * (h as u64));
+            }
         }
         let every = |stride: usize| frames.div_ceil(stride.max(1) as u64);
         if let Some(m) = self.micro {

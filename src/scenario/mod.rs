@@ -103,6 +103,13 @@ pub struct OutputSection {
     /// Write PNG maps of the surface strain per frame under `strain/`
     /// (`rs_NNNN.png`, `rt_NNNN.png`, `axes_NNNN.png`). Default false.
     pub strain_images: bool,
+    /// Write the surface strain per frame as float data, `strain/strain_NNNN.exr`:
+    /// channels `rs`, `rt` (stretch ratios), `su`, `sv` (the s axis, a unit
+    /// vector in UV with `su ≥ 0`) and `A` (1 on the surface, 0 outside,
+    /// where the ratios are 1 and the axis is u). At the microstructure
+    /// map's size when the scenario has a whole map, else
+    /// `strain_image_px` square. Default false.
+    pub strain_data: bool,
     /// Side of the strain maps in pixels (the UV square). Default 512.
     pub strain_image_px: usize,
     /// Stretch ratios `1 ± strain_image_range` saturate the colour map. Default 0.25.
@@ -153,6 +160,7 @@ impl Default for OutputSection {
             frames_vtu: true,
             frames_vtkhdf: false,
             strain_images: false,
+            strain_data: false,
             strain_image_px: 512,
             strain_image_range: 0.25,
             surface_glb: false,
@@ -209,13 +217,29 @@ pub struct OutputSetup {
     pub force_large_output: bool,
 }
 
-/// Size and colour range of the per-frame strain maps.
+/// The per-frame strain maps: coloured previews and float data.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StrainImageSettings {
-    /// Side in pixels.
+    /// Side of the previews in pixels.
     pub px: usize,
     /// Colour-map half range around a stretch ratio of 1.
     pub range: f64,
+    /// Write the coloured PNG previews (`output.strain_images`).
+    pub previews: bool,
+    /// Width and height of the float data maps (`output.strain_data`), if asked.
+    pub data: Option<[usize; 2]>,
+}
+
+impl StrainImageSettings {
+    /// The data maps at the size of the microstructure's whole map, if any.
+    pub fn sized_to(mut self, micro: Option<&MicroSetup>) -> StrainImageSettings {
+        if let (Some(data), Some(NeutralMap::Whole(map))) =
+            (self.data.as_mut(), micro.map(|m| &m.neutral))
+        {
+            *data = [map.width, map.height];
+        }
+        self
+    }
 }
 
 impl OutputSection {
@@ -256,10 +280,15 @@ impl OutputSection {
                 format!("must be in (0, 1], got {range}"),
             ));
         }
-        Ok(self.strain_images.then_some(StrainImageSettings {
-            px: self.strain_image_px,
-            range,
-        }))
+        let px = self.strain_image_px;
+        Ok(
+            (self.strain_images || self.strain_data).then_some(StrainImageSettings {
+                px,
+                range,
+                previews: self.strain_images,
+                data: self.strain_data.then_some([px, px]),
+            }),
+        )
     }
 }
 
@@ -616,7 +645,7 @@ impl Setup {
             let needs = [
                 ("probe contact ([probe])", scenario.probe.is_some()),
                 (
-                    "strain maps (output.strain_images)",
+                    "strain maps (output.strain_images, output.strain_data)",
                     strain_images.is_some(),
                 ),
                 (
@@ -670,7 +699,7 @@ impl Setup {
                 dir: output_dir,
                 write_frames: scenario.output.frames_vtu,
                 vtu_format: scenario.output.vtu_format(),
-                strain_images,
+                strain_images: strain_images.map(|s| s.sized_to(micro.as_ref())),
                 micro,
                 render,
                 force_large_output: false,
@@ -857,7 +886,19 @@ mod tests {
             on,
             Some(StrainImageSettings {
                 px: 128,
-                range: 0.25
+                range: 0.25,
+                previews: true,
+                data: None,
+            })
+        );
+        let data = settings("[output]\nstrain_data = true\nstrain_image_px = 64\n").unwrap();
+        assert_eq!(
+            data,
+            Some(StrainImageSettings {
+                px: 64,
+                range: 0.25,
+                previews: false,
+                data: Some([64, 64]),
             })
         );
         for (text, key) in [

@@ -148,7 +148,10 @@ impl SurfaceSetup {
                 dir: output_dir,
                 write_frames: scenario.output.frames_vtu,
                 vtu_format: scenario.output.vtu_format(),
-                strain_images: scenario.output.strain_image_settings()?,
+                strain_images: scenario
+                    .output
+                    .strain_image_settings()?
+                    .map(|s| s.sized_to(micro.as_ref())),
                 micro,
                 render,
                 force_large_output: false,

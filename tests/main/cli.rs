@@ -409,35 +409,9 @@ fn bad_scenarios_fail_cleanly() {
     assert!(stderr.len() < 2000, "{} bytes of stderr", stderr.len());
 }
 
-/// Writes tests/fixtures/press_small.toml with `extra` appended (mesh path
-/// made absolute) into `dir` and runs it with output `dir/out`, after
-/// `configure` has adjusted the command (environment).
-fn run_press_small_configured(
-    dir: &Path,
-    extra: &str,
-    configure: impl FnOnce(&mut Command),
-) -> (std::path::PathBuf, Output) {
-    let scenario = std::fs::read_to_string(root().join("tests/fixtures/press_small.toml")).unwrap();
-    let scenario =
-        scenario.replace("../../meshes", root().join("meshes").to_str().unwrap()) + extra;
-    let path = dir.join("scenario.toml");
-    std::fs::write(&path, scenario).unwrap();
-    let out = dir.join("out");
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_skinpatch"));
-    cmd.args([
-        "run",
-        path.to_str().unwrap(),
-        "--output",
-        out.to_str().unwrap(),
-    ])
-    .current_dir(root());
-    configure(&mut cmd);
-    (out, cmd.output().expect("the skinpatch binary runs"))
-}
-
-/// [`run_press_small_configured`] with the environment as it is.
+/// [`common::run_press_small_configured`] with the environment as it is.
 fn run_press_small_with(dir: &Path, extra: &str) -> (std::path::PathBuf, Output) {
-    run_press_small_configured(dir, extra, |_| {})
+    common::run_press_small_configured(dir, extra, |_| {})
 }
 
 /// A run whose solver gives up stops with an error naming the frame and the
@@ -897,7 +871,7 @@ fn microstructure_maps_per_frame() {
     // widened by the stated margin, the same bytes in every file, and each
     // PNG within half a quantisation step of its unquantised EXR twin.
     let margin = skinpatch::scenario::HEIGHT_RANGE_MARGIN * (hi - lo) as f64;
-    let [offset, scale] = png_quantisation(&micro.join("height_neutral.png"));
+    let [offset, scale] = crate::dcc_outputs::png_quantisation(&micro.join("height_neutral.png"));
     let expected_offset = lo as f64 - margin;
     let expected_scale = ((hi - lo) as f64 + 2.0 * margin) / 65535.0;
     // (`lo`, `hi` come from the quantised neutral map: within a step.)
@@ -911,7 +885,11 @@ fn microstructure_maps_per_frame() {
     );
     for tag in ["0000", "0003", "0006"] {
         let png = micro.join(format!("height_{tag}.png"));
-        assert_eq!(png_quantisation(&png), [offset, scale], "{tag}");
+        assert_eq!(
+            crate::dcc_outputs::png_quantisation(&png),
+            [offset, scale],
+            "{tag}"
+        );
         let exr =
             skinpatch::micro::io::read_map(&micro.join(format!("height_{tag}.exr")), &defaults)
                 .unwrap();
@@ -927,79 +905,6 @@ fn microstructure_maps_per_frame() {
             "{tag}: {worst} vs step {scale}"
         );
     }
-}
-
-/// The `skinpatch:height_offset` and `skinpatch:height_scale` texts of a PNG.
-fn png_quantisation(path: &Path) -> [f64; 2] {
-    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
-    let reader = decoder.read_info().unwrap();
-    let text = &reader.info().uncompressed_latin1_text;
-    let value = |key: &str| -> f64 {
-        text.iter()
-            .find(|c| c.keyword == key)
-            .unwrap_or_else(|| panic!("{key} in {}", path.display()))
-            .text
-            .parse()
-            .unwrap()
-    };
-    [
-        value("skinpatch:height_offset"),
-        value("skinpatch:height_scale"),
-    ]
-}
-
-/// A `height_range_um` narrower than the heights clips them to its ends,
-/// and the run says how many texels it clipped, in which file; the EXR maps
-/// keep the heights.
-#[test]
-fn a_narrow_height_range_clips_and_says_so() {
-    use skinpatch::micro::io::{read_map, MapDefaults, TexelSize};
-    let dir = tempfile::tempdir().unwrap();
-    let (out, o) = run_press_small_with(
-        dir.path(),
-        "\n[microstructure]\nframe_stride = 6\nformats = [\"png16\", \"exr\"]\nnormal_maps = false\n\
-         height_range_um = [-20.0, 0.0]\n[microstructure.procedural]\nsize_px = 128\n",
-    );
-    let stderr = text(&o.stderr);
-    assert!(o.status.success(), "stderr: {stderr}");
-    let micro = out.join("micro");
-    let defaults = MapDefaults {
-        texel: TexelSize::Um(1.0),
-        height_unit_um: 1.0,
-        edge: skinpatch::micro::Edge::Wrap,
-    };
-    let exr = read_map(&micro.join("height_0006.exr"), &defaults).unwrap();
-    let png = read_map(&micro.join("height_0006.png"), &defaults).unwrap();
-    let outside = exr
-        .data
-        .iter()
-        .filter(|&&h| !(-20.0..=0.0).contains(&h))
-        .count();
-    assert!(outside > 0, "the fixture's grooves reach below -20 µm");
-    let step = 20.0 / 65535.0;
-    for (p, e) in png.data.iter().zip(&exr.data) {
-        let expected = e.clamp(-20.0, 0.0);
-        assert!((p - expected).abs() <= 0.51 * step, "{p} vs {e}");
-    }
-    // Clipping is counted texel by texel (a texel within half a step of an
-    // end rounds onto it without being clipped).
-    let counted = stderr
-        .lines()
-        .find(|l| l.contains("height_0006.png") && l.contains("clipped"))
-        .unwrap_or_else(|| panic!("no clipping report: {stderr}"));
-    let n: usize = counted
-        .split(": ")
-        .nth(1)
-        .and_then(|rest| rest.split(' ').next())
-        .and_then(|n| n.parse().ok())
-        .unwrap_or_else(|| panic!("{counted}"));
-    let near_ends = exr
-        .data
-        .iter()
-        .filter(|&&h| !(-20.0 - 0.5 * step as f32..=0.5 * step as f32).contains(&h))
-        .count();
-    assert_eq!(n, near_ends, "{counted}");
-    assert!(counted.contains("-20.00, 0.00"), "{counted}");
 }
 
 /// `incremental_tolerance = 0` reuses only tiles whose inputs are
@@ -1044,7 +949,7 @@ fn a_coarse_strain_raster_runs_alike_on_gpu_and_cpu() {
     let section = "\n[microstructure]\nframe_stride = 6\nformats = [\"exr\"]\nnormal_maps = false\nstrain_raster_step = 4\n[microstructure.procedural]\nsize_px = 240\n";
     let dirs = [(); 3].map(|_| tempfile::tempdir().unwrap());
     let run = |dir: &Path, section: &str, adapter: Option<&str>| {
-        run_press_small_configured(dir, section, |cmd| {
+        common::run_press_small_configured(dir, section, |cmd| {
             cmd.env_remove("SKINPATCH_ADAPTER")
                 .env_remove("SKINPATCH_REQUIRE_GPU");
             if let Some(a) = adapter {
@@ -1217,7 +1122,7 @@ fn fit_prints_the_table_and_writes_a_usable_kernel_file() {
 fn run_micro_with_env(dir: &Path, env: &[(&str, &str)]) -> (std::path::PathBuf, Output) {
     let extra =
         "\n[microstructure]\nframe_stride = 6\n[microstructure.procedural]\nsize_px = 300\n";
-    run_press_small_configured(dir, extra, |cmd| {
+    common::run_press_small_configured(dir, extra, |cmd| {
         cmd.env_remove("SKINPATCH_ADAPTER")
             .env_remove("SKINPATCH_REQUIRE_GPU")
             .envs(env.iter().copied());
@@ -1722,7 +1627,7 @@ fn a_synthesized_neutral_map_is_cached_between_runs() {
     assert_eq!((neutral.width, neutral.texel_um), (128, 5.0));
     // The rerun reads the cache (the file is not written again) and gives
     // the same neutral map.
-    let (_, o) = run_press_small_configured(dir.path(), section, |cmd| {
+    let (_, o) = common::run_press_small_configured(dir.path(), section, |cmd| {
         cmd.arg("-v");
     });
     assert!(o.status.success(), "stderr: {}", text(&o.stderr));

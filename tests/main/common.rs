@@ -1,6 +1,7 @@
 //! Helpers shared by the integration tests.
 
 use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
 
 use skinpatch::mesh::generate::{LayerSpec, PatchSpec, RefineZone, ZoneShape};
 
@@ -167,4 +168,30 @@ pub fn python_check(
         }
         Err(e) => skip(format!("python3 does not run: {e}")),
     }
+}
+
+/// Writes tests/fixtures/press_small.toml with `extra` appended (mesh path
+/// made absolute) into `dir` and runs it with output `dir/out`, after
+/// `configure` has adjusted the command (environment).
+pub fn run_press_small_configured(
+    dir: &Path,
+    extra: &str,
+    configure: impl FnOnce(&mut Command),
+) -> (std::path::PathBuf, Output) {
+    let scenario = std::fs::read_to_string(root().join("tests/fixtures/press_small.toml")).unwrap();
+    let scenario =
+        scenario.replace("../../meshes", root().join("meshes").to_str().unwrap()) + extra;
+    let path = dir.join("scenario.toml");
+    std::fs::write(&path, scenario).unwrap();
+    let out = dir.join("out");
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_skinpatch"));
+    cmd.args([
+        "run",
+        path.to_str().unwrap(),
+        "--output",
+        out.to_str().unwrap(),
+    ])
+    .current_dir(root());
+    configure(&mut cmd);
+    (out, cmd.output().expect("the skinpatch binary runs"))
 }

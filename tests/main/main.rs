@@ -9,6 +9,7 @@ mod common;
 mod bad_input;
 mod cli;
 mod contact;
+mod dcc_outputs;
 mod doors;
 mod fem_verification;
 mod fuzz;
