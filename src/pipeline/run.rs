@@ -222,7 +222,13 @@ impl<'a> SurfaceExport<'a> {
     fn finish(self) -> Result<()> {
         if let (true, Some(surface)) = (self.setup.write_surface_glb, &self.surface) {
             let path = self.setup.outputs.dir.join("surface.glb");
-            crate::surface::gltf::write_glb(&path, surface)?;
+            // The neutral microstructure normal map, where the run wrote one
+            // beside the file.
+            let normals = self.setup.outputs.micro.as_ref().is_some_and(|m| {
+                m.normal_maps && matches!(m.neutral, crate::scenario::NeutralMap::Whole(_))
+            });
+            let texture = normals.then_some("micro/normal_neutral.png");
+            crate::surface::gltf::write_glb(&path, surface, texture)?;
         }
         Ok(())
     }

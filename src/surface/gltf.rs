@@ -12,11 +12,15 @@
 //! `JOINTS_0`/`WEIGHTS_0`) linear blend skinning by the joints' world
 //! matrices times their inverse bind matrices (the node's own transform is
 //! then ignored, as glTF says). The rest is the scene's own pose without
-//! animation or morph weights. glTF stores metres unless told otherwise.
+//! animation or morph weights. glTF stores metres unless told otherwise,
+//! with +y up; positions are turned to skinpatch's +z up as they are read
+//! (`(x, y, z)` → `(x, −z, y)`), so a face modelled z-up in Blender comes
+//! back z-up, in Blender's own coordinates.
 //!
-//! Write ([`write_glb`]): one primitive, one morph target per frame (the
-//! displacement from rest) and a step animation that shows frame `k` at
-//! `k / rate` — what Blender and other tools import as shape keys.
+//! Write ([`write_glb`], in [`super::gltf_write`]): one primitive with
+//! normals, one morph target per frame (the displacement from rest) and a
+//! step animation that shows frame `k` at `k / rate` — what Blender and
+//! other tools import as shape keys.
 
 use std::path::Path;
 
@@ -24,6 +28,9 @@ use ::gltf::buffer::Source;
 use ::gltf::mesh::Mode;
 use nalgebra::{Matrix4, Vector4};
 
+pub use super::gltf_write::{write_glb, write_glb_animation, MorphAnimation};
+
+use super::gltf_write::from_y_up;
 use super::{clip, AnimatedSurface, ReadOptions, SplitSurface};
 use crate::error::{Error, Result};
 use crate::mesh::Vec3;
@@ -79,6 +86,9 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<AnimatedSurface> {
         let local = |n: &::gltf::Node<'_>| clip.as_ref().unwrap_or(&still).local(n, t, tol);
         let world = clip::world_matrices(doc, &roots, &local);
         raw.pose(&world, node.index(), binding.as_ref(), weights)
+            .iter()
+            .map(from_y_up)
+            .collect()
     };
     // Rest: the scene's own pose without morph targets.
     split.rest = pose(None, &vec![0.0; n_targets]);
@@ -586,212 +596,4 @@ fn choose_clip(
             Ok(None)
         }
     }
-}
-
-/// Writes `surface` as a binary glTF: positions in metres, one morph target
-/// per frame and a step animation showing frame `k` at `k / rate` seconds.
-/// Vertices are the surface vertices (split at UV seams, as glTF needs).
-pub fn write_glb(path: &Path, surface: &AnimatedSurface) -> Result<()> {
-    let n = surface.frames.len();
-    let animation = MorphAnimation {
-        names: (0..n).map(|k| format!("frame_{k:04}")).collect(),
-        targets: surface
-            .frames
-            .iter()
-            .map(|x| {
-                x.iter()
-                    .zip(&surface.positions)
-                    .map(|(a, b)| a - b)
-                    .collect()
-            })
-            .collect(),
-        times_s: (0..n).map(|k| surface.time(k)).collect(),
-        weights: (0..n)
-            .map(|k| (0..n).map(|t| if t == k { 1.0 } else { 0.0 }).collect())
-            .collect(),
-        linear: false,
-    };
-    write_glb_animation(path, surface, &animation)
-}
-
-/// Named morph targets and an animation of their weights.
-#[derive(Clone, Debug, PartialEq)]
-pub struct MorphAnimation {
-    /// Target names (glTF `extras.targetNames`, Blender's shape key names).
-    pub names: Vec<String>,
-    /// Per target, the displacement of every position (mm).
-    pub targets: Vec<Vec<Vec3>>,
-    /// Keyframe times (s), increasing.
-    pub times_s: Vec<f64>,
-    /// Per keyframe, the weight of every target.
-    pub weights: Vec<Vec<f64>>,
-    /// Linear interpolation between keyframes (else step).
-    pub linear: bool,
-}
-
-/// Writes the rest of `surface` (its positions and UV layout; its frames are
-/// not used) with the morph targets and weight animation of `animation` as
-/// a binary glTF, positions in metres.
-pub fn write_glb_animation(
-    path: &Path,
-    surface: &AnimatedSurface,
-    animation: &MorphAnimation,
-) -> Result<()> {
-    let top = &surface.top;
-    // Positions relative to the centre of the bounds (the node's
-    // translation), so f32 keeps more of them; displacements from the f64
-    // difference, so a frame's strain loses only the rounding of the rest.
-    let (lo, hi) = surface.bounds();
-    let centre = ((lo + hi) * 0.5).map(|c| ((c / 1000.0) as f32) as f64 * 1000.0);
-    let metres = |p: &Vec3| [p.x, p.y, p.z].map(|c| (c / 1000.0) as f32);
-    let mut glb = GlbBuffers::default();
-    let rest: Vec<f32> = top
-        .vertices
-        .iter()
-        .flat_map(|&v| metres(&(surface.positions[v] - centre)))
-        .collect();
-    let position = glb.floats(&rest, "VEC3", 3, true);
-    let uvs: Vec<f32> = top
-        .uvs
-        .iter()
-        .flat_map(|w| [w[0] as f32, (1.0 - w[1]) as f32])
-        .collect();
-    let texcoord = glb.floats(&uvs, "VEC2", 2, false);
-    let mut targets = Vec::new();
-    for displacement in &animation.targets {
-        let delta: Vec<f32> = top
-            .vertices
-            .iter()
-            .flat_map(|&v| metres(&displacement[v]))
-            .collect();
-        targets.push(serde_json::json!({ "POSITION": glb.floats(&delta, "VEC3", 3, true) }));
-    }
-    let n_targets = animation.targets.len();
-    let times: Vec<f32> = animation.times_s.iter().map(|&t| t as f32).collect();
-    let input = glb.floats(&times, "SCALAR", 1, true);
-    let weights: Vec<f32> = animation
-        .weights
-        .iter()
-        .flat_map(|w| w.iter().map(|&x| x as f32))
-        .collect();
-    let output = glb.floats(&weights, "SCALAR", 1, false);
-    // Indices after the floats, so every view stays 4-byte aligned.
-    let indices = glb.indices(&top.triangles);
-    let name = Path::new(&surface.origin)
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "surface".into());
-    let json = serde_json::json!({
-        "asset": { "version": "2.0", "generator": concat!("skinpatch ", env!("CARGO_PKG_VERSION")) },
-        "scene": 0,
-        "scenes": [{ "nodes": [0] }],
-        "nodes": [{ "name": name, "mesh": 0, "translation": [centre.x / 1000.0, centre.y / 1000.0, centre.z / 1000.0] }],
-        "meshes": [{
-            "name": name,
-            "primitives": [{
-                "attributes": { "POSITION": position, "TEXCOORD_0": texcoord },
-                "indices": indices,
-                "mode": 4,
-                "targets": targets
-            }],
-            "weights": vec![0.0; n_targets],
-            "extras": { "targetNames": animation.names }
-        }],
-        "animations": [{
-            "name": "animation",
-            "samplers": [{
-                "input": input, "output": output,
-                "interpolation": if animation.linear { "LINEAR" } else { "STEP" }
-            }],
-            "channels": [{ "sampler": 0, "target": { "node": 0, "path": "weights" } }]
-        }],
-        "buffers": [{ "byteLength": glb.bin.len() }],
-        "bufferViews": glb.views,
-        "accessors": glb.accessors
-    });
-    let text = serde_json::to_vec(&json).map_err(|e| Error::malformed(path, e.to_string()))?;
-    crate::mesh::io::write_atomically(path, &glb_container(text, glb.bin))
-}
-
-/// The binary chunk of a GLB file with its buffer views and accessors.
-#[derive(Default)]
-struct GlbBuffers {
-    bin: Vec<u8>,
-    views: Vec<serde_json::Value>,
-    accessors: Vec<serde_json::Value>,
-}
-
-impl GlbBuffers {
-    /// Appends `data` as a float accessor of `components` per element
-    /// (`kind`: "SCALAR", "VEC2", "VEC3"), with per-component min/max when
-    /// `bounds` (POSITION requires them); returns the accessor's index.
-    fn floats(&mut self, data: &[f32], kind: &str, components: usize, bounds: bool) -> usize {
-        let offset = self.bin.len();
-        self.bin.extend(data.iter().flat_map(|x| x.to_le_bytes()));
-        self.views.push(serde_json::json!({
-            "buffer": 0, "byteOffset": offset, "byteLength": data.len() * 4
-        }));
-        let mut acc = serde_json::json!({
-            "bufferView": self.views.len() - 1, "componentType": 5126,
-            "count": data.len() / components, "type": kind
-        });
-        if bounds {
-            let (lo, hi): (Vec<f32>, Vec<f32>) = (0..components)
-                .map(|c| {
-                    let col = data.iter().skip(c).step_by(components);
-                    (
-                        col.clone().copied().fold(f32::INFINITY, f32::min),
-                        col.copied().fold(f32::NEG_INFINITY, f32::max),
-                    )
-                })
-                .unzip();
-            acc["min"] = serde_json::json!(lo);
-            acc["max"] = serde_json::json!(hi);
-        }
-        self.accessors.push(acc);
-        self.accessors.len() - 1
-    }
-
-    /// Appends the triangles' vertex indices as a u32 accessor; returns its
-    /// index.
-    fn indices(&mut self, triangles: &[[usize; 3]]) -> usize {
-        let offset = self.bin.len();
-        self.bin.extend(
-            triangles
-                .iter()
-                .flatten()
-                .flat_map(|&i| (i as u32).to_le_bytes()),
-        );
-        self.views.push(serde_json::json!({
-            "buffer": 0, "byteOffset": offset, "byteLength": triangles.len() * 12
-        }));
-        self.accessors.push(serde_json::json!({
-            "bufferView": self.views.len() - 1, "componentType": 5125,
-            "count": triangles.len() * 3, "type": "SCALAR"
-        }));
-        self.accessors.len() - 1
-    }
-}
-
-/// A GLB file: the 12-byte header, the JSON chunk (padded with spaces) and
-/// the binary chunk (padded with zeros), each 4-byte aligned.
-fn glb_container(mut text: Vec<u8>, mut bin: Vec<u8>) -> Vec<u8> {
-    while !text.len().is_multiple_of(4) {
-        text.push(b' ');
-    }
-    while !bin.len().is_multiple_of(4) {
-        bin.push(0);
-    }
-    let total = 12 + 8 + text.len() + 8 + bin.len();
-    let mut out = Vec::with_capacity(total);
-    out.extend(b"glTF");
-    out.extend(2u32.to_le_bytes());
-    out.extend((total as u32).to_le_bytes());
-    out.extend((text.len() as u32).to_le_bytes());
-    out.extend(b"JSON");
-    out.extend(text);
-    out.extend((bin.len() as u32).to_le_bytes());
-    out.extend(b"BIN\0");
-    out.extend(bin);
-    out
 }

@@ -26,6 +26,7 @@ use crate::mesh::{TopSurface, Vec3};
 mod clip;
 pub mod gltf;
 mod gltf_check;
+pub mod gltf_write;
 pub mod obj;
 
 /// A triangle surface with UVs and its positions over time (mm).

@@ -170,3 +170,145 @@ fn strain_data_maps_hold_the_frame_strain() {
         }
     }
 }
+
+/// The JSON chunk and the binary chunk of a GLB file.
+fn glb_chunks(bytes: &[u8]) -> (serde_json::Value, Vec<u8>) {
+    let word = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap()) as usize;
+    assert_eq!(&bytes[..4], b"glTF");
+    let json_len = word(12);
+    let json = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
+    let bin_at = 20 + json_len;
+    (json, bytes[bin_at + 8..bin_at + 8 + word(bin_at)].to_vec())
+}
+
+/// The floats of accessor `index`, in groups of three.
+fn vec3s(json: &serde_json::Value, bin: &[u8], index: usize) -> Vec<[f32; 3]> {
+    let accessor = &json["accessors"][index];
+    assert_eq!(accessor["type"], "VEC3");
+    let view = &json["bufferViews"][accessor["bufferView"].as_u64().unwrap() as usize];
+    let offset = view["byteOffset"].as_u64().unwrap() as usize;
+    let count = accessor["count"].as_u64().unwrap() as usize;
+    bin[offset..offset + 12 * count]
+        .chunks_exact(12)
+        .map(|c| [0, 4, 8].map(|k| f32::from_le_bytes(c[k..k + 4].try_into().unwrap())))
+        .collect()
+}
+
+/// `surface.glb` as Blender and the Khronos validator read it: +y up (the
+/// patch lies in glTF's x–z plane and its normals point up), unit normals
+/// with per-frame normal targets, a material whose normal texture is the
+/// run's neutral normal map, the frame rate stated; 0 errors and 0 warnings
+/// from the Khronos glTF validator, and pygltflib reads the same.
+#[test]
+fn surface_glb_is_y_up_with_normals_and_validates() {
+    let dir = tempfile::tempdir().unwrap();
+    let (out, o) = common::run_press_small_configured(
+        dir.path(),
+        "\n[output]\nframes_vtu = false\nsurface_glb = true\n\
+         [microstructure]\nformats = [\"png16\"]\nframe_stride = 6\n\
+         [microstructure.procedural]\nsize_px = 64\n",
+        |_| {},
+    );
+    assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    let glb = out.join("surface.glb");
+    let (json, bin) = glb_chunks(&std::fs::read(&glb).unwrap());
+    let primitive = &json["meshes"][0]["primitives"][0];
+    let positions = vec3s(
+        &json,
+        &bin,
+        primitive["attributes"]["POSITION"].as_u64().unwrap() as usize,
+    );
+    let normals = vec3s(
+        &json,
+        &bin,
+        primitive["attributes"]["NORMAL"].as_u64().unwrap() as usize,
+    );
+    assert_eq!(positions.len(), normals.len());
+    let extent = |c: usize| {
+        let (lo, hi) = positions.iter().fold((f32::MAX, f32::MIN), |(lo, hi), p| {
+            (lo.min(p[c]), hi.max(p[c]))
+        });
+        hi - lo
+    };
+    // patch_3k's top is 10 × 10 mm and flat at rest.
+    assert!((extent(0) - 0.01).abs() < 1e-5 && (extent(2) - 0.01).abs() < 1e-5);
+    assert!(extent(1) < 1e-7, "the rest top is flat in y: {}", extent(1));
+    for n in &normals {
+        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        assert!((len - 1.0).abs() < 1e-5 && n[1] > 0.999, "{n:?}");
+    }
+    // Tangents along u (+x) with the bitangent up the image (+v, skinpatch
+    // +y, glTF −z): w = +1.
+    let accessor = primitive["attributes"]["TANGENT"].as_u64().unwrap() as usize;
+    let view =
+        &json["bufferViews"][json["accessors"][accessor]["bufferView"].as_u64().unwrap() as usize];
+    let offset = view["byteOffset"].as_u64().unwrap() as usize;
+    for t in bin[offset..offset + 16 * positions.len()].chunks_exact(16) {
+        let t = [0, 4, 8, 12].map(|k| f32::from_le_bytes(t[k..k + 4].try_into().unwrap()));
+        assert!((t[0] - 1.0).abs() < 1e-5 && t[3] == 1.0, "{t:?}");
+    }
+    let targets = primitive["targets"].as_array().unwrap();
+    assert_eq!(targets.len(), 7);
+    // The pressed frame's normals tilt around the probe.
+    let last = &targets[6];
+    let turned = vec3s(&json, &bin, last["NORMAL"].as_u64().unwrap() as usize);
+    let tilt = turned
+        .iter()
+        .map(|d| d[0].abs().max(d[2].abs()))
+        .fold(0.0, f32::max);
+    assert!(tilt > 0.05, "{tilt}");
+    let moved = vec3s(&json, &bin, last["POSITION"].as_u64().unwrap() as usize);
+    let deepest = moved.iter().map(|d| d[1]).fold(0.0, f32::min);
+    assert!(deepest < -4e-4, "the probe presses down (−y): {deepest} m");
+    assert_eq!(json["images"][0]["uri"], "micro/normal_neutral.png");
+    assert!(out.join("micro/normal_neutral.png").exists());
+    assert_eq!(json["materials"][0]["normalTexture"]["index"], 0);
+    assert_eq!(json["asset"]["extras"]["frame_rate_hz"], 6.0);
+
+    // The Khronos validator (npm `gltf-validator`, through NODE_PATH).
+    let required = std::env::var("SKINPATCH_REQUIRE_GLTF_VALIDATOR").is_ok_and(|v| v == "1");
+    let script = common::root().join("tests/gltf/validate.js");
+    match std::process::Command::new("node")
+        .arg(&script)
+        .arg(&glb)
+        .output()
+    {
+        Ok(o) if o.status.success() => {
+            let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+            let issues = &report["issues"];
+            assert_eq!(issues["numErrors"], 0, "{issues:#}");
+            assert_eq!(issues["numWarnings"], 0, "{issues:#}");
+        }
+        other => {
+            let why = match other {
+                Ok(o) => text(&o.stderr),
+                Err(e) => format!("node does not run: {e}"),
+            };
+            assert!(!required, "glTF validator required: {why}");
+            eprintln!(
+                "glTF validator skipped ({why}; set SKINPATCH_REQUIRE_GLTF_VALIDATOR=1 to fail)"
+            );
+        }
+    }
+    // An independent reader.
+    let script = r#"
+import sys
+from pygltflib import GLTF2
+g = GLTF2().load(sys.argv[1])
+p = g.meshes[0].primitives[0]
+assert p.attributes.NORMAL is not None and p.attributes.TEXCOORD_0 is not None
+a = g.accessors[p.attributes.POSITION]
+span = [hi - lo for lo, hi in zip(a.min, a.max)]
+assert span[1] < 1e-7 < span[0] and span[2] > 1e-3, span
+assert g.materials[0].normalTexture.index == 0
+print(len(p.targets), g.animations[0].samplers[0].interpolation)
+"#;
+    if let Some(out) = common::python_check(
+        "pygltflib",
+        "SKINPATCH_REQUIRE_PYGLTFLIB",
+        script,
+        &[glb.to_str().unwrap()],
+    ) {
+        assert_eq!(out.trim(), "7 STEP");
+    }
+}
