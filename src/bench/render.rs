@@ -80,7 +80,8 @@ pub fn bench_render(
         ..Default::default()
     };
     let mesh = &setup.mesh;
-    simulate(&setup, |m, sim| {
+    simulate(&setup, |m, stepper| {
+        let sim = stepper.simulation();
         let field = SurfaceField::new(&mesh.top, &mesh.positions, sim.positions());
         let start = Instant::now();
         if let Some(chain) = chain.as_mut() {

@@ -232,17 +232,23 @@ const XYZ: [&str; 3] = ["X", "Y", "Z"];
 ///
 /// Point data: `displacement_mm`; on top-surface vertices (NaN elsewhere)
 /// `surface_stretch` (r_s, r_t) and the unit principal axes
-/// `surface_axis_s`, `surface_axis_t` on the deformed surface. Cell data:
+/// `surface_axis_s`, `surface_axis_t` on the deformed surface; the probe's
+/// `contact_force_n` on each node, `contact_pressure_n_mm2` and
+/// `contact_shear_n_mm2` (zero off the contact). Cell data:
 /// `region`, `principal_stretch` (λ1 ≥ λ2 ≥ λ3, sign-corrected),
 /// `principal_biot_strain` (λ − 1), `principal_green_strain` ((λ² − 1)/2),
-/// `volume_ratio` (J), and the unit principal direction of each stretch
+/// `volume_ratio` (J), the unit principal direction of each stretch
 /// as a 3-vector, `principal_axis_K_rest` and `principal_axis_K_deformed`
-/// (K = 1, 2, 3, matching λK). The points are the deformed positions.
+/// (K = 1, 2, 3, matching λK), `cauchy_stress_n_mm2` (XX, YY, ZZ, XY, YZ,
+/// XZ), `von_mises_stress_n_mm2` and `strain_energy_density_n_mm2` (per
+/// rest volume). The points are the deformed positions.
 /// Multi-component arrays carry component names (X, Y, Z for vectors).
 pub fn frame_grid(
     mesh: &TetMesh,
     x: &[Vec3],
     strains: &ElementStrains,
+    stresses: &[crate::strain::TetStress],
+    contact: &crate::fem::contact::ContactForces,
     field: &SurfaceField,
 ) -> Grid {
     let displacement = x
@@ -282,6 +288,24 @@ pub fn frame_grid(
         axis_s[3 * v..3 * v + 3].copy_from_slice(a.as_slice());
         axis_t[3 * v..3 * v + 3].copy_from_slice(b.as_slice());
     }
+    // Contact: zero force and traction off the contact.
+    let (mut contact_force, mut pressure, mut shear) =
+        (vec![0.0; 3 * nv], vec![0.0; nv], vec![0.0; nv]);
+    for (k, &v) in contact.nodes.iter().enumerate() {
+        contact_force[3 * v..3 * v + 3].copy_from_slice(contact.force_n[k].as_slice());
+        pressure[v] = contact.pressure(k);
+        shear[v] = contact.shear(k);
+    }
+    let (mut cauchy, mut von_mises, mut energy) = (
+        Vec::with_capacity(6 * n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+    );
+    for s in stresses {
+        cauchy.extend_from_slice(&s.components());
+        von_mises.push(s.von_mises());
+        energy.push(s.energy_density);
+    }
     Grid {
         points: x.to_vec(),
         tets: mesh.tets.clone(),
@@ -291,6 +315,9 @@ pub fn frame_grid(
             Field::f64("surface_stretch", 2, surface_stretch).named(&["r_s", "r_t"]),
             Field::f64("surface_axis_s", 3, axis_s).named(&XYZ),
             Field::f64("surface_axis_t", 3, axis_t).named(&XYZ),
+            Field::f64("contact_force_n", 3, contact_force).named(&XYZ),
+            Field::f64("contact_pressure_n_mm2", 1, pressure),
+            Field::f64("contact_shear_n_mm2", 1, shear),
         ],
         cell_data: {
             let mut cells = vec![
@@ -299,6 +326,10 @@ pub fn frame_grid(
                 Field::f64("principal_biot_strain", 3, biot).named(&["ε1", "ε2", "ε3"]),
                 Field::f64("principal_green_strain", 3, green).named(&["E1", "E2", "E3"]),
                 Field::f64("volume_ratio", 1, ratio),
+                Field::f64("cauchy_stress_n_mm2", 6, cauchy)
+                    .named(&["XX", "YY", "ZZ", "XY", "YZ", "XZ"]),
+                Field::f64("von_mises_stress_n_mm2", 1, von_mises),
+                Field::f64("strain_energy_density_n_mm2", 1, energy),
             ];
             for (frame, axes) in [("rest", rest_axes), ("deformed", deformed_axes)] {
                 for (k, values) in axes.into_iter().enumerate() {

@@ -86,6 +86,44 @@ pub struct ContactState {
     /// Complementarity constants: each node's rest stiffness (N/mm), which
     /// turns a gap or a slip into a comparable force.
     stiffness: Vec<f64>,
+    /// The last solve's force and traction per contact node.
+    forces: ContactForces,
+}
+
+/// The probe's force on each skin node in contact after a solve, with the
+/// contact normal and the node's share of the deformed surface: what the
+/// nodal contact pressure and shear traction are made of.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ContactForces {
+    /// Mesh vertices in contact, ascending.
+    pub nodes: Vec<usize>,
+    /// Force of the probe on the node (N).
+    pub force_n: Vec<Vec3>,
+    /// The probe surface's outward unit normal at the node.
+    pub normal: Vec<Vec3>,
+    /// The node's lumped area of the deformed top surface (mm²): a third of
+    /// each top triangle at the node.
+    pub area_mm2: Vec<f64>,
+}
+
+impl ContactForces {
+    /// Contact pressure at the `k`-th node in contact (N/mm²): the normal
+    /// force over the node's area, positive when the probe pushes.
+    pub fn pressure(&self, k: usize) -> f64 {
+        self.force_n[k].dot(&self.normal[k]) / self.area_mm2[k]
+    }
+
+    /// Shear traction at the `k`-th node in contact (N/mm²): the
+    /// tangential force over the node's area.
+    pub fn shear(&self, k: usize) -> f64 {
+        tangential(&self.force_n[k], &self.normal[k]).norm() / self.area_mm2[k]
+    }
+
+    /// The traction `(pressure · normal + shear traction) · area` summed over
+    /// the contact: the force the skin feels from the probe (N).
+    pub fn total(&self) -> Vec3 {
+        self.force_n.iter().sum()
+    }
 }
 
 /// What a contact solve found.
@@ -153,7 +191,13 @@ impl ContactState {
             solved: Default::default(),
             planes: Default::default(),
             stiffness: Vec::new(),
+            forces: ContactForces::default(),
         }
+    }
+
+    /// The last solve's force and traction per contact node.
+    pub fn forces(&self) -> &ContactForces {
+        &self.forces
     }
 
     /// Allowed penetration at node `v` (mm).
@@ -615,13 +659,29 @@ fn finish_report(
     sim: &super::integrate::Simulation,
     base_ext: &[Vec3],
     pose: &ProbePose,
-    state: &ContactState,
+    state: &mut ContactState,
     report: &mut ContactReport,
 ) {
     let mut force = Vec3::zeros();
+    let mut forces = ContactForces::default();
     for &v in state.active.keys() {
-        force -= contact_force(sim, base_ext, v);
+        let f = contact_force(sim, base_ext, v);
+        force -= f;
+        forces.nodes.push(v);
+        forces.force_n.push(f);
+        forces.normal.push(pose.distance(&sim.state.x[v]).1);
     }
+    forces.area_mm2 = vec![0.0; forces.nodes.len()];
+    for tri in &state.top_triangles {
+        let [a, b, c] = tri.map(|v| sim.state.x[v]);
+        let third = (b - a).cross(&(c - a)).norm() / 6.0;
+        for v in tri {
+            if let Ok(k) = forces.nodes.binary_search(v) {
+                forces.area_mm2[k] += third;
+            }
+        }
+    }
+    state.forces = forces;
     report.probe_force = force;
     report.contact_nodes = state.active.len();
     report.contact_area_mm2 = state

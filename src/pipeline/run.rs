@@ -9,9 +9,10 @@ use super::outputs::{FrameInput, FrameOutputs, MapPiece, OutputSpec, RunKind, Ru
 use super::{plan, stepper::simulate, texel_mm, vtkhdf};
 use crate::error::{Error, Result};
 use crate::export::{self, FrameMetrics};
+use crate::fem::contact::ContactForces;
 use crate::mesh::{io, QualityReport, Vec3};
 use crate::scenario::Setup;
-use crate::strain::{ElementStrains, SurfaceField};
+use crate::strain::{element_stresses, ElementStrains, SurfaceField, TetStress};
 use crate::surface::AnimatedSurface;
 
 /// What a FEM run produced.
@@ -32,7 +33,12 @@ pub struct Frame<'a> {
     /// triangle T (eq. 10) and per top vertex its area-weighted average
     /// with stretch ratios and axes (eq. 11–13).
     pub surface: &'a SurfaceField,
+    /// The probe's force on each node in contact, with the contact normal
+    /// and the node's area: nodal contact pressure and shear traction.
+    pub contact: &'a ContactForces,
+    materials: &'a [crate::fem::Material],
     strains: &'a std::cell::OnceCell<ElementStrains>,
+    stresses: &'a std::cell::OnceCell<Vec<TetStress>>,
 }
 
 impl Frame<'_> {
@@ -46,6 +52,13 @@ impl Frame<'_> {
     pub fn strains(&self) -> &ElementStrains {
         self.strains
             .get_or_init(|| ElementStrains::compute(self.mesh, self.positions))
+    }
+
+    /// Cauchy stress, von Mises stress and strain energy density of every
+    /// tet (computed on first use, and shared with the frame's VTU).
+    pub fn stresses(&self) -> &[TetStress] {
+        self.stresses
+            .get_or_init(|| element_stresses(self.mesh, self.positions, self.materials))
     }
 }
 
@@ -90,17 +103,21 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<FemRun
     outputs.start()?;
     let mut hdf = None;
     let mut exported = SurfaceExport::open(setup)?;
-    let result = simulate(setup, |m, sim| {
+    let materials = &setup.simulation.tet_material;
+    let result = simulate(setup, |m, stepper| {
+        let (sim, contact) = (stepper.simulation(), stepper.contact_forces());
         let mut m = *m;
         let field = SurfaceField::new(&mesh.top, &mesh.positions, sim.positions());
         let (rs, rt, folded) = field.extremes();
         m.rs_range = [rs.0, rs.1];
         m.rt_range = [rt.0, rt.1];
         m.folded_vertices = folded;
-        let strains = std::cell::OnceCell::new();
+        let (strains, stresses) = (std::cell::OnceCell::new(), std::cell::OnceCell::new());
         let grid = (outputs.wants_grid() || setup.write_vtkhdf).then(|| {
-            let strains = strains.get_or_init(|| ElementStrains::compute(mesh, sim.positions()));
-            export::frame_grid(mesh, sim.positions(), strains, &field)
+            let x = sim.positions();
+            let strains = strains.get_or_init(|| ElementStrains::compute(mesh, x));
+            let stresses = stresses.get_or_init(|| element_stresses(mesh, x, materials));
+            export::frame_grid(mesh, x, strains, stresses, contact, &field)
         });
         if let (true, Some(grid)) = (setup.write_vtkhdf, &grid) {
             vtkhdf::push(&mut hdf, dir, setup, m.time_s, grid)?;
@@ -124,7 +141,10 @@ pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<FemRun
             mesh,
             positions: sim.positions(),
             surface: &field,
+            contact,
+            materials,
             strains: &strains,
+            stresses: &stresses,
         });
         Ok(())
     });

@@ -26,13 +26,13 @@ const MAX_PREDICTION_RATIO: f64 = 1.5;
 /// timings.
 pub fn simulate(
     setup: &Setup,
-    mut emit: impl FnMut(&FrameMetrics, &Simulation) -> Result<()>,
+    mut emit: impl FnMut(&FrameMetrics, &Stepper) -> Result<()>,
 ) -> Result<crate::fem::integrate::Timings> {
     let s = &setup.simulation;
     let mut stepper = Stepper::new(s, &setup.mesh);
     for _ in 0..=s.frames {
         let m = stepper.step(s, &setup.mesh, s.probe.as_ref())?;
-        emit(&m, stepper.simulation())?;
+        emit(&m, &stepper)?;
     }
     Ok(stepper.simulation().timings)
 }
@@ -106,6 +106,12 @@ impl Stepper {
     /// The simulation as last solved.
     pub fn simulation(&self) -> &Simulation {
         &self.sim
+    }
+
+    /// The probe's force and traction per contact node after the last
+    /// frame (empty without a probe or contact).
+    pub fn contact_forces(&self) -> &crate::fem::contact::ContactForces {
+        self.contact.forces()
     }
 
     /// New materials (one per tet) from the next frame on; the deformed

@@ -22,6 +22,7 @@ mod micro;
 mod render;
 mod robustness;
 mod strain;
+mod stress;
 mod surface;
 mod synth;
 mod viewer;

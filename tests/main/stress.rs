@@ -1,0 +1,185 @@
+//! Stress and contact traction, as a biomechanics user reads them: nodal
+//! contact pressure against Hertz's profile and the probe force, element
+//! stress and strain energy against the work the probe did.
+
+use crate::common;
+
+use skinpatch::scenario::Setup;
+
+/// One frame's contact and energy, as the run's callback saw them.
+struct Seen {
+    delta: f64,
+    force: [f64; 3],
+    /// Per contact node: distance from the probe axis (mm), pressure
+    /// (N/mm²), area (mm²), pressure × area × normal (N).
+    nodes: Vec<(f64, f64, f64, [f64; 3])>,
+    /// Σ ψ V over the tets (N·mm).
+    energy: f64,
+}
+
+fn hertz_frames(poisson: f64) -> Vec<Seen> {
+    let fixture = common::root().join("tests/fixtures/hertz.toml");
+    let text = std::fs::read_to_string(&fixture)
+        .unwrap()
+        .replace("poisson_ratio = 0.3", &format!("poisson_ratio = {poisson}"));
+    let scenario = skinpatch::scenario::Scenario::parse(&text, &fixture).unwrap();
+    let mut setup = Setup::from_scenario(&scenario, &fixture).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    setup.outputs.dir = dir.path().to_path_buf();
+    let mut seen = Vec::new();
+    skinpatch::pipeline::run(&setup, |frame| {
+        let c = frame.contact;
+        let volumes: Vec<f64> = (0..frame.mesh.num_tets())
+            .map(|t| frame.mesh.tet_volume(t))
+            .collect();
+        let energy = frame
+            .stresses()
+            .iter()
+            .zip(&volumes)
+            .map(|(s, v)| s.energy_density * v)
+            .sum();
+        seen.push(Seen {
+            delta: 0.2 * frame.metrics.time_s,
+            force: frame.metrics.probe_force_n,
+            nodes: (0..c.nodes.len())
+                .map(|k| {
+                    let x = frame.positions[c.nodes[k]];
+                    let t = c.normal[k] * (c.pressure(k) * c.area_mm2[k]);
+                    (
+                        x.x.hypot(x.y),
+                        c.pressure(k),
+                        c.area_mm2[k],
+                        [t.x, t.y, t.z],
+                    )
+                })
+                .collect(),
+            energy,
+        });
+    })
+    .unwrap();
+    seen
+}
+
+/// Hertz (frictionless sphere, R = 2 mm, on the E = 100 kPa, ν = 0.3
+/// block of `tests/fixtures/hertz.toml`) at δ = 0.05 … 0.2 mm:
+///
+/// - the nodal tractions (pressure × area × contact normal) sum to the
+///   probe force within 1e-6 relative;
+/// - the pressure profile, as the contact force over the contact area in
+///   rings 0.1a wide, follows p(r) = p0 √(1 − r²/a²) with a = √(Rδ) and
+///   p0 = 3F/(2πa²) (F the computed force) within 5% inside 0.8a (the
+///   outer ring straddles the edge of the contact and is left out);
+/// - the strain energy Σ ψ V equals the probe's work, which for Hertz's
+///   F ∝ δ^{3/2} is 0.4 F δ, within 2%.
+#[test]
+fn hertz_pressure_profile_and_energy() {
+    let frames = hertz_frames(0.3);
+    let r = 2.0f64;
+    let mut report = String::new();
+    for f in &frames[1..] {
+        let fz = f.force[2];
+        let sum: [f64; 3] = [0, 1, 2].map(|c| f.nodes.iter().map(|n| n.3[c]).sum());
+        let balance = (0..3)
+            .map(|c| (sum[c] + f.force[c]).abs())
+            .fold(0.0, f64::max)
+            / fz;
+        assert!(
+            balance < 1e-6,
+            "δ {}: tractions {sum:?} vs force {:?}",
+            f.delta,
+            f.force
+        );
+        let a = (r * f.delta).sqrt();
+        let p0 = 3.0 * fz / (2.0 * std::f64::consts::PI * a * a);
+        for ring in 0..8 {
+            let (lo, hi) = (ring as f64 * 0.1 * a, (ring + 1) as f64 * 0.1 * a);
+            let inside: Vec<_> = f.nodes.iter().filter(|n| n.0 >= lo && n.0 < hi).collect();
+            assert!(!inside.is_empty(), "δ {}: no node in ring {ring}", f.delta);
+            let force: f64 = inside.iter().map(|n| n.1 * n.2).sum();
+            let area: f64 = inside.iter().map(|n| n.2).sum();
+            let mid = 0.5 * (lo + hi) / a;
+            let hertz = p0 * (1.0 - mid * mid).sqrt();
+            let err = force / area / hertz - 1.0;
+            report += &format!(
+                "δ {:.2} ring {ring}: {:.5} vs {hertz:.5} N/mm² ({:+.1}%)\n",
+                f.delta,
+                force / area,
+                100.0 * err
+            );
+            assert!(err.abs() < 0.05, "{report}");
+        }
+        let work = 0.4 * fz * f.delta;
+        let err = f.energy / work - 1.0;
+        report += &format!(
+            "δ {:.2}: energy {:.4e} vs {work:.4e} N·mm ({:+.2}%)\n",
+            f.delta,
+            f.energy,
+            100.0 * err
+        );
+        assert!(err.abs() < 0.02, "{report}");
+    }
+    println!("{report}");
+}
+
+/// Under Coulomb friction (μ = 0.8, `tests/fixtures/press_small.toml`) the
+/// nodal forces sum to minus the probe force, every node's shear traction
+/// stays within the cone (μ(1 + 1e-3) times its pressure), the drag shears,
+/// and the frame's VTU carries the stress and contact arrays: the von Mises
+/// stress of the pressed skin is positive, the cells' energy density too.
+#[test]
+fn coulomb_tractions_balance_and_stay_in_the_cone() {
+    let fixture = common::root().join("tests/fixtures/press_small.toml");
+    let mut setup = Setup::load(&fixture).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    setup.outputs.dir = dir.path().to_path_buf();
+    let mut sheared = 0.0f64;
+    skinpatch::pipeline::run(&setup, |frame| {
+        let c = frame.contact;
+        let total = c.total();
+        let force = frame.metrics.probe_force_n;
+        let scale = force[2].abs().max(1e-12);
+        for k in 0..3 {
+            assert!(
+                (total[k] + force[k]).abs() <= 1e-9 * scale.max(1e-3),
+                "{total:?} vs {force:?}"
+            );
+        }
+        for k in 0..c.nodes.len() {
+            assert!(c.pressure(k) > 0.0 && c.area_mm2[k] > 0.0);
+            assert!(
+                c.shear(k) <= 0.8 * (1.0 + 1e-3) * c.pressure(k),
+                "node {}",
+                c.nodes[k]
+            );
+            sheared = sheared.max(c.shear(k));
+        }
+    })
+    .unwrap();
+    assert!(sheared > 0.0, "the drag shears the skin");
+    let grid = skinpatch::mesh::io::read_vtu(&dir.path().join("frames/frame_0006.vtu")).unwrap();
+    let cell = |name: &str| -> Vec<f64> {
+        let f = grid
+            .cell_data
+            .iter()
+            .find(|f| f.name == name)
+            .unwrap_or_else(|| panic!("{name}"));
+        match &f.values {
+            skinpatch::mesh::io::Values::F64(v) => v.clone(),
+            _ => panic!("{name} is f64"),
+        }
+    };
+    assert_eq!(cell("cauchy_stress_n_mm2").len(), 6 * grid.tets.len());
+    assert!(
+        cell("von_mises_stress_n_mm2")
+            .iter()
+            .fold(0.0f64, |m, &v| m.max(v))
+            > 1e-3
+    );
+    assert!(cell("strain_energy_density_n_mm2")
+        .iter()
+        .all(|&v| v >= 0.0));
+    let point = |name: &str| grid.point_data.iter().any(|f| f.name == name);
+    assert!(
+        point("contact_force_n") && point("contact_pressure_n_mm2") && point("contact_shear_n_mm2")
+    );
+}
