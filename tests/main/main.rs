@@ -19,6 +19,7 @@ mod mesh_generation;
 mod mesh_invariants;
 mod mesh_io;
 mod micro;
+mod readme;
 mod render;
 mod robustness;
 mod strain;
