@@ -142,7 +142,8 @@ fn vertex_tangents(surface: &AnimatedSurface, normals: &[Vec3]) -> Vec<[f32; 4]>
         .zip(along_u.iter().zip(&along_v))
         .map(|(n, (u, v))| {
             let mut t = u - n * n.dot(u);
-            if !(t.norm() > 1e-12 * u.norm().max(1e-300)) {
+            let degenerate = t.norm() <= 1e-12 * u.norm().max(1e-300) || !t.norm().is_finite();
+            if degenerate {
                 // No UV gradient: any direction in the tangent plane.
                 let helper = if n.x.abs() < 0.9 {
                     Vec3::x()

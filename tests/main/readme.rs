@@ -257,7 +257,11 @@ fn readme_commands_run() {
         let extra: &[&str] = match how {
             How::AsWritten => &[],
             How::Smaller(extra) => extra,
-            How::Skip(_) => continue,
+            How::Skip(why) => {
+                assert!(!why.is_empty(), "{command}: a skip says why");
+                eprintln!("not run: {command} ({why})");
+                continue;
+            }
         };
         let (exe, mut args) = program(command);
         args.extend(extra.iter().map(|s| s.to_string()));
