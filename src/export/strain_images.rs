@@ -169,6 +169,53 @@ pub fn write_strain_data(
     Ok(path)
 }
 
+/// A strain data map read back ([`read_strain_data`]): one value per texel
+/// and channel, rows as in the file (the top row first, v = 1).
+#[derive(Clone, Debug, PartialEq)]
+pub struct StrainData {
+    /// Texels across (u).
+    pub width: usize,
+    /// Texels down (v).
+    pub height: usize,
+    /// Channels by name: `rs`, `rt`, `su`, `sv`, `A`.
+    pub channels: std::collections::BTreeMap<String, Vec<f32>>,
+}
+
+impl StrainData {
+    /// The channel `name`; an error naming the file's channels if absent.
+    pub fn channel(&self, name: &str) -> Result<&[f32]> {
+        self.channels
+            .get(name)
+            .map(Vec::as_slice)
+            .ok_or_else(|| Error::Parameter {
+                key: name.to_string(),
+                reason: format!(
+                    "is not a channel of this strain map; it has {:?}",
+                    self.channels.keys().collect::<Vec<_>>()
+                ),
+            })
+    }
+}
+
+/// Reads a strain data map written by [`write_strain_data`] (or any EXR's
+/// first layer of float channels).
+pub fn read_strain_data(path: &Path) -> Result<StrainData> {
+    let image = exr::prelude::read_first_flat_layer_from_file(path)
+        .map_err(|e| Error::malformed(path, format!("not a readable EXR: {e}")))?;
+    let layer = &image.layer_data;
+    let channels = layer
+        .channel_data
+        .list
+        .iter()
+        .map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect()))
+        .collect();
+    Ok(StrainData {
+        width: layer.size.width(),
+        height: layer.size.height(),
+        channels,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -195,18 +242,9 @@ mod tests {
         std::fs::create_dir_all(dir.path().join("strain")).unwrap();
         let path = write_strain_data(&raster, dir.path(), "", 7).unwrap();
         assert!(path.ends_with("strain/strain_0007.exr"));
-        let image = exr::prelude::read_first_flat_layer_from_file(&path).unwrap();
-        let layer = &image.layer_data;
-        assert_eq!((layer.size.width(), layer.size.height()), (w, h));
-        let channel = |name: &str| -> Vec<f32> {
-            let c = layer
-                .channel_data
-                .list
-                .iter()
-                .find(|c| c.name.eq(name))
-                .unwrap_or_else(|| panic!("channel {name}"));
-            c.sample_data.values_as_f32().collect()
-        };
+        let data = read_strain_data(&path).unwrap();
+        assert_eq!((data.width, data.height), (w, h));
+        let channel = |name: &str| data.channel(name).unwrap().to_vec();
         let axis = -Vector2::new(theta.cos(), theta.sin());
         let expected_inside = [1.2, 0.9, axis.x, axis.y, 1.0];
         let expected_outside = [1.0, 1.0, 1.0, 0.0, 0.0];

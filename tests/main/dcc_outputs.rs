@@ -118,18 +118,9 @@ fn strain_data_maps_hold_the_frame_strain() {
     );
     for (f, row) in rows.iter().enumerate() {
         let path = out.join(format!("strain/strain_{f:04}.exr"));
-        let image = exr::prelude::read_first_flat_layer_from_file(&path).unwrap();
-        let layer = &image.layer_data;
-        assert_eq!((layer.size.width(), layer.size.height()), (96, 96));
-        let channel = |name: &str| -> Vec<f32> {
-            let c = layer
-                .channel_data
-                .list
-                .iter()
-                .find(|c| c.name.eq(name))
-                .unwrap();
-            c.sample_data.values_as_f32().collect()
-        };
+        let data = skinpatch::export::strain_images::read_strain_data(&path).unwrap();
+        assert_eq!((data.width, data.height), (96, 96));
+        let channel = |name: &str| data.channel(name).unwrap().to_vec();
         let (rs, rt, su, sv, a) = (
             channel("rs"),
             channel("rt"),
