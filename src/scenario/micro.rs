@@ -244,9 +244,20 @@ impl MicrostructureSection {
         let png16 = self.formats.contains(&MapFormat::Png16);
         let exr = self.formats.contains(&MapFormat::Exr);
         let png_range = match &neutral {
-            NeutralMap::Whole(map) => Some(self.png_range(map)?),
-            NeutralMap::Tiled(_) => None,
+            NeutralMap::Whole(map) if png16 => Some(self.png_range(map)?),
+            _ => None,
         };
+        if let (None, Some([lo, hi])) = (png_range, self.height_range_um) {
+            return Err(Error::parameter(
+                "microstructure.height_range_um",
+                format!(
+                    "has no effect without \"png16\" in microstructure.formats and a whole \
+                     (not tiled) map (got [{}, {}])",
+                    crate::error::shown(lo),
+                    crate::error::shown(hi)
+                ),
+            ));
+        }
         Ok(MicroSetup {
             neutral,
             model,

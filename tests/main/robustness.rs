@@ -424,6 +424,16 @@ fn keys_without_effect_are_errors() {
             "microstructure.texel_um has no effect without microstructure.map (got -5)",
         ),
         (
+            "[microstructure]\nformats = [\"exr\"]\nheight_range_um = [-20.0, 0.0]\n\
+             [microstructure.procedural]\nsize_px = 32\n",
+            "microstructure.height_range_um has no effect without \"png16\" in \
+             microstructure.formats and a whole (not tiled) map (got [-20, 0])",
+        ),
+        (
+            "[microstructure]\nheight_range_um = [0.0, -1.0]\n[microstructure.procedural]\nsize_px = 32\n",
+            "microstructure.height_range_um must be two finite heights [low, high] with low < high (µm), got [0, -1]",
+        ),
+        (
             "[microstructure]\nheight_unit_um = 1.0\n[microstructure.procedural]\nsize_px = 32\n",
             "microstructure.height_unit_um has no effect without microstructure.map (got 1)",
         ),
