@@ -120,9 +120,7 @@ fn unknown_values_name_the_key_the_values_and_the_closest() {
         .unwrap_err()
         .to_string();
     assert!(
-        err.contains(
-            "time.integrator must be \"quasi-static\" or \"implicit-euler\", got \"rk4\""
-        ),
+        err.contains("time.integrator must be \"quasi-static\" or \"implicit-euler\", got \"rk4\""),
         "{err}"
     );
     assert!(!err.contains("did you mean"), "{err}");
