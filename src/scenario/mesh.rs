@@ -16,8 +16,9 @@ use crate::mesh::generate::{LayerSpec, PatchSpec, RefineZone, ZoneShape};
 #[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct MeshSection {
-    /// Mesh file to load instead of generating: `.msh` (Gmsh 4.1 ASCII),
-    /// `.node`/`.ele` or a TetGen base name. Relative to the scenario file.
+    /// Mesh file to load instead of generating: `.msh` (Gmsh 4.1 or 2.2),
+    /// `.vtu`/`.vtk`, `.node`/`.ele` or a TetGen base name. Relative to the
+    /// scenario file.
     pub file: Option<PathBuf>,
     /// Patch extent in x (mm). Default 10.
     pub width_mm: Option<f64>,

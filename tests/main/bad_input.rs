@@ -268,16 +268,29 @@ fn gmsh_errors() {
     let elements = fixture_line("$Elements");
     check_gmsh(
         |t| t.lines().take(elements + 10).collect::<Vec<_>>().join("\n"),
-        &["box.msh:", "file ends early: expected an element line"],
+        &["box.msh:", "file ends early: expected an element"],
     );
     check_gmsh(|_| String::new(), &["box.msh: empty file"]);
     check_gmsh(
-        |t| t.replacen("4.1 0 8", "2.2 0 8", 1),
-        &["box.msh:2:", "MSH version 2.2 is not supported"],
+        |t| t.replacen("4.1 0 8", "4.0 0 8", 1),
+        &[
+            "box.msh:2:",
+            "MSH version 4.0 is not supported; save as 4.1 or 2.2",
+        ],
     );
     check_gmsh(
+        |t| t.replacen("4.1 0 8", "4.1 2 8", 1),
+        &["box.msh:2:", "file type '2' is neither 0 nor 1"],
+    );
+    check_gmsh(
+        |t| t.replacen("4.1 0 8", "4.1 0 4", 1),
+        &["box.msh:2:", "data size 4 is not supported"],
+    );
+    // A text file that says it is binary: the marker after the format line
+    // is text, not the integer 1.
+    check_gmsh(
         |t| t.replacen("4.1 0 8", "4.1 1 8", 1),
-        &["box.msh:2:", "binary MSH is not supported"],
+        &["box.msh: byte 20: the endianness marker is not the integer 1"],
     );
     check_gmsh(
         |t| t.replacen("$MeshFormat", "$Mesh", 1),

@@ -785,3 +785,56 @@ fn commands_on_mutated_inputs_keep_inputs_and_outputs() {
         outcomes[0]
     );
 }
+
+/// The Gmsh fixture as a mesh, for the binary mesh corpora.
+fn gmsh_fixture() -> &'static skinpatch::mesh::TetMesh {
+    static MESH: std::sync::OnceLock<skinpatch::mesh::TetMesh> = std::sync::OnceLock::new();
+    MESH.get_or_init(|| {
+        skinpatch::mesh::io::read_mesh(&root().join("tests/fixtures/two_layer_box.msh")).unwrap()
+    })
+}
+
+/// Reads a mutated mesh file: it reads, or the error names the file.
+fn read_mutated_mesh(name: &str, bytes: &[u8]) -> Result<(), TestCaseError> {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join(name);
+    std::fs::write(&path, bytes).unwrap();
+    if let Err(e) = skinpatch::mesh::io::read_mesh(&path) {
+        prop_assert!(e.to_string().contains(name), "{}", e);
+    }
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(config(150))]
+
+    /// Binary Gmsh meshes (4.1 and 2.2, either byte order) with a few bytes
+    /// overwritten (a third of them in the first 400 bytes: format,
+    /// names, entities and headers) read, or fail naming the file.
+    #[test]
+    fn mutated_binary_gmsh_meshes_never_panic(
+        layout in 0..4usize,
+        edits in prop::collection::vec((any::<usize>(), any::<u8>()), 1..4)
+    ) {
+        let bytes = crate::mesh_io::encode_msh(gmsh_fixture(), layout < 2, true, layout % 2 == 1);
+        read_mutated_mesh("box.msh", &mutate_bytes(&bytes, &edits, 400))?;
+    }
+
+    /// VTU meshes, uncompressed binary, with bytes overwritten: read, or
+    /// fail naming the file.
+    #[test]
+    fn mutated_vtu_meshes_never_panic(
+        edits in prop::collection::vec((any::<usize>(), any::<u8>()), 1..4)
+    ) {
+        static BYTES: std::sync::OnceLock<Vec<u8>> = std::sync::OnceLock::new();
+        let bytes = BYTES.get_or_init(|| {
+            let dir = tempfile::tempdir().unwrap();
+            let path = dir.path().join("box.vtu");
+            let grid = skinpatch::mesh::io::Grid::from_mesh(gmsh_fixture());
+            skinpatch::mesh::io::write_vtu_as(&path, &grid, skinpatch::mesh::io::VtuFormat { compress: false, f32: false })
+                .unwrap();
+            std::fs::read(&path).unwrap()
+        });
+        read_mutated_mesh("box.vtu", &mutate_bytes(bytes, &edits, 1200))?;
+    }
+}

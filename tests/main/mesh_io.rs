@@ -261,3 +261,340 @@ fn shipped_hertz_block() {
     assert!(near < mid && mid < far, "{near} < {mid} < {far}");
     assert!((mesh.total_volume() - 32_000.0).abs() < 32_000.0 * 1e-9);
 }
+
+/// A mesh as a sorted list of (region, the tet's corner coordinates as
+/// bits, sorted): equal for two files that hold the same tets whatever the
+/// order of their nodes, tets and corners.
+fn canonical(mesh: &TetMesh) -> Vec<(i32, [[u64; 3]; 4])> {
+    let mut out: Vec<(i32, [[u64; 3]; 4])> = (0..mesh.num_tets())
+        .map(|t| {
+            let mut corners: [[u64; 3]; 4] = std::array::from_fn(|i| {
+                let p = mesh.positions[mesh.tets[t][i]];
+                [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]
+            });
+            corners.sort_unstable();
+            (mesh.tet_region[t], corners)
+        })
+        .collect();
+    out.sort_unstable();
+    out
+}
+
+/// The Gmsh fixture written as MSH 4.1 or 2.2, text or binary, in either
+/// byte order, by a writer kept here as the reference for the layouts of
+/// the Gmsh file-format documentation: one volume entity per region.
+pub(crate) fn encode_msh(mesh: &TetMesh, v41: bool, binary: bool, big_endian: bool) -> Vec<u8> {
+    let mut out = Vec::new();
+    let int = |out: &mut Vec<u8>, v: i32| {
+        if binary {
+            out.extend(if big_endian {
+                v.to_be_bytes()
+            } else {
+                v.to_le_bytes()
+            });
+        } else {
+            out.extend(format!("{v} ").bytes());
+        }
+    };
+    let size = |out: &mut Vec<u8>, v: usize| {
+        let v = v as u64;
+        if binary {
+            out.extend(if big_endian {
+                v.to_be_bytes()
+            } else {
+                v.to_le_bytes()
+            });
+        } else {
+            out.extend(format!("{v} ").bytes());
+        }
+    };
+    let real = |out: &mut Vec<u8>, v: f64| {
+        if binary {
+            out.extend(if big_endian {
+                v.to_be_bytes()
+            } else {
+                v.to_le_bytes()
+            });
+        } else {
+            out.extend(format!("{v:e} ").bytes());
+        }
+    };
+    let newline = |out: &mut Vec<u8>| {
+        if !binary {
+            out.push(b'\n')
+        }
+    };
+    let version = if v41 { "4.1" } else { "2.2" };
+    out.extend(format!("$MeshFormat\n{version} {} 8\n", u8::from(binary)).bytes());
+    if binary {
+        int(&mut out, 1);
+        out.push(b'\n');
+    }
+    out.extend(b"$EndMeshFormat\n$PhysicalNames\n");
+    out.extend(format!("{}\n", mesh.regions.len()).bytes());
+    for r in &mesh.regions {
+        out.extend(format!("3 {} \"{}\"\n", r.id, r.name).bytes());
+    }
+    out.extend(b"$EndPhysicalNames\n");
+    // Node tags 10, 20, …: sparse, as Gmsh allows.
+    let tag = |v: usize| 10 * (v + 1);
+    if v41 {
+        out.extend(b"$Entities\n");
+        for n in [0, 0, 0, mesh.regions.len()] {
+            size(&mut out, n);
+        }
+        newline(&mut out);
+        for (k, r) in mesh.regions.iter().enumerate() {
+            int(&mut out, k as i32 + 1);
+            (0..6).for_each(|_| real(&mut out, 0.0));
+            size(&mut out, 1);
+            int(&mut out, r.id);
+            size(&mut out, 0);
+            newline(&mut out);
+        }
+        out.extend(b"$EndEntities\n$Nodes\n");
+        let n = mesh.num_vertices();
+        for v in [1, n, tag(0), tag(n - 1)] {
+            size(&mut out, v);
+        }
+        newline(&mut out);
+        for v in [3, 1, 0] {
+            int(&mut out, v);
+        }
+        size(&mut out, n);
+        newline(&mut out);
+        for v in 0..n {
+            size(&mut out, tag(v));
+            newline(&mut out);
+        }
+        for p in &mesh.positions {
+            (0..3).for_each(|k| real(&mut out, p[k]));
+            newline(&mut out);
+        }
+        out.extend(b"$EndNodes\n$Elements\n");
+        let t = mesh.num_tets();
+        for v in [mesh.regions.len(), t, 1, t] {
+            size(&mut out, v);
+        }
+        newline(&mut out);
+        for (k, r) in mesh.regions.iter().enumerate() {
+            let tets: Vec<usize> = (0..t).filter(|&i| mesh.tet_region[i] == r.id).collect();
+            for v in [3, k as i32 + 1, 4] {
+                int(&mut out, v);
+            }
+            size(&mut out, tets.len());
+            newline(&mut out);
+            for i in tets {
+                size(&mut out, i + 1);
+                mesh.tets[i].iter().for_each(|&v| size(&mut out, tag(v)));
+                newline(&mut out);
+            }
+        }
+    } else {
+        out.extend(format!("$Nodes\n{}\n", mesh.num_vertices()).bytes());
+        for (v, p) in mesh.positions.iter().enumerate() {
+            int(&mut out, tag(v) as i32);
+            (0..3).for_each(|k| real(&mut out, p[k]));
+            newline(&mut out);
+        }
+        // A point element first (skipped), then the tets, in binary as
+        // one block of like elements.
+        let t = mesh.num_tets();
+        out.extend(format!("$EndNodes\n$Elements\n{}\n", t + 1).bytes());
+        for v in if binary {
+            vec![15, 1, 2]
+        } else {
+            vec![1, 15, 2]
+        } {
+            int(&mut out, v);
+        }
+        if binary {
+            int(&mut out, 1);
+        }
+        for v in [0, 0, tag(0) as i32] {
+            int(&mut out, v);
+        }
+        newline(&mut out);
+        if binary {
+            for v in [4, t as i32, 2] {
+                int(&mut out, v);
+            }
+        }
+        for i in 0..t {
+            if !binary {
+                for v in [i as i32 + 2, 4, 2] {
+                    int(&mut out, v);
+                }
+            } else {
+                int(&mut out, i as i32 + 2);
+            }
+            int(&mut out, mesh.tet_region[i]);
+            int(&mut out, 100 + mesh.tet_region[i]);
+            mesh.tets[i]
+                .iter()
+                .for_each(|&v| int(&mut out, tag(v) as i32));
+            newline(&mut out);
+        }
+    }
+    out.extend(b"\n$EndElements\n");
+    out
+}
+
+/// Every Gmsh layout reads to the same tets, regions and names as the text
+/// 4.1 fixture: 4.1 and 2.2, text and binary, little- and big-endian.
+#[test]
+fn gmsh_layouts_read_the_same_mesh() {
+    let fixture = io::read_mesh(&root().join("tests/fixtures/two_layer_box.msh")).unwrap();
+    let expected = canonical(&fixture);
+    let dir = tempfile::tempdir().unwrap();
+    for (v41, binary, big_endian) in [
+        (true, false, false),
+        (true, true, false),
+        (true, true, true),
+        (false, false, false),
+        (false, true, false),
+        (false, true, true),
+    ] {
+        let path = dir.path().join("box.msh");
+        std::fs::write(&path, encode_msh(&fixture, v41, binary, big_endian)).unwrap();
+        let what = format!("v4.1 {v41}, binary {binary}, big-endian {big_endian}");
+        let mesh = io::read_mesh(&path).unwrap_or_else(|e| panic!("{what}: {e}"));
+        assert!(canonical(&mesh) == expected, "{what}: other tets");
+        assert_eq!(mesh.regions, fixture.regions, "{what}");
+    }
+}
+
+/// Binary Gmsh errors name the byte where the data stops making sense.
+#[test]
+fn binary_gmsh_errors_name_the_byte() {
+    let fixture = io::read_mesh(&root().join("tests/fixtures/two_layer_box.msh")).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("box.msh");
+    let bytes = encode_msh(&fixture, true, true, false);
+    let cut = bytes.len() / 2;
+    std::fs::write(&path, &bytes[..cut]).unwrap();
+    let err = io::read_mesh(&path).unwrap_err().to_string();
+    assert!(
+        err.contains(&format!(
+            "box.msh: byte {cut}: file ends early: expected an element"
+        )),
+        "{err}"
+    );
+    // A non-finite coordinate, at its own byte.
+    let mut bad = bytes.clone();
+    // After "$Nodes\n": the 4-size header, the block's 3 ints and size, its tags.
+    let nodes = bytes.windows(7).position(|w| w == b"$Nodes\n").unwrap();
+    let first_x = nodes + 7 + 4 * 8 + 3 * 4 + 8 + 8 * fixture.num_vertices();
+    bad[first_x..first_x + 8].copy_from_slice(&f64::NAN.to_le_bytes());
+    std::fs::write(&path, &bad).unwrap();
+    let err = io::read_mesh(&path).unwrap_err().to_string();
+    assert!(
+        err.contains(&format!("box.msh: byte {first_x}: x is not finite")),
+        "{err}"
+    );
+    // A second-order tet block.
+    let text = std::fs::read_to_string(root().join("tests/fixtures/two_layer_box.msh")).unwrap();
+    let elements = text.find("$Elements").unwrap();
+    let block = text[elements..].find("\n3 ").unwrap() + elements;
+    let line_end = text[block + 1..].find('\n').unwrap() + block + 1;
+    let header: Vec<&str> = text[block + 1..line_end].split_whitespace().collect();
+    let edited = format!(
+        "{}\n3 {} 11 {}{}",
+        &text[..block],
+        header[1],
+        header[3],
+        &text[line_end..]
+    );
+    std::fs::write(&path, edited).unwrap();
+    let err = io::read_mesh(&path).unwrap_err().to_string();
+    assert!(err.contains("second-order tetrahedra"), "{err}");
+}
+
+/// A mesh written as VTU by this project reads back as the same mesh, its
+/// region ids from the `region` array and its names `region_<id>`.
+#[test]
+fn vtu_mesh_input_round_trips() {
+    let fixture = io::read_mesh(&root().join("tests/fixtures/two_layer_box.msh")).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("box.vtu");
+    io::write_vtu(&path, &io::Grid::from_mesh(&fixture)).unwrap();
+    let mesh = io::read_mesh(&path).unwrap();
+    assert!(canonical(&mesh) == canonical(&fixture));
+    let names: Vec<(&str, i32)> = mesh
+        .regions
+        .iter()
+        .map(|r| (r.name.as_str(), r.id))
+        .collect();
+    assert_eq!(names, vec![("region_1", 1), ("region_2", 2)]);
+    assert!((mesh.top.area(&mesh.positions) - 4.0).abs() < 1e-9);
+    // Without a region array the grid is one region.
+    let mut grid = io::Grid::from_mesh(&fixture);
+    grid.cell_data.clear();
+    io::write_vtu(&path, &grid).unwrap();
+    let mesh = io::read_mesh(&path).unwrap();
+    assert_eq!(mesh.tet_region, vec![1; fixture.num_tets()]);
+    // A non-integer region id is refused by name.
+    let mut grid = io::Grid::from_mesh(&fixture);
+    grid.cell_data = vec![io::Field::f64(
+        "region",
+        1,
+        (0..fixture.num_tets()).map(|t| t as f64 + 0.5).collect(),
+    )];
+    io::write_vtu(&path, &grid).unwrap();
+    let err = io::read_mesh(&path).unwrap_err().to_string();
+    assert!(
+        err.contains("box.vtu") && err.contains("holds 0.5 at cell 0; region ids are integers"),
+        "{err}"
+    );
+}
+
+/// The files meshio writes from the fixture, in every layout users get from
+/// it (Gmsh 4.1 binary, its default; 2.2 text and binary; VTU; legacy VTK
+/// 5.1 and 4.2, text and binary, with triangles beside the tets), read to
+/// the fixture's tets and region ids.
+#[test]
+fn meshio_outputs_read_as_the_fixture() {
+    let fixture = io::read_mesh(&root().join("tests/fixtures/two_layer_box.msh")).unwrap();
+    let expected = canonical(&fixture);
+    let dir = tempfile::tempdir().unwrap();
+    let script = r#"
+import sys, meshio, numpy as np
+src, out = sys.argv[1], sys.argv[2]
+m = meshio.read(src)
+tets = np.vstack([c.data for c in m.cells if c.type == "tetra"])
+phys = np.concatenate([d for c, d in zip(m.cells, m.cell_data["gmsh:physical"]) if c.type == "tetra"])
+# Boundary triangles of the first tets, as meshers keep them.
+tri = tets[:10, :3]
+mesh = meshio.Mesh(m.points, [("tetra", tets), ("triangle", tri)],
+                   cell_data={"gmsh:physical": [phys, np.zeros(len(tri), dtype=int)],
+                              "gmsh:geometrical": [phys, np.zeros(len(tri), dtype=int)]},
+                   field_data=m.field_data)
+meshio.write(out + "/b41.msh", m, file_format="gmsh", binary=True)
+meshio.write(out + "/a22.msh", m, file_format="gmsh22", binary=False)
+meshio.write(out + "/b22.msh", m, file_format="gmsh22", binary=True)
+meshio.write(out + "/m.vtu", mesh)
+meshio.write(out + "/m.vtk", mesh, binary=True)
+meshio.write(out + "/a.vtk", mesh, binary=False)
+meshio.write(out + "/m42.vtk", mesh, file_format="vtk42", binary=True)
+print("written")
+"#;
+    let src = root().join("tests/fixtures/two_layer_box.msh");
+    let Some(out) = common::python_check(
+        "meshio",
+        "SKINPATCH_REQUIRE_MESHIO",
+        script,
+        &[src.to_str().unwrap(), dir.path().to_str().unwrap()],
+    ) else {
+        return;
+    };
+    assert!(out.contains("written"), "{out}");
+    for name in [
+        "b41.msh", "a22.msh", "b22.msh", "m.vtu", "m.vtk", "a.vtk", "m42.vtk",
+    ] {
+        let mesh = io::read_mesh(&dir.path().join(name)).unwrap_or_else(|e| panic!("{e}"));
+        assert!(canonical(&mesh) == expected, "{name}: other tets");
+        if name.ends_with(".msh") {
+            assert_eq!(mesh.regions, fixture.regions, "{name}");
+        }
+    }
+}

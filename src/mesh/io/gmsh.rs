@@ -1,90 +1,200 @@
-//! Gmsh MSH 4.1 (ASCII) reader for linear tetrahedra.
+//! Gmsh MSH reader for linear tetrahedra: versions 4.1 and 2.2, each ASCII
+//! or binary (little- or big-endian).
 //!
-//! Reads `$MeshFormat`, `$PhysicalNames`, `$Entities`, `$Nodes` and
+//! Reads `$MeshFormat`, `$PhysicalNames`, `$Entities` (4.1), `$Nodes` and
 //! `$Elements`; other sections are skipped. Node tags may be sparse and in any
-//! order across blocks. Tetrahedra (element type 4) become the mesh; every
-//! tet takes the first physical tag of its volume entity as region id (the
-//! entity tag when the volume has no physical group), named from
-//! `$PhysicalNames` where a 3-D name exists. Lower-dimensional elements are
-//! ignored. Binary files are rejected with a hint to save as ASCII.
+//! order. Tetrahedra (element type 4) become the mesh; lower-dimensional
+//! elements are skipped and other 3-D elements refused.
+//!
+//! Region ids: in 4.1 a tet takes the first physical tag of its volume
+//! entity (the entity tag when the volume has no physical group); in 2.2 its
+//! own first tag, the physical group (the elementary tag when that is 0).
+//! Regions are named from `$PhysicalNames` where a 3-D name exists.
+//!
+//! Errors name the file and, in text, the 1-based line; inside binary data
+//! they name the byte offset instead.
 //!
 //! Written by hand rather than through a crate: the MSH crate at hand drops
 //! the node tags of dense blocks (assuming they run in block order), skips
-//! `$PhysicalNames`, and reports errors without line numbers.
+//! `$PhysicalNames`, reads neither 2.2 nor big-endian files, and reports
+//! errors without positions.
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
+use std::str::FromStr;
 
-use super::text::{read_text, Lines, Record};
 use crate::error::{Error, Result};
 use crate::mesh::{RawMesh, TetMesh, Vec3};
 
 const TET4: i32 = 4;
+const TET10: i32 = 11;
 
-/// Reads a Gmsh MSH 4.1 ASCII file.
+/// Reads a Gmsh MSH file, version 4.1 or 2.2, ASCII or binary.
 pub fn read_gmsh(path: &Path) -> Result<TetMesh> {
-    let text = read_text(path)?;
-    let mut lines = Lines::new(path, &text, None);
+    let data = super::read_input(path)?;
+    let mut c = Cursor {
+        path,
+        data: &data,
+        pos: 0,
+        binary: None,
+    };
+    let Some((at, first)) = c.token_opt()? else {
+        return Err(Error::malformed(path, "empty file: no $MeshFormat section"));
+    };
+    if first != "$MeshFormat" {
+        return Err(c.error_at(at, "the file must start with $MeshFormat"));
+    }
+    let version = read_format(&mut c)?;
+    c.expect_end("MeshFormat")?;
     let mut state = State::default();
-    let mut saw_format = false;
-    while let Some(r) = lines.next() {
-        let section = r.fields[0];
+    while let Some((at, section)) = c.token_opt()? {
         let Some(name) = section.strip_prefix('$') else {
-            return Err(r.error(format!(
-                "expected a section header like $Nodes, got '{section}'"
-            )));
+            return Err(c.error_at(
+                at,
+                format!("expected a section header like $Nodes, got '{section}'"),
+            ));
         };
-        match name {
-            "MeshFormat" => {
-                read_format(&mut lines)?;
-                saw_format = true;
-            }
-            _ if !saw_format => return Err(r.error("the file must start with $MeshFormat")),
-            "PhysicalNames" => read_physical_names(&mut lines, &mut state)?,
-            "Entities" => read_entities(&mut lines, &mut state)?,
-            "Nodes" => read_nodes(&mut lines, &mut state)?,
-            "Elements" => read_elements(&mut lines, &mut state)?,
-            other => {
+        match (name, version) {
+            ("PhysicalNames", _) => read_physical_names(&mut c, &mut state)?,
+            ("Entities", Version::V41) => read_entities(&mut c, &mut state)?,
+            ("Nodes", Version::V41) => read_nodes_41(&mut c, &mut state)?,
+            ("Elements", Version::V41) => read_elements_41(&mut c, &mut state)?,
+            ("Nodes", Version::V22) => read_nodes_22(&mut c, &mut state)?,
+            ("Elements", Version::V22) => read_elements_22(&mut c, &mut state)?,
+            (other, _) => {
                 log::debug!("{}: skipping section ${other}", path.display());
-                skip_section(&mut lines, other)?;
+                c.skip_section(at, other)?;
                 continue;
             }
         }
-        let end = lines.next_record(&format!("$End{name}"))?;
-        if end.fields[0] != format!("$End{name}") {
-            return Err(end.error(format!("expected $End{name}, got '{}'", end.fields[0])));
+        c.expect_end(name)?;
+    }
+    state.finish(&c)
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum Version {
+    V41,
+    V22,
+}
+
+/// Reads the line after `$MeshFormat`: version, file type and data size,
+/// then in binary files the endianness marker (the integer 1).
+fn read_format(c: &mut Cursor) -> Result<Version> {
+    let (at, version) = c.token("the format line 'version file-type data-size'")?;
+    let version = match version {
+        "4.1" => Version::V41,
+        "2.2" | "2.1" | "2.0" | "2" => Version::V22,
+        other => {
+            return Err(c.error_at(
+                at,
+                format!("MSH version {other} is not supported; save as 4.1 or 2.2"),
+            ))
         }
+    };
+    let (at, kind) = c.token("the file type (0 text, 1 binary)")?;
+    let binary = match kind {
+        "0" => false,
+        "1" => true,
+        other => return Err(c.error_at(at, format!("file type '{other}' is neither 0 nor 1"))),
+    };
+    let (at, size) = c.token("the data size")?;
+    if size != "8" {
+        return Err(c.error_at(
+            at,
+            format!("data size {size} is not supported; only 8-byte numbers (the Gmsh default)"),
+        ));
     }
-    if !saw_format {
-        return Err(Error::malformed(path, "empty file: no $MeshFormat section"));
+    if binary {
+        c.end_of_line();
+        let at = c.mark();
+        let marker: [u8; 4] = c.bytes("the endianness marker")?;
+        let big_endian = match (i32::from_le_bytes(marker), i32::from_be_bytes(marker)) {
+            (1, _) => false,
+            (_, 1) => true,
+            _ => {
+                return Err(c.binary_error(
+                    at,
+                    "the endianness marker is not the integer 1 in either byte order",
+                ))
+            }
+        };
+        c.binary = Some(Binary { big_endian });
     }
-    state.finish(path)
+    Ok(version)
+}
+
+/// Node count of each Gmsh element type up to 31 (lines, triangles,
+/// quadrangles, tetrahedra, hexahedra, prisms, pyramids, points and their
+/// higher-order forms), so that blocks of other elements can be skipped.
+fn nodes_of(kind: i32) -> Option<usize> {
+    const NODES: [usize; 31] = [
+        2, 3, 4, 4, 8, 6, 5, 3, 6, 9, 10, 27, 18, 14, 1, 8, 20, 15, 13, 9, 10, 12, 15, 15, 21, 4,
+        5, 6, 20, 35, 56,
+    ];
+    usize::try_from(kind)
+        .ok()
+        .and_then(|k| k.checked_sub(1))
+        .and_then(|k| NODES.get(k).copied())
+}
+
+/// Dimension of element types 1…31 (the ones [`nodes_of`] knows).
+fn dim_of(kind: i32) -> usize {
+    match kind {
+        15 => 0,
+        1 | 8 | 26 | 27 | 28 => 1,
+        2 | 3 | 9 | 10 | 16 | 20..=25 => 2,
+        _ => 3,
+    }
+}
+
+/// Checks an element type of a 3-D block or element: linear tets only.
+fn check_volume_type(kind: i32) -> std::result::Result<(), String> {
+    match kind {
+        TET4 => Ok(()),
+        TET10 => Err(
+            "second-order tetrahedra (type 11) are not supported; mesh with Mesh.ElementOrder = 1"
+                .into(),
+        ),
+        other => Err(format!(
+            "3-D element type {other} is not supported; only linear tetrahedra (type 4)"
+        )),
+    }
 }
 
 #[derive(Default)]
 struct State {
     /// 3-D physical names by tag.
     names: BTreeMap<i32, String>,
-    /// Volume entity tag → region id.
+    /// Volume entity tag → region id (4.1).
     volume_region: HashMap<i32, i32>,
     /// Node tag → index in `positions`.
     node_index: HashMap<u64, usize>,
     positions: Vec<Vec3>,
-    /// (element tag, node tags, region id, line)
+    /// (element tag, node tags, region id, byte offset of the element)
     tets: Vec<(u64, [u64; 4], i32, usize)>,
 }
 
 impl State {
-    fn finish(self, path: &Path) -> Result<TetMesh> {
+    fn add_node(&mut self, c: &Cursor, at: usize, tag: u64, p: Vec3) -> Result<()> {
+        if self.node_index.insert(tag, self.positions.len()).is_some() {
+            return Err(c.error_at(at, format!("node tag {tag} is defined twice")));
+        }
+        self.positions.push(p);
+        Ok(())
+    }
+
+    fn finish(self, c: &Cursor) -> Result<TetMesh> {
         let mut tets = Vec::with_capacity(self.tets.len());
         let mut tet_region = Vec::with_capacity(self.tets.len());
-        for (tag, nodes, region, line) in &self.tets {
+        for (tag, nodes, region, at) in &self.tets {
             let mut tet = [0; 4];
             for (slot, node) in tet.iter_mut().zip(nodes) {
-                *slot = *self.node_index.get(node).ok_or_else(|| Error::Parse {
-                    path: path.to_path_buf(),
-                    line: *line,
-                    message: format!("element {tag} refers to node {node}, which is not defined"),
+                *slot = *self.node_index.get(node).ok_or_else(|| {
+                    c.error_at(
+                        *at,
+                        format!("element {tag} refers to node {node}, which is not defined"),
+                    )
                 })?;
             }
             tets.push(tet);
@@ -97,63 +207,20 @@ impl State {
             region_names: self.names,
             face_markers: HashMap::new(),
         };
-        TetMesh::from_raw(&path.display().to_string(), raw)
+        TetMesh::from_raw(&c.path.display().to_string(), raw)
     }
 }
 
-fn read_format(lines: &mut Lines) -> Result<()> {
-    let r = lines.next_record("the format line 'version file-type data-size'")?;
-    r.expect_len(3, "the format line")?;
-    if r.fields[0] != "4.1" {
-        return Err(r.error(format!(
-            "MSH version {} is not supported; save as 4.1",
-            r.fields[0]
-        )));
-    }
-    if r.fields[1] != "0" {
-        return Err(r.error("binary MSH is not supported; save as ASCII (Mesh.Binary = 0)"));
-    }
-    Ok(())
-}
-
-fn skip_section(lines: &mut Lines, name: &str) -> Result<()> {
-    let end = format!("$End{name}");
-    loop {
-        let (_, text) = lines.next_text(&end)?;
-        if text == end {
-            return Ok(());
-        }
-    }
-}
-
-fn count(r: &Record, i: usize, what: &str) -> Result<usize> {
-    r.get(i, what)
-}
-
-fn read_physical_names(lines: &mut Lines, state: &mut State) -> Result<()> {
-    let r = lines.next_record("the number of physical names")?;
-    let n = count(&r, 0, "number of physical names")?;
+fn read_physical_names(c: &mut Cursor, state: &mut State) -> Result<()> {
+    let n: usize = c.parse("the number of physical names")?;
     for _ in 0..n {
-        let (line, text) = lines.next_text("a physical name line")?;
-        let bad = |m: &str| Error::Parse {
-            path: lines.path().to_path_buf(),
-            line,
-            message: m.to_string(),
-        };
-        let mut parts = text.splitn(3, char::is_whitespace);
-        let dim: i32 = parts
-            .next()
-            .and_then(|s| s.parse().ok())
-            .ok_or_else(|| bad("physical name: bad dimension"))?;
-        let tag: i32 = parts
-            .next()
-            .and_then(|s| s.parse().ok())
-            .ok_or_else(|| bad("physical name: bad tag"))?;
-        let name = parts
-            .next()
-            .map(|s| s.trim().trim_matches('"').to_string())
-            .filter(|s| !s.is_empty())
-            .ok_or_else(|| bad("physical name: missing quoted name"))?;
+        let dim: i32 = c.parse("a physical name's dimension")?;
+        let tag: i32 = c.parse("a physical name's tag")?;
+        let (at, rest) = c.rest_of_line();
+        let name = rest.trim().trim_matches('"').trim();
+        if name.is_empty() {
+            return Err(c.error_at(at, "physical name: missing quoted name"));
+        }
         if dim == 3 {
             state
                 .names
@@ -163,27 +230,35 @@ fn read_physical_names(lines: &mut Lines, state: &mut State) -> Result<()> {
     Ok(())
 }
 
-fn read_entities(lines: &mut Lines, state: &mut State) -> Result<()> {
-    let r = lines.next_record("entity counts")?;
-    r.expect_len(4, "the entity counts line")?;
-    let counts: Vec<usize> = (0..4)
-        .map(|i| count(&r, i, "entity count"))
-        .collect::<Result<_>>()?;
+fn read_entities(c: &mut Cursor, state: &mut State) -> Result<()> {
+    c.start_binary_block();
+    let mut counts = [0u64; 4];
+    for n in &mut counts {
+        *n = c.size("an entity count")?;
+    }
     // Points: tag x y z nPhys phys…; curves, surfaces, volumes:
     // tag minX minY minZ maxX maxY maxZ nPhys phys… nBound bound…
     for (dim, &n) in counts.iter().enumerate() {
         for _ in 0..n {
-            let r = lines.next_record(&format!("a {dim}-D entity"))?;
-            let phys_at = if dim == 0 { 4 } else { 7 };
-            let tag: i32 = r.get(0, "entity tag")?;
-            let nphys = count(&r, phys_at, "number of physical tags")?;
-            r.expect_len(phys_at + 1 + nphys, "an entity line")?;
+            let tag = c.int("an entity tag")?;
+            for _ in 0..if dim == 0 { 3 } else { 6 } {
+                c.real("an entity coordinate")?;
+            }
+            let nphys = c.size("the number of physical tags")?;
+            let mut region = tag;
+            for k in 0..nphys {
+                let phys = c.int("a physical tag")?;
+                if k == 0 {
+                    region = phys;
+                }
+            }
+            if dim > 0 {
+                let nbound = c.size("the number of bounding entities")?;
+                for _ in 0..nbound {
+                    c.int("a bounding entity")?;
+                }
+            }
             if dim == 3 {
-                let region = if nphys > 0 {
-                    r.get(phys_at + 1, "physical tag")?
-                } else {
-                    tag
-                };
                 state.volume_region.insert(tag, region);
             }
         }
@@ -191,88 +266,389 @@ fn read_entities(lines: &mut Lines, state: &mut State) -> Result<()> {
     Ok(())
 }
 
-fn read_nodes(lines: &mut Lines, state: &mut State) -> Result<()> {
-    let head = lines.next_record("the $Nodes header")?;
-    head.expect_len(4, "the $Nodes header")?;
-    let blocks = count(&head, 0, "number of node blocks")?;
-    let total = count(&head, 1, "number of nodes")?;
+fn read_nodes_41(c: &mut Cursor, state: &mut State) -> Result<()> {
+    c.start_binary_block();
+    let head = c.mark();
+    let blocks = c.size("the number of node blocks")?;
+    let total = c.size("the number of nodes")?;
+    c.size("the smallest node tag")?;
+    c.size("the largest node tag")?;
+    let before = state.positions.len();
     for _ in 0..blocks {
-        let r = lines.next_record("a node block header")?;
-        r.expect_len(4, "a node block header")?;
-        let dim: usize = r.get(0, "entity dimension")?;
-        let parametric: u8 = r.get(2, "parametric flag")?;
-        let n = count(&r, 3, "number of nodes in block")?;
-        let mut tags = Vec::with_capacity(lines.capacity(n));
+        let dim = c.int("a node block's entity dimension")?;
+        c.int("a node block's entity tag")?;
+        let parametric = c.int("a node block's parametric flag")?;
+        let n = c.size("the number of nodes in a block")?;
+        let mut tags = Vec::with_capacity(c.capacity(n));
         for _ in 0..n {
-            let t = lines.next_record("a node tag")?;
-            tags.push((t.get::<u64>(0, "node tag")?, t.line));
+            tags.push(c.size("a node tag")?);
         }
-        let width = 3 + if parametric == 1 { dim } else { 0 };
-        for (tag, tag_line) in tags {
-            let c = lines.next_record("node coordinates")?;
-            c.expect_len(width, "a node coordinate line")?;
-            let p = Vec3::new(c.float(0, "x")?, c.float(1, "y")?, c.float(2, "z")?);
-            if state
-                .node_index
-                .insert(tag, state.positions.len())
-                .is_some()
-            {
-                return Err(c.error(format!("node tag {tag} (line {tag_line}) is defined twice")));
+        let extra = if parametric == 1 {
+            usize::try_from(dim.clamp(0, 3)).unwrap_or(0)
+        } else {
+            0
+        };
+        for tag in tags {
+            let at = c.mark();
+            let p = Vec3::new(c.real("x")?, c.real("y")?, c.real("z")?);
+            for _ in 0..extra {
+                c.real("a parametric coordinate")?;
             }
-            state.positions.push(p);
+            state.add_node(c, at, tag, p)?;
         }
     }
-    if state.positions.len() != total {
-        return Err(head.error(format!(
-            "header announces {total} nodes, the blocks hold {}",
-            state.positions.len()
-        )));
+    let read = state.positions.len() - before;
+    if read as u64 != total {
+        return Err(c.error_at(
+            head,
+            format!("header announces {total} nodes, the blocks hold {read}"),
+        ));
     }
     Ok(())
 }
 
-fn read_elements(lines: &mut Lines, state: &mut State) -> Result<()> {
-    let head = lines.next_record("the $Elements header")?;
-    head.expect_len(4, "the $Elements header")?;
-    let blocks = count(&head, 0, "number of element blocks")?;
-    let total = count(&head, 1, "number of elements")?;
-    let mut seen = 0;
+fn read_elements_41(c: &mut Cursor, state: &mut State) -> Result<()> {
+    c.start_binary_block();
+    let head = c.mark();
+    let blocks = c.size("the number of element blocks")?;
+    let total = c.size("the number of elements")?;
+    c.size("the smallest element tag")?;
+    c.size("the largest element tag")?;
+    let mut seen = 0u64;
     for _ in 0..blocks {
-        let r = lines.next_record("an element block header")?;
-        r.expect_len(4, "an element block header")?;
-        let dim: i32 = r.get(0, "entity dimension")?;
-        let entity: i32 = r.get(1, "entity tag")?;
-        let kind: i32 = r.get(2, "element type")?;
-        let n = count(&r, 3, "number of elements in block")?;
-        let region = if dim == 3 {
-            *state.volume_region.get(&entity).unwrap_or(&entity)
-        } else {
-            0
-        };
-        if dim == 3 && kind != TET4 {
-            return Err(r.error(format!(
-                "3-D element type {kind} is not supported; only linear tetrahedra (type 4)"
-            )));
+        let at = c.mark();
+        let dim = c.int("an element block's entity dimension")?;
+        let entity = c.int("an element block's entity tag")?;
+        let kind = c.int("an element type")?;
+        let n = c.size("the number of elements in a block")?;
+        if dim == 3 {
+            check_volume_type(kind).map_err(|m| c.error_at(at, m))?;
         }
+        let nodes =
+            nodes_of(kind).ok_or_else(|| c.error_at(at, format!("unknown element type {kind}")))?;
+        let region = *state.volume_region.get(&entity).unwrap_or(&entity);
         for _ in 0..n {
-            let e = lines.next_record("an element line")?;
+            let at = c.mark();
+            let tag = c.size("an element tag")?;
+            let mut tet = [0u64; 4];
+            for k in 0..nodes {
+                let node = c.size("an element's node tag")?;
+                if let Some(slot) = tet.get_mut(k) {
+                    *slot = node;
+                }
+            }
             seen += 1;
-            if dim != 3 {
-                continue;
+            if dim == 3 {
+                state.tets.push((tag, tet, region, at));
             }
-            e.expect_len(5, "a tetrahedron line")?;
-            let tag: u64 = e.get(0, "element tag")?;
-            let mut nodes = [0u64; 4];
-            for (i, node) in nodes.iter_mut().enumerate() {
-                *node = e.get(1 + i, "node tag")?;
-            }
-            state.tets.push((tag, nodes, region, e.line));
         }
     }
     if seen != total {
-        return Err(head.error(format!(
-            "header announces {total} elements, the blocks hold {seen}"
-        )));
+        return Err(c.error_at(
+            head,
+            format!("header announces {total} elements, the blocks hold {seen}"),
+        ));
     }
     Ok(())
+}
+
+fn read_nodes_22(c: &mut Cursor, state: &mut State) -> Result<()> {
+    let n: u64 = c.parse("the number of nodes")?;
+    c.start_binary_block();
+    for _ in 0..n {
+        let at = c.mark();
+        let tag = if c.binary.is_some() {
+            u64::try_from(c.int("a node tag")?)
+                .map_err(|_| c.binary_error(at, "negative node tag"))?
+        } else {
+            c.parse("a node tag")?
+        };
+        let p = Vec3::new(c.real("x")?, c.real("y")?, c.real("z")?);
+        state.add_node(c, at, tag, p)?;
+    }
+    Ok(())
+}
+
+fn read_elements_22(c: &mut Cursor, state: &mut State) -> Result<()> {
+    let total: u64 = c.parse("the number of elements")?;
+    c.start_binary_block();
+    let mut seen = 0u64;
+    while seen < total {
+        // Binary data comes in blocks (type, count, tag count) of like
+        // elements; text has one element a line with its own type.
+        let at = c.mark();
+        let (text_tag, kind, count, ntags) = if c.binary.is_some() {
+            let kind = c.int("an element block's type")?;
+            let count = c.int("an element block's count")?;
+            let ntags = c.int("an element block's tag count")?;
+            let count =
+                u64::try_from(count).map_err(|_| c.binary_error(at, "negative element count"))?;
+            (None, kind, count, ntags)
+        } else {
+            let tag = c.parse::<u64>("an element tag")?;
+            let kind = c.parse("an element type")?;
+            let ntags = c.parse("an element's tag count")?;
+            (Some(tag), kind, 1, ntags)
+        };
+        let nodes =
+            nodes_of(kind).ok_or_else(|| c.error_at(at, format!("unknown element type {kind}")))?;
+        let volume = dim_of(kind) == 3;
+        if volume {
+            check_volume_type(kind).map_err(|m| c.error_at(at, m))?;
+        }
+        if ntags < 0 {
+            return Err(c.error_at(at, format!("negative tag count {ntags}")));
+        }
+        for k in 0..count {
+            let at = if k == 0 { at } else { c.mark() };
+            let tag = match text_tag {
+                Some(tag) => tag,
+                None => {
+                    let at = c.mark();
+                    u64::try_from(c.int("an element tag")?)
+                        .map_err(|_| c.binary_error(at, "negative element tag"))?
+                }
+            };
+            let mut tags = [0i32; 2];
+            for t in 0..ntags as usize {
+                let v = c.int("an element tag value")?;
+                if let Some(slot) = tags.get_mut(t) {
+                    *slot = v;
+                }
+            }
+            let mut tet = [0u64; 4];
+            for n in 0..nodes {
+                let at = c.mark();
+                let node = c.int("an element's node tag")?;
+                let node = u64::try_from(node).map_err(|_| c.error_at(at, "negative node tag"))?;
+                if let Some(slot) = tet.get_mut(n) {
+                    *slot = node;
+                }
+            }
+            seen += 1;
+            if seen > total {
+                return Err(c.error_at(
+                    at,
+                    format!("header announces {total} elements, the blocks hold more"),
+                ));
+            }
+            if volume {
+                let region = if tags[0] != 0 { tags[0] } else { tags[1] };
+                state.tets.push((tag, tet, region, at));
+            }
+        }
+    }
+    Ok(())
+}
+
+#[derive(Clone, Copy)]
+struct Binary {
+    big_endian: bool,
+}
+
+/// A read position in the file's bytes: text tokens, or binary numbers
+/// once `$MeshFormat` said the file is binary.
+struct Cursor<'a> {
+    path: &'a Path,
+    data: &'a [u8],
+    pos: usize,
+    binary: Option<Binary>,
+}
+
+impl<'a> Cursor<'a> {
+    fn line_at(&self, pos: usize) -> usize {
+        1 + self.data[..pos.min(self.data.len())]
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count()
+    }
+
+    /// An error at byte `pos`: by line in text files, by byte offset in
+    /// binary ones (past the format line, lines mean nothing there).
+    fn error_at(&self, pos: usize, message: impl Into<String>) -> Error {
+        if self.binary.is_some() {
+            self.binary_error(pos, message)
+        } else {
+            Error::Parse {
+                path: self.path.to_path_buf(),
+                line: self.line_at(pos),
+                message: message.into(),
+            }
+        }
+    }
+
+    fn binary_error(&self, pos: usize, message: impl Into<String>) -> Error {
+        Error::Parse {
+            path: self.path.to_path_buf(),
+            line: 0,
+            message: format!("byte {pos}: {}", message.into()),
+        }
+    }
+
+    fn ends_early(&self, what: &str) -> Error {
+        self.error_at(self.data.len(), format!("file ends early: expected {what}"))
+    }
+
+    /// Room to reserve for `n` announced entries: at most one per two bytes
+    /// left, so a header claiming 4e9 entries cannot make the reader
+    /// allocate for them.
+    fn capacity(&self, n: u64) -> usize {
+        let left = (self.data.len() - self.pos) / 2;
+        usize::try_from(n).unwrap_or(usize::MAX).min(left)
+    }
+
+    /// The offset of the next item: in text, past the whitespace before
+    /// it, so that errors name the line where it stands.
+    fn mark(&mut self) -> usize {
+        if self.binary.is_none() {
+            while self.pos < self.data.len() && self.data[self.pos].is_ascii_whitespace() {
+                self.pos += 1;
+            }
+        }
+        self.pos
+    }
+
+    /// The next whitespace-separated text token and its offset.
+    fn token_opt(&mut self) -> Result<Option<(usize, &'a str)>> {
+        while self.pos < self.data.len() && self.data[self.pos].is_ascii_whitespace() {
+            self.pos += 1;
+        }
+        let start = self.pos;
+        if start == self.data.len() {
+            return Ok(None);
+        }
+        while self.pos < self.data.len() && !self.data[self.pos].is_ascii_whitespace() {
+            self.pos += 1;
+        }
+        std::str::from_utf8(&self.data[start..self.pos])
+            .map(|t| Some((start, t)))
+            .map_err(|_| Error::Parse {
+                path: self.path.to_path_buf(),
+                line: self.line_at(start),
+                message: "not a text file (invalid UTF-8)".into(),
+            })
+    }
+
+    fn token(&mut self, what: &str) -> Result<(usize, &'a str)> {
+        self.token_opt()?.ok_or_else(|| self.ends_early(what))
+    }
+
+    /// A text token parsed as `T`.
+    fn parse<T: FromStr>(&mut self, what: &str) -> Result<T> {
+        let (at, token) = self.token(what)?;
+        token
+            .parse()
+            .map_err(|_| self.error_at(at, format!("{what}: cannot parse '{token}'")))
+    }
+
+    /// The rest of the current line (for quoted names).
+    fn rest_of_line(&mut self) -> (usize, &'a str) {
+        let start = self.pos;
+        while self.pos < self.data.len() && self.data[self.pos] != b'\n' {
+            self.pos += 1;
+        }
+        (
+            start,
+            std::str::from_utf8(&self.data[start..self.pos]).unwrap_or(""),
+        )
+    }
+
+    /// Skips to just past the end of the current line: binary data starts
+    /// on the byte after a header line's newline.
+    fn end_of_line(&mut self) {
+        self.rest_of_line();
+        self.pos = (self.pos + 1).min(self.data.len());
+    }
+
+    /// In a binary file, moves past the section header's newline.
+    fn start_binary_block(&mut self) {
+        if self.binary.is_some() {
+            self.end_of_line();
+        }
+    }
+
+    fn bytes<const N: usize>(&mut self, what: &str) -> Result<[u8; N]> {
+        let end = self.pos + N;
+        let Some(b) = self.data.get(self.pos..end) else {
+            return Err(self.ends_early(what));
+        };
+        self.pos = end;
+        Ok(b.try_into().expect("slice of N bytes"))
+    }
+
+    fn big_endian(&self) -> bool {
+        self.binary.is_some_and(|b| b.big_endian)
+    }
+
+    /// A 4-byte integer in binary files, a text token otherwise.
+    fn int(&mut self, what: &str) -> Result<i32> {
+        if self.binary.is_none() {
+            return self.parse(what);
+        }
+        let b = self.bytes::<4>(what)?;
+        Ok(if self.big_endian() {
+            i32::from_be_bytes(b)
+        } else {
+            i32::from_le_bytes(b)
+        })
+    }
+
+    /// An 8-byte unsigned size in binary files, a text token otherwise.
+    fn size(&mut self, what: &str) -> Result<u64> {
+        if self.binary.is_none() {
+            return self.parse(what);
+        }
+        let b = self.bytes::<8>(what)?;
+        Ok(if self.big_endian() {
+            u64::from_be_bytes(b)
+        } else {
+            u64::from_le_bytes(b)
+        })
+    }
+
+    /// A finite 8-byte float in binary files, a text token otherwise.
+    fn real(&mut self, what: &str) -> Result<f64> {
+        let at = self.pos;
+        let v = if self.binary.is_none() {
+            self.parse(what)?
+        } else {
+            let b = self.bytes::<8>(what)?;
+            if self.big_endian() {
+                f64::from_be_bytes(b)
+            } else {
+                f64::from_le_bytes(b)
+            }
+        };
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(self.error_at(at, format!("{what} is not finite ({v})")))
+        }
+    }
+
+    /// Requires the token `$End<name>`.
+    fn expect_end(&mut self, name: &str) -> Result<()> {
+        let end = format!("$End{name}");
+        let (at, token) = self.token(&end)?;
+        if token == end {
+            Ok(())
+        } else {
+            Err(self.error_at(at, format!("expected {end}, got '{token}'")))
+        }
+    }
+
+    /// Moves past `$End<name>` of a section this reader does not use.
+    fn skip_section(&mut self, at: usize, name: &str) -> Result<()> {
+        let end = format!("$End{name}");
+        let found = self.data[self.pos..]
+            .windows(end.len())
+            .position(|w| w == end.as_bytes());
+        match found {
+            Some(k) => {
+                self.pos += k + end.len();
+                Ok(())
+            }
+            None => Err(self.error_at(at, format!("section ${name} has no {end}"))),
+        }
+    }
 }

@@ -1,4 +1,5 @@
-//! Mesh files: TetGen `.node/.ele/.face`, Gmsh `.msh` 4.1, VTK `.vtu`.
+//! Mesh files: TetGen `.node/.ele/.face`, Gmsh `.msh` (4.1 and 2.2, text or
+//! binary), VTK `.vtu` and legacy `.vtk` unstructured grids.
 //!
 //! [`read_mesh`] picks the reader by extension. Every reader reports
 //! malformed input as [`Error::Parse`] with the file and 1-based line, and
@@ -9,6 +10,7 @@
 mod gmsh;
 mod tetgen;
 pub(crate) mod text;
+mod vtk_mesh;
 pub mod vtu;
 
 use std::io::Write;
@@ -16,22 +18,25 @@ use std::path::{Path, PathBuf};
 
 pub use gmsh::read_gmsh;
 pub use tetgen::{read_tetgen, tetgen_paths, write_tetgen};
+pub use vtk_mesh::{read_vtk_mesh, REGION_ARRAYS};
 pub use vtu::{read_vtu, write_vtu, write_vtu_as, Field, Grid, Values, VtuFormat};
 
 use crate::error::{Error, Result};
 use crate::mesh::TetMesh;
 
-/// Reads a mesh by extension: `.msh` (Gmsh 4.1 ASCII), or a TetGen mesh given
-/// as `base.node`, `base.ele` or the bare base name.
+/// Reads a mesh by extension: `.msh` (Gmsh 4.1 or 2.2, text or binary),
+/// `.vtu` or `.vtk` (a VTK unstructured grid of tetrahedra), or a TetGen
+/// mesh given as `base.node`, `base.ele` or the bare base name.
 pub fn read_mesh(path: &Path) -> Result<TetMesh> {
     match path.extension().and_then(|e| e.to_str()) {
         Some("msh") => read_gmsh(path),
+        Some("vtu" | "vtk") => read_vtk_mesh(path),
         Some("node" | "ele" | "face") => read_tetgen(&path.with_extension("")),
         _ if tetgen_paths(path)[0].exists() => read_tetgen(path),
         _ => Err(Error::parameter(
             "mesh file",
             format!(
-                "{}: unknown mesh format; expected .msh, .node/.ele, or a TetGen base name",
+                "{}: unknown mesh format; expected .msh, .vtu, .vtk, .node/.ele, or a TetGen base name",
                 path.display()
             ),
         )),

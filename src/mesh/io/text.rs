@@ -99,34 +99,11 @@ impl<'a> Lines<'a> {
         })
     }
 
-    /// The next raw line (comment and blank handling still applied), trimmed.
-    pub fn next_text(&mut self, what: &str) -> Result<(usize, &'a str), Error> {
-        loop {
-            let Some((i, line)) = self.inner.next() else {
-                return Err(Error::Parse {
-                    path: self.path.to_path_buf(),
-                    line: self.last_line,
-                    message: format!("file ends early: expected {what}"),
-                });
-            };
-            self.last_line = i + 1;
-            let text = self.strip(line).trim();
-            if !text.is_empty() {
-                return Ok((i + 1, text));
-            }
-        }
-    }
-
     fn strip(&self, line: &'a str) -> &'a str {
         match self.comment.and_then(|c| line.find(c)) {
             Some(k) => &line[..k],
             None => line,
         }
-    }
-
-    /// The file's path, for errors.
-    pub fn path(&self) -> &'a Path {
-        self.path
     }
 }
 

@@ -340,10 +340,112 @@ pub fn write_vtu_as(path: &Path, grid: &Grid, format: VtuFormat) -> Result<()> {
 /// unstructured grid of tetrahedra and triangles, tets first).
 pub fn read_vtu(path: &Path) -> Result<Grid> {
     let bad = |message: String| Error::malformed(path, message);
-    if !path.exists() {
-        return Err(Error::not_found(path));
+    let loaded = load_unstructured(path)?;
+    let (mut tets, mut triangles) = (Vec::with_capacity(loaded.cells.len()), Vec::new());
+    for (k, cell) in loaded.cells.iter().enumerate() {
+        let nodes = loaded.nodes(cell);
+        match (cell.kind, nodes.len()) {
+            (CellType::Tetra, 4) => {
+                if !triangles.is_empty() {
+                    return Err(bad(format!(
+                        "cell {k}: tetrahedra after triangles are not supported"
+                    )));
+                }
+                tets.push(std::array::from_fn(|i| nodes[i]));
+            }
+            (CellType::Triangle, 3) => triangles.push(std::array::from_fn(|i| nodes[i])),
+            (CellType::Tetra | CellType::Triangle, n) => {
+                return Err(bad(format!("cell {k} has {n} nodes, not as its type says")))
+            }
+            (other, _) => {
+                return Err(bad(format!(
+                    "cell {k} is a {other:?}; only tetrahedra and triangles are supported"
+                )))
+            }
+        }
     }
-    let vtk = Vtk::import(path).map_err(|e| bad(format!("not a readable VTK file: {e}")))?;
+    Ok(Grid {
+        points: loaded.points,
+        tets,
+        triangles,
+        point_data: loaded.point_data,
+        cell_data: loaded.cell_data,
+    })
+}
+
+/// Legacy VTK 5.1 names 64-bit array types `vtktypeint64` and
+/// `vtktypeuint64` (meshio writes them for integer cell data); the legacy
+/// parser knows them only in the `OFFSETS`/`CONNECTIVITY` headers, so array
+/// headers elsewhere get the older names `long` and `unsigned_long`, which
+/// mean the same 8-byte integers.
+fn legacy_type_names(bytes: Vec<u8>) -> Vec<u8> {
+    const NAMES: [(&[u8], &[u8]); 2] = [
+        (b" vtktypeint64", b" long"),
+        (b" vtktypeuint64", b" unsigned_long"),
+    ];
+    if !bytes.starts_with(b"# vtk DataFile Version 5") {
+        return bytes;
+    }
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut line_start = 0;
+    let mut i = 0;
+    while i < bytes.len() {
+        if bytes[i] == b'\n' {
+            line_start = i + 1;
+        }
+        let topology = bytes[line_start..].starts_with(b"OFFSETS")
+            || bytes[line_start..].starts_with(b"CONNECTIVITY");
+        let hit = (!topology)
+            .then(|| NAMES.iter().find(|(from, _)| bytes[i..].starts_with(from)))
+            .flatten();
+        if let Some((from, to)) = hit {
+            out.extend_from_slice(to);
+            i += from.len();
+        } else {
+            out.push(bytes[i]);
+            i += 1;
+        }
+    }
+    out
+}
+
+/// One cell of a loaded grid: its VTK type and its range in the
+/// connectivity.
+pub(super) struct Cell {
+    pub kind: CellType,
+    pub range: std::ops::Range<usize>,
+}
+
+/// A single-piece unstructured grid as read, any cell types.
+pub(super) struct Unstructured {
+    pub points: Vec<Vec3>,
+    pub connectivity: Vec<usize>,
+    pub cells: Vec<Cell>,
+    pub point_data: Vec<Field>,
+    pub cell_data: Vec<Field>,
+}
+
+impl Unstructured {
+    /// The point indices of `cell`.
+    pub fn nodes(&self, cell: &Cell) -> &[usize] {
+        &self.connectivity[cell.range.clone()]
+    }
+}
+
+/// Reads a single-piece unstructured grid from VTK XML (`.vtu`) or legacy
+/// VTK (`.vtk`, versions 2 to 5.1, text or binary), checking every cell's
+/// point indices. Legacy field data (`FIELD`) arrays become ordinary arrays.
+pub(super) fn load_unstructured(path: &Path) -> Result<Unstructured> {
+    let bad = |message: String| Error::malformed(path, message);
+    super::regular_file(path)?;
+    let legacy = path.extension().is_some_and(|e| e == "vtk");
+    let vtk = if legacy {
+        let bytes = legacy_type_names(super::read_input(path)?);
+        Vtk::parse_legacy_be(&bytes[..])
+    } else {
+        Vtk::import(path)
+    }
+    .map_err(|e| bad(format!("not a readable VTK file: {e}")))?;
     let DataSet::UnstructuredGrid { pieces, .. } = vtk.data else {
         return Err(bad("not an unstructured grid".into()));
     };
@@ -357,82 +459,132 @@ pub fn read_vtu(path: &Path) -> Result<Grid> {
         .points
         .cast_into()
         .ok_or_else(|| bad("points are not numeric".into()))?;
-    let points = coords
+    if !coords.len().is_multiple_of(3) {
+        return Err(bad(format!(
+            "{} point coordinates, not a multiple of 3",
+            coords.len()
+        )));
+    }
+    let points: Vec<Vec3> = coords
         .chunks_exact(3)
         .map(|c| Vec3::new(c[0], c[1], c[2]))
         .collect();
-    let (connectivity, offsets) = match piece.cells.cell_verts.clone() {
-        VertexNumbers::XML {
-            connectivity,
-            offsets,
-        } => (connectivity, offsets),
-        VertexNumbers::Legacy { .. } => return Err(bad("unexpected legacy cell layout".into())),
+    let index = |v: u64, k: usize| -> Result<usize> {
+        usize::try_from(v)
+            .ok()
+            .filter(|&i| i < points.len())
+            .ok_or_else(|| {
+                bad(format!(
+                    "cell {k} refers to point {v}; there are {}",
+                    points.len()
+                ))
+            })
     };
-    if piece.cells.types.len() != offsets.len() {
-        return Err(bad(format!(
-            "{} cell types for {} cells",
-            piece.cells.types.len(),
-            offsets.len()
-        )));
-    }
-    let (mut tets, mut triangles) = (Vec::with_capacity(offsets.len()), Vec::new());
-    let mut start = 0usize;
-    for (k, (&end, kind)) in offsets.iter().zip(&piece.cells.types).enumerate() {
-        let end = end as usize;
-        let nodes = match kind {
-            CellType::Tetra => 4,
-            CellType::Triangle => 3,
-            other => {
+    let types = &piece.cells.types;
+    let mut connectivity = Vec::new();
+    let mut cells = Vec::with_capacity(types.len());
+    match &piece.cells.cell_verts {
+        VertexNumbers::XML {
+            connectivity: conn,
+            offsets,
+        } => {
+            // Legacy 5.1 files list n + 1 offsets, the first 0; XML lists
+            // the n ends.
+            let offsets = match &offsets[..] {
+                [0, ends @ ..] if legacy && ends.len() == types.len() => ends,
+                all => all,
+            };
+            if types.len() != offsets.len() {
                 return Err(bad(format!(
-                    "cell {k} is a {other:?}; only tetrahedra and triangles are supported"
-                )))
-            }
-        };
-        if end != start + nodes || end > connectivity.len() {
-            return Err(bad(format!("cell {k} does not have {nodes} nodes")));
-        }
-        if nodes == 4 {
-            if !triangles.is_empty() {
-                return Err(bad(format!(
-                    "cell {k}: tetrahedra after triangles are not supported"
+                    "{} cell types for {} cells",
+                    types.len(),
+                    offsets.len()
                 )));
             }
-            tets.push(std::array::from_fn(|i| connectivity[start + i] as usize));
-        } else {
-            triangles.push(std::array::from_fn(|i| connectivity[start + i] as usize));
+            connectivity.reserve(conn.len());
+            let mut start = 0usize;
+            for (k, (&end, &kind)) in offsets.iter().zip(types).enumerate() {
+                let end = usize::try_from(end).unwrap_or(usize::MAX);
+                if end < start || end > conn.len() {
+                    return Err(bad(format!(
+                        "cell {k}: offset {end} is out of order or range"
+                    )));
+                }
+                for &v in &conn[start..end] {
+                    connectivity.push(index(v, k)?);
+                }
+                cells.push(Cell {
+                    kind,
+                    range: start..end,
+                });
+                start = end;
+            }
         }
-        start = end;
+        VertexNumbers::Legacy {
+            num_cells,
+            vertices,
+        } => {
+            if types.len() != *num_cells as usize {
+                return Err(bad(format!(
+                    "{} cell types for {num_cells} cells",
+                    types.len()
+                )));
+            }
+            let mut at = 0usize;
+            for (k, &kind) in types.iter().enumerate() {
+                let n = *vertices
+                    .get(at)
+                    .ok_or_else(|| bad(format!("cell {k}: the cell list ends early")))?
+                    as usize;
+                let ids = vertices
+                    .get(at + 1..at + 1 + n)
+                    .ok_or_else(|| bad(format!("cell {k}: the cell list ends early")))?;
+                let start = connectivity.len();
+                for &v in ids {
+                    connectivity.push(index(u64::from(v), k)?);
+                }
+                cells.push(Cell {
+                    kind,
+                    range: start..connectivity.len(),
+                });
+                at += 1 + n;
+            }
+        }
     }
     let fields = |attrs: &[Attribute]| -> Result<Vec<Field>> {
-        attrs
-            .iter()
-            .map(|a| match a {
-                Attribute::DataArray(d) => {
-                    let components = d.elem.num_comp() as usize;
-                    let values = match &d.data {
-                        IOBuffer::I32(v) => Values::I32(v.clone()),
-                        other => Values::F64(
-                            other
-                                .clone()
-                                .cast_into()
-                                .ok_or_else(|| bad(format!("array {} is not numeric", d.name)))?,
-                        ),
-                    };
-                    Ok(Field {
-                        name: d.name.clone(),
-                        components,
-                        values,
-                        component_names: Vec::new(),
-                    })
-                }
-                Attribute::Field { name, .. } => Err(bad(format!("unexpected field data {name}"))),
-            })
-            .collect()
+        let mut out = Vec::new();
+        for a in attrs {
+            let arrays: Vec<(&str, usize, &IOBuffer)> = match a {
+                Attribute::DataArray(d) => vec![(&d.name, d.elem.num_comp() as usize, &d.data)],
+                Attribute::Field { data_array, .. } => data_array
+                    .iter()
+                    .map(|f| (f.name.as_str(), f.elem as usize, &f.data))
+                    .collect(),
+            };
+            for (name, components, data) in arrays {
+                let values = match data {
+                    IOBuffer::I32(v) => Values::I32(v.clone()),
+                    other => Values::F64(
+                        other
+                            .clone()
+                            .cast_into()
+                            .ok_or_else(|| bad(format!("array {name} is not numeric")))?,
+                    ),
+                };
+                out.push(Field {
+                    name: name.to_string(),
+                    components,
+                    values,
+                    component_names: Vec::new(),
+                });
+            }
+        }
+        Ok(out)
     };
-    Ok(Grid {
+    Ok(Unstructured {
         points,
-        tets,
-        triangles,
+        connectivity,
+        cells,
         point_data: fields(&piece.data.point)?,
         cell_data: fields(&piece.data.cell)?,
     })
