@@ -2,7 +2,9 @@
 //! and writes its outputs. One room per job; this file only declares and
 //! re-exports.
 //!
-//! * [`run`](run()): the FEM run — [`Stepper`] frames through every output;
+//! * [`run`](run()): the FEM run — [`Run`], a run a caller steps frame by
+//!   frame (probe targets, fields, files only when asked), stepped through
+//!   the scenario's frames;
 //! * [`surface`]: the run of an animated surface from another tool;
 //! * `stepper`: the FEM frame source and its load-step rules;
 //! * `micro`: where the microstructure stages run and what they write;
@@ -28,5 +30,5 @@ mod vtkhdf;
 pub use micro::gpu_chain;
 pub use outputs::{RunKind, RunSummary};
 pub use render::{roughness_curve, texel_mm};
-pub use run::{run, FemRunSummary, Frame};
+pub use run::{run, FemRunSummary, Frame, Run};
 pub use stepper::{simulate, Stepper};

@@ -1,17 +1,21 @@
-//! The FEM run: [`run`] steps a validated [`Setup`] frame by frame (the
-//! [`Stepper`](super::Stepper)) and writes each frame's outputs — the VTU
-//! and VTKHDF frames, strain maps, the top surface's animation, the
-//! deformed microstructure, rendered frames and a `metrics.csv` row. A
-//! failing frame stops the run with an error naming it; everything written
-//! before stays.
+//! The FEM run. [`Run`] is a run a caller steps frame by frame (through
+//! the [`Stepper`](super::Stepper)): probe targets set from code, each
+//! frame's fields read in memory, and — for [`Run::writing`] — each frame's
+//! outputs written as it is solved: the VTU and VTKHDF frames, strain maps,
+//! the top surface's animation, the deformed microstructure, rendered
+//! frames and a `metrics.csv` row. [`run`] steps one through a scenario's
+//! frames. A failing frame stops a writing run with an error naming it;
+//! everything written before stays.
 
 use super::outputs::{FrameInput, FrameOutputs, MapPiece, OutputSpec, RunKind, RunSummary};
-use super::{plan, stepper::simulate, texel_mm, vtkhdf};
+use super::{plan, texel_mm, vtkhdf, Stepper};
 use crate::error::{Error, Result};
 use crate::export::{self, FrameMetrics};
 use crate::fem::contact::ContactForces;
-use crate::mesh::{io, QualityReport, Vec3};
-use crate::scenario::Setup;
+use crate::fem::material::Material;
+use crate::fem::probe::{ContactMode, Probe, ProbePose};
+use crate::mesh::{io, QualityReport, TetMesh, Vec3};
+use crate::scenario::{Setup, SimulationSetup};
 use crate::strain::{element_stresses, ElementStrains, SurfaceField, TetStress};
 use crate::surface::AnimatedSurface;
 
@@ -36,7 +40,7 @@ pub struct Frame<'a> {
     /// The probe's force on each node in contact, with the contact normal
     /// and the node's area: nodal contact pressure and shear traction.
     pub contact: &'a ContactForces,
-    materials: &'a [crate::fem::Material],
+    materials: &'a [Material],
     strains: &'a std::cell::OnceCell<ElementStrains>,
     stresses: &'a std::cell::OnceCell<Vec<TetStress>>,
 }
@@ -64,7 +68,9 @@ impl Frame<'_> {
 
 /// Runs the scenario and writes its outputs; `on_frame` is called after
 /// each frame's files are written, with the frame's metrics and fields
-/// (for progress, or to read results without going through files).
+/// (for progress, or to read results without going through files). It is
+/// [`Run::writing`] stepped through the scenario's frames; use [`Run`]
+/// itself to drive the probe from code or to stop early.
 ///
 /// ```
 /// # fn main() -> skinpatch::Result<()> {
@@ -88,80 +94,427 @@ impl Frame<'_> {
 /// # }
 /// ```
 pub fn run(setup: &Setup, mut on_frame: impl FnMut(&Frame<'_>)) -> Result<FemRunSummary> {
-    let dir = &setup.outputs.dir;
-    let mesh = &setup.mesh;
-    // Everything that can fail before the first frame is checked before
-    // the folder is touched: the planned output size, the adapters and
-    // ffmpeg (opening the outputs).
-    plan::check(setup, setup.outputs.force_large_output)?;
-    let whole = MapPiece {
-        tag: String::new(),
-        triangles: None,
-    };
-    let mut outputs = FrameOutputs::open(output_spec(setup), vec![whole])?;
-    write_rest_mesh(setup)?;
-    outputs.start()?;
-    let mut hdf = None;
-    let mut exported = SurfaceExport::open(setup)?;
-    let materials = &setup.simulation.tet_material;
-    let result = simulate(setup, |m, stepper| {
-        let (sim, contact) = (stepper.simulation(), stepper.contact_forces());
-        let mut m = *m;
-        let field = SurfaceField::new(&mesh.top, &mesh.positions, sim.positions());
+    let mut run = Run::writing(setup)?;
+    for _ in 0..=setup.simulation.frames {
+        match run.step() {
+            Ok(frame) => on_frame(&frame),
+            // The files written so far stay; the run's own error is the
+            // one reported.
+            Err(e) => {
+                run.close_after_error();
+                return Err(e);
+            }
+        }
+    }
+    run.finish()
+}
+
+/// A FEM run a caller steps frame by frame: set the probe's target, step,
+/// read the frame (positions, strains, stresses, contact), and stop when
+/// it likes. [`Run::new`] keeps everything in memory; [`Run::writing`]
+/// also writes the scenario's outputs, frame by frame as `skinpatch run`
+/// does (which is this object stepped through the scenario's frames).
+///
+/// Without targets the probe follows the scenario's path. The first
+/// [`Run::set_probe_target`] replaces the path from the next frame on: each
+/// target becomes a keyframe at its frame's time, and the probe moves
+/// linearly (in load steps, as any probe motion) from where it was, then
+/// stays at the last target. The same targets give the same frames, bit for
+/// bit; a scenario whose `path_mm` lists them solves to the same states.
+///
+/// A frame that fails leaves an in-memory run at its last good frame (the
+/// failed target dropped), so the caller may try another; a writing run
+/// stops at the first failure, keeping what it wrote.
+///
+/// ```
+/// # fn main() -> skinpatch::Result<()> {
+/// use skinpatch::pipeline::Run;
+/// use skinpatch::scenario::Setup;
+/// let setup = Setup::load(std::path::Path::new("tests/fixtures/press_small.toml"))?;
+/// let mut run = Run::new(&setup);
+/// let start = run.probe_pose().expect("the scenario has a probe").centre;
+/// // Press straight down 0.1 mm a frame until the skin pushes back with 20 mN.
+/// for k in 1..=10 {
+///     run.set_probe_target(start - skinpatch::mesh::Vec3::z() * (0.1 * k as f64))?;
+///     let frame = run.step()?;
+///     if frame.contact.total().norm() >= 0.02 {
+///         break;
+///     }
+/// }
+/// let frame = run.frame().expect("a frame was solved");
+/// assert!(frame.metrics.probe_force_n[2] >= 0.02);
+/// assert!(frame.stresses().iter().any(|s| s.von_mises() > 0.0));
+/// # Ok(())
+/// # }
+/// ```
+pub struct Run<'a> {
+    simulation: &'a SimulationSetup,
+    mesh: &'a TetMesh,
+    materials: std::borrow::Cow<'a, [Material]>,
+    stepper: Stepper,
+    probe: Option<Probe>,
+    /// The target of the next frame, when set.
+    target: Option<(Vec3, Option<Vec3>)>,
+    /// Whether targets have replaced the scenario's path.
+    driven: bool,
+    writer: Option<Writer<'a>>,
+    last: Option<LastFrame>,
+    rows: Vec<FrameMetrics>,
+    /// Why a writing run stopped.
+    failed: Option<String>,
+}
+
+/// The fields of the last solved frame.
+struct LastFrame {
+    metrics: FrameMetrics,
+    field: SurfaceField,
+    strains: std::cell::OnceCell<ElementStrains>,
+    stresses: std::cell::OnceCell<Vec<TetStress>>,
+}
+
+/// The files of a writing run.
+struct Writer<'a> {
+    setup: &'a Setup,
+    outputs: FrameOutputs<'a, FrameMetrics>,
+    hdf: Option<vtkhdf::Writer>,
+    exported: SurfaceExport<'a>,
+}
+
+impl<'a> Run<'a> {
+    /// A run of `setup` kept in memory: it writes no files.
+    pub fn new(setup: &'a Setup) -> Run<'a> {
+        Run::from_parts(&setup.simulation, &setup.mesh)
+    }
+
+    /// A run of the simulation part of a setup on `mesh`, in memory.
+    pub fn from_parts(simulation: &'a SimulationSetup, mesh: &'a TetMesh) -> Run<'a> {
+        Run {
+            simulation,
+            mesh,
+            materials: std::borrow::Cow::Borrowed(&simulation.tet_material),
+            stepper: Stepper::new(simulation, mesh),
+            probe: simulation.probe.clone(),
+            target: None,
+            driven: false,
+            writer: None,
+            last: None,
+            rows: Vec::new(),
+            failed: None,
+        }
+    }
+
+    /// A run that writes `setup`'s outputs as it goes. Everything that can
+    /// fail before the first frame — the planned output size, the GPU
+    /// adapter, ffmpeg — is checked before the output folder is touched.
+    /// It writes at most the scenario's frames (the size that was checked).
+    pub fn writing(setup: &'a Setup) -> Result<Run<'a>> {
+        plan::check(setup, setup.outputs.force_large_output)?;
+        let whole = MapPiece {
+            tag: String::new(),
+            triangles: None,
+        };
+        let mut outputs = FrameOutputs::open(output_spec(setup), vec![whole])?;
+        write_rest_mesh(setup)?;
+        outputs.start()?;
+        let exported = SurfaceExport::open(setup)?;
+        let mut run = Run::new(setup);
+        run.writer = Some(Writer {
+            setup,
+            outputs,
+            hdf: None,
+            exported,
+        });
+        Ok(run)
+    }
+
+    /// The frame [`Run::step`] solves next (0: the rest state with the
+    /// probe at its start).
+    pub fn next_frame(&self) -> usize {
+        self.stepper.next_frame()
+    }
+
+    /// Time between frames (s).
+    pub fn frame_dt(&self) -> f64 {
+        self.simulation.frame_dt
+    }
+
+    /// Frames in the scenario, the rest frame included.
+    pub fn scenario_frames(&self) -> usize {
+        self.simulation.frames + 1
+    }
+
+    /// The probe where the last frame was solved (before frame 0: where the
+    /// run starts it); `None` without a probe.
+    pub fn probe_pose(&self) -> Option<ProbePose> {
+        let t = self.last.as_ref().map_or(0.0, |l| l.metrics.time_s);
+        let probe = self.probe.as_ref()?;
+        (!probe.path.points.is_empty()).then(|| probe.pose(t))
+    }
+
+    /// Where the probe's centre (mm) is to be at the next frame; a capsule
+    /// keeps its axis. From the first target on, the scenario's path is
+    /// no longer followed (see [`Run`]).
+    pub fn set_probe_target(&mut self, centre: Vec3) -> Result<()> {
+        self.set_target(centre, None)
+    }
+
+    /// [`Run::set_probe_target`] with the capsule's axis as well (any
+    /// length but zero; normalised where used).
+    pub fn set_probe_pose(&mut self, centre: Vec3, axis: Vec3) -> Result<()> {
+        if !(axis.iter().all(|v| v.is_finite()) && axis.norm() > 0.0) {
+            return Err(Error::parameter(
+                "probe axis",
+                format!(
+                    "({}, {}, {}) must be finite and not zero",
+                    axis.x, axis.y, axis.z
+                ),
+            ));
+        }
+        self.set_target(centre, Some(axis))
+    }
+
+    fn set_target(&mut self, centre: Vec3, axis: Option<Vec3>) -> Result<()> {
+        if self.probe.is_none() {
+            return Err(Error::parameter(
+                "probe target",
+                "the scenario has no [probe] to move",
+            ));
+        }
+        if !centre.iter().all(|v| v.is_finite()) {
+            return Err(Error::parameter(
+                "probe target",
+                format!(
+                    "({}, {}, {}) mm must be finite",
+                    centre.x, centre.y, centre.z
+                ),
+            ));
+        }
+        self.target = Some((centre, axis));
+        Ok(())
+    }
+
+    /// New materials (one per tet) from the next frame on; the deformed
+    /// state is kept.
+    pub fn set_materials(&mut self, tet_material: Vec<Material>) -> Result<()> {
+        if tet_material.len() != self.mesh.num_tets() {
+            return Err(Error::parameter(
+                "materials",
+                format!(
+                    "{} given for {} tets; one per tet",
+                    tet_material.len(),
+                    self.mesh.num_tets()
+                ),
+            ));
+        }
+        self.stepper.set_materials(self.mesh, &tet_material);
+        self.materials = std::borrow::Cow::Owned(tet_material);
+        Ok(())
+    }
+
+    /// The probe's contact mode from the next frame on.
+    pub fn set_contact_mode(&mut self, mode: ContactMode) -> Result<()> {
+        match self.probe.as_mut() {
+            Some(p) => {
+                p.mode = mode;
+                Ok(())
+            }
+            None => Err(Error::parameter(
+                "contact mode",
+                "the scenario has no [probe]",
+            )),
+        }
+    }
+
+    /// Solves the next frame (and writes its files, for a writing run).
+    pub fn step(&mut self) -> Result<Frame<'_>> {
+        if let Some(why) = &self.failed {
+            return Err(Error::Solver(format!(
+                "the run stopped at an earlier error and cannot go on: {why}"
+            )));
+        }
+        let frame = self.stepper.next_frame();
+        if self.writer.is_some() && frame > self.simulation.frames {
+            return Err(Error::parameter(
+                "time.duration_s",
+                format!(
+                    "the run writes files for the scenario's {} frames and has written them \
+                     all; make the scenario longer to write more",
+                    self.simulation.frames + 1
+                ),
+            ));
+        }
+        let t = frame as f64 * self.simulation.frame_dt;
+        let target = self.target.take();
+        // An in-memory run goes back to its last good frame on failure.
+        let before = self
+            .writer
+            .is_none()
+            .then(|| (self.stepper.clone(), self.probe.clone(), self.driven));
+        if let (Some(probe), Some(target)) = (self.probe.as_mut(), target) {
+            let t_prev = self.last.as_ref().map(|l| l.metrics.time_s);
+            drive(probe, &mut self.driven, t_prev, t, target);
+        }
+        let solved = self
+            .stepper
+            .step(self.simulation, self.mesh, self.probe.as_ref())
+            .and_then(|m| self.finish_frame(m));
+        if let Err(e) = solved {
+            match before {
+                Some((stepper, probe, driven)) => {
+                    self.stepper = stepper;
+                    self.probe = probe;
+                    self.driven = driven;
+                }
+                None => self.failed = Some(e.to_string()),
+            }
+            return Err(e);
+        }
+        Ok(self.frame().expect("a frame was just solved"))
+    }
+
+    /// Fills a solved frame's surface ranges, keeps its fields and writes
+    /// its files.
+    fn finish_frame(&mut self, mut m: FrameMetrics) -> Result<()> {
+        let (mesh, x) = (self.mesh, self.stepper.simulation().positions());
+        let field = SurfaceField::new(&mesh.top, &mesh.positions, x);
         let (rs, rt, folded) = field.extremes();
         m.rs_range = [rs.0, rs.1];
         m.rt_range = [rt.0, rt.1];
         m.folded_vertices = folded;
-        let (strains, stresses) = (std::cell::OnceCell::new(), std::cell::OnceCell::new());
-        let grid = (outputs.wants_grid() || setup.write_vtkhdf).then(|| {
-            let x = sim.positions();
-            let strains = strains.get_or_init(|| ElementStrains::compute(mesh, x));
-            let stresses = stresses.get_or_init(|| element_stresses(mesh, x, materials));
-            export::frame_grid(mesh, x, strains, stresses, contact, &field)
+        let last = LastFrame {
+            metrics: m,
+            field,
+            strains: std::cell::OnceCell::new(),
+            stresses: std::cell::OnceCell::new(),
+        };
+        if let Some(w) = self.writer.as_mut() {
+            let pose = self.probe.as_ref().map(|p| p.pose(m.time_s));
+            w.frame(
+                &last,
+                x,
+                self.stepper.contact_forces(),
+                &self.materials,
+                pose,
+            )?;
+        }
+        self.rows.push(m);
+        self.last = Some(last);
+        Ok(())
+    }
+
+    /// The last solved frame.
+    pub fn frame(&self) -> Option<Frame<'_>> {
+        let last = self.last.as_ref()?;
+        Some(Frame {
+            metrics: &last.metrics,
+            total_frames: self.simulation.frames + 1,
+            mesh: self.mesh,
+            positions: self.stepper.simulation().positions(),
+            surface: &last.field,
+            contact: self.stepper.contact_forces(),
+            materials: &self.materials,
+            strains: &last.strains,
+            stresses: &last.stresses,
+        })
+    }
+
+    /// Ends the run: a writing run closes its files (the surface GLB, the
+    /// MP4, the VTKHDF file) and lists them. The summary holds every
+    /// frame's metrics.
+    pub fn finish(self) -> Result<FemRunSummary> {
+        let Some(w) = self.writer else {
+            return Ok(RunSummary {
+                kind: RunKind::Fem,
+                written: Vec::new(),
+                quality: Some(QualityReport::of(self.mesh)),
+                frames: self.rows,
+                micro_device: None,
+            });
+        };
+        vtkhdf::finish(w.hdf)?;
+        w.exported.finish()?;
+        let finished = w.outputs.finish()?;
+        Ok(RunSummary {
+            kind: RunKind::Fem,
+            written: export::outputs::run_files(&w.setup.outputs.dir),
+            quality: Some(QualityReport::of(self.mesh)),
+            frames: finished.rows,
+            micro_device: finished.micro_device,
+        })
+    }
+
+    /// After a failed frame: closes what must be closed for the frames
+    /// written so far to stay readable (the VTKHDF file).
+    pub fn close_after_error(self) {
+        if let Some(w) = self.writer {
+            if let Err(e) = vtkhdf::finish(w.hdf) {
+                log::warn!("{e}");
+            }
+        }
+    }
+}
+
+/// Makes `target` the probe's keyframe at `t`. The first time, the
+/// scenario's path is cut at the last frame (`t_prev`, its pose there kept
+/// as a keyframe so the probe starts from where it was).
+fn drive(
+    probe: &mut Probe,
+    driven: &mut bool,
+    t_prev: Option<f64>,
+    t: f64,
+    (centre, axis): (Vec3, Option<Vec3>),
+) {
+    let axis = axis.unwrap_or_else(|| probe.pose(t_prev.unwrap_or(0.0)).axis);
+    if !*driven {
+        let start = t_prev.map(|tp| (tp, probe.pose(tp)));
+        probe.path.points.clear();
+        probe.axis.points.clear();
+        if let Some((tp, pose)) = start {
+            probe.path.points.push((tp, pose.centre));
+            probe.axis.points.push((tp, pose.axis));
+        }
+        *driven = true;
+    }
+    probe.path.points.push((t, centre));
+    probe.axis.points.push((t, axis));
+}
+
+impl Writer<'_> {
+    /// Writes one frame's files and its metrics row.
+    fn frame(
+        &mut self,
+        last: &LastFrame,
+        x: &[Vec3],
+        contact: &ContactForces,
+        materials: &[Material],
+        probe: Option<ProbePose>,
+    ) -> Result<()> {
+        let (setup, mesh, m) = (self.setup, &self.setup.mesh, &last.metrics);
+        let grid = (self.outputs.wants_grid() || setup.write_vtkhdf).then(|| {
+            let strains = last
+                .strains
+                .get_or_init(|| ElementStrains::compute(mesh, x));
+            let stresses = last
+                .stresses
+                .get_or_init(|| element_stresses(mesh, x, materials));
+            export::frame_grid(mesh, x, strains, stresses, contact, &last.field)
         });
         if let (true, Some(grid)) = (setup.write_vtkhdf, &grid) {
-            vtkhdf::push(&mut hdf, dir, setup, m.time_s, grid)?;
+            vtkhdf::push(&mut self.hdf, &setup.outputs.dir, setup, m.time_s, grid)?;
         }
-        exported.push(sim.positions(), m.frame)?;
-        let probe = setup.simulation.probe.as_ref().map(|p| p.pose(m.time_s));
+        self.exported.push(x, m.frame)?;
         let geometry = |tessellate: usize| {
-            crate::render::scene::build(mesh, sim.positions(), &field, probe.as_ref(), tessellate)
+            crate::render::scene::build(mesh, x, &last.field, probe.as_ref(), tessellate)
         };
-        outputs.frame(&FrameInput {
+        self.outputs.frame(&FrameInput {
             frame: m.frame,
             time_s: m.time_s,
-            field: &field,
+            field: &last.field,
             grid: grid.as_ref(),
             geometry: &geometry,
         })?;
-        outputs.row(m)?;
-        on_frame(&Frame {
-            metrics: &m,
-            total_frames: setup.simulation.frames + 1,
-            mesh,
-            positions: sim.positions(),
-            surface: &field,
-            contact,
-            materials,
-            strains: &strains,
-            stresses: &stresses,
-        });
-        Ok(())
-    });
-    // Closed whether or not the run finished: the steps so far stay. The
-    // run's own error, if any, is the one reported.
-    let closed = vtkhdf::finish(hdf);
-    result?;
-    closed?;
-    exported.finish()?;
-    let finished = outputs.finish()?;
-    Ok(RunSummary {
-        kind: RunKind::Fem,
-        written: export::outputs::run_files(&setup.outputs.dir),
-        quality: Some(QualityReport::of(mesh)),
-        frames: finished.rows,
-        micro_device: finished.micro_device,
-    })
+        self.outputs.row(*m)
+    }
 }
 
 /// What the shared output stage needs of a FEM scenario.

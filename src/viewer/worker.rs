@@ -7,7 +7,8 @@
 //! Each solved frame becomes a keyframe of the probe's path at the frame's
 //! time (frame × frame_dt), so the path so far, written as `[probe]
 //! path_mm`, makes `skinpatch run` solve the same frames in the same order
-//! ([`crate::pipeline::Stepper`] is the frame step of both).
+//! ([`crate::pipeline::Run`], stepped in memory here, is the frame step of
+//! both).
 
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
@@ -17,9 +18,9 @@ use nalgebra::Vector3;
 
 use crate::export::FrameMetrics;
 use crate::fem::material::Material;
-use crate::fem::probe::{ContactMode, Probe, ProbePose};
+use crate::fem::probe::{ContactMode, ProbePose};
 use crate::mesh::{TetMesh, Vec3};
-use crate::pipeline::Stepper;
+use crate::pipeline::Run;
 use crate::scenario::SimulationSetup;
 
 /// One converged frame.
@@ -196,12 +197,7 @@ impl Drop for FemWorker {
 
 /// The worker's loop.
 fn run(shared: &Shared, setup: SimulationSetup, mesh: TetMesh, notify: Box<dyn Fn() + Send>) {
-    let mut stepper = Stepper::new(&setup, &mesh);
-    let mut probe: Option<Probe> = setup.probe.clone().map(|mut p| {
-        p.path.points.clear();
-        p.axis.points.clear();
-        p
-    });
+    let mut run = Run::from_parts(&setup, &mesh);
     // The target of the last frame tried (solved or failed).
     let mut tried: Option<Option<ProbePose>> = None;
     loop {
@@ -222,45 +218,42 @@ fn run(shared: &Shared, setup: SimulationSetup, mesh: TetMesh, notify: Box<dyn F
             (inbox.target, inbox.materials.take())
         };
         if let Some((tet_material, mode)) = materials {
-            stepper.set_materials(&mesh, &tet_material);
-            if let (Some(p), Some(mode)) = (probe.as_mut(), mode) {
-                p.mode = mode;
+            let changed = run.set_materials(tet_material).and_then(|()| match mode {
+                Some(mode) if setup.probe.is_some() => run.set_contact_mode(mode),
+                _ => Ok(()),
+            });
+            if let Err(e) = changed {
+                log::warn!("{e}");
             }
         }
         tried = Some(target);
-        let t = stepper.next_frame() as f64 * setup.frame_dt;
-        if let (Some(p), Some(pose)) = (probe.as_mut(), target) {
-            p.path.points.push((t, pose.centre));
-            p.axis.points.push((t, pose.axis));
-        }
-        let before = stepper.clone();
-        let outcome = stepper.step(&setup, &mesh, probe.as_ref());
+        let t = run.next_frame() as f64 * setup.frame_dt;
+        let aimed = match target {
+            Some(pose) if setup.probe.is_some() => run.set_probe_pose(pose.centre, pose.axis),
+            _ => Ok(()),
+        };
+        // A failed frame leaves the in-memory run at its last good state.
+        let outcome = aimed.and_then(|()| run.step()).map(|frame| Solved {
+            metrics: *frame.metrics,
+            positions: frame.positions.to_vec(),
+            pose: None,
+        });
         match outcome {
-            Ok(metrics) => {
-                if let Some(p) = &probe {
-                    let (_, centre) = *p.path.points.last().expect("pushed above");
-                    let (_, axis) = *p.axis.points.last().expect("pushed above");
-                    lock(&shared.path).push((t, centre, axis));
+            Ok(mut solved) => {
+                solved.pose = run.probe_pose();
+                if let Some(pose) = solved.pose {
+                    lock(&shared.path).push((t, pose.centre, pose.axis));
                 }
-                lock(&shared.metrics).push(metrics);
-                let solved = Solved {
-                    metrics,
-                    positions: stepper.simulation().positions().to_vec(),
-                    pose: probe.as_ref().map(|p| p.pose(t)),
-                };
+                lock(&shared.metrics).push(solved.metrics);
+                let last_frame_s = solved.metrics.step_wall_s;
                 *lock(&shared.latest) = Some(Arc::new(solved));
                 let mut status = lock(&shared.status);
                 status.solved += 1;
                 status.failure = None;
-                status.last_frame_s = metrics.step_wall_s;
+                status.last_frame_s = last_frame_s;
             }
             Err(e) => {
                 log::warn!("{e}; the viewer keeps the last good state");
-                stepper = before;
-                if let Some(p) = probe.as_mut() {
-                    p.path.points.pop();
-                    p.axis.points.pop();
-                }
                 lock(&shared.status).failure = Some(e.to_string());
             }
         }

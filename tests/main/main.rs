@@ -22,6 +22,7 @@ mod micro;
 mod readme;
 mod render;
 mod robustness;
+mod run_api;
 mod strain;
 mod stress;
 mod surface;

@@ -124,6 +124,11 @@ const COMMANDS: &[(&str, How)] = &[
         "cargo run --release --example press_api -- --dermis-kpa 75 --mesh meshes/patch_3k.node",
         How::AsWritten,
     ),
+    ("cargo run --release --example probe_control", How::AsWritten),
+    (
+        "cargo run --release --example probe_control -- --force-n 0.02 --mesh meshes/patch_3k.node --out out/probe_control",
+        How::AsWritten,
+    ),
 ];
 
 /// The commands of the README's `sh` blocks: continuation lines joined,
@@ -218,7 +223,7 @@ fn scratch() -> tempfile::TempDir {
 
 /// The program and arguments of a command: `cargo run --release [--example
 /// E] -- args` runs the binary (or example) that `cargo test` built.
-fn program(command: &str) -> (PathBuf, Vec<String>) {
+pub(crate) fn program(command: &str) -> (PathBuf, Vec<String>) {
     let words: Vec<String> = command.split_whitespace().map(str::to_string).collect();
     let built = |name: &str, sub: &str| {
         // target/<profile>/deps/main-… → target/<profile>/[examples/]name
@@ -279,13 +284,14 @@ fn readme_commands_run() {
         );
         ran += 1;
     }
-    assert_eq!(ran, 8);
+    assert_eq!(ran, 10);
     // What the commands promise to leave behind.
     for file in [
         "out/press/metrics.csv",
         "meshes/patch_25k.node",
         "my_patch.node",
         "my_patch.vtu",
+        "out/probe_control/metrics.csv",
     ] {
         assert!(dir.path().join(file).exists(), "{file}");
     }
