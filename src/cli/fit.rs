@@ -191,9 +191,16 @@ pub fn fit(
     let base = path.parent().unwrap_or(std::path::Path::new("."));
     let bins = checked_bins(&samples)?;
     refuse_overwriting_inputs(path, base, &samples)?;
+    let height_unit_um = samples.height_unit_um.unwrap_or(1.0);
+    if !(height_unit_um.is_finite() && height_unit_um > 0.0) {
+        return Err(Error::parameter(
+            "height_unit_um",
+            format!("must be a finite height > 0 µm, got {height_unit_um}"),
+        ));
+    }
     let defaults = MapDefaults {
         texel: TexelSize::Um(samples.texel_um.unwrap_or(1.0)),
-        height_unit_um: 1.0,
+        height_unit_um,
         edge: skinpatch::micro::Edge::Clamp,
     };
     let mut rows = Vec::new();
@@ -505,6 +512,9 @@ fn write_kernel_file(
          # Use it with [microstructure] kernel_file = \"…\".\n{body}",
         samples_path.display()
     );
+    if let Some(folder) = out.parent().filter(|f| !f.as_os_str().is_empty()) {
+        std::fs::create_dir_all(folder).map_err(|e| Error::io(folder, e))?;
+    }
     io::write_atomically(out, text.as_bytes())
 }
 

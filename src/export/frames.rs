@@ -8,7 +8,9 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use crate::error::{Error, Result};
-pub use crate::imaging::encode::{write_difference, write_image, DIFFERENCE_RANGE};
+pub use crate::imaging::encode::{
+    write_comparison, write_difference, write_image, COMPARISON_GAP_PX, DIFFERENCE_RANGE,
+};
 use crate::imaging::FrameFormat;
 
 /// File name of frame `frame` in `format`.

@@ -71,17 +71,59 @@ fn write_exr(path: &Path, image: &Image) -> Result<()> {
 /// |dynamic − static| / static of the linear luminance per pixel, in false
 /// colour saturating at [`DIFFERENCE_RANGE`], as an 8-bit RGB PNG.
 pub fn write_difference(path: &Path, stat: &Image, dynamic: &Image) -> Result<()> {
+    write_rgb8_png(
+        path,
+        (stat.width, stat.height),
+        &difference_rgb8(stat, dynamic),
+    )
+}
+
+/// The false-colour difference as 8-bit RGB bytes.
+fn difference_rgb8(stat: &Image, dynamic: &Image) -> Vec<u8> {
     let lum = |p: &[f32; 4]| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
-    let bytes: Vec<u8> = stat
-        .pixels
+    stat.pixels
         .iter()
         .zip(&dynamic.pixels)
         .flat_map(|(s, d)| {
             let (s, d) = (lum(s), lum(d));
             heat((d - s).abs() / s.max(1e-4) / DIFFERENCE_RANGE)
         })
-        .collect();
-    write_rgb8_png(path, (stat.width, stat.height), &bytes)
+        .collect()
+}
+
+/// An image as 8-bit sRGB bytes (what a PNG frame holds).
+fn srgb8(image: &Image) -> Vec<u8> {
+    image
+        .pixels
+        .iter()
+        .flat_map(|p| {
+            p[..3]
+                .iter()
+                .map(|&c| (linear_to_srgb(c) * 255.0).round() as u8)
+        })
+        .collect()
+}
+
+/// White pixels between the panels of a comparison strip.
+pub const COMPARISON_GAP_PX: usize = 10;
+
+/// The comparison strip of one frame: static | dynamic | their difference
+/// (as [`write_difference`]), side by side with [`COMPARISON_GAP_PX`] of
+/// white between them, as an 8-bit sRGB PNG.
+pub fn write_comparison(path: &Path, stat: &Image, dynamic: &Image) -> Result<()> {
+    let (w, h) = (stat.width, stat.height);
+    let panels = [srgb8(stat), srgb8(dynamic), difference_rgb8(stat, dynamic)];
+    let width = 3 * w + 2 * COMPARISON_GAP_PX;
+    let mut rgb = Vec::with_capacity(width * h * 3);
+    for row in 0..h {
+        for (k, panel) in panels.iter().enumerate() {
+            if k > 0 {
+                rgb.extend(std::iter::repeat_n(255u8, 3 * COMPARISON_GAP_PX));
+            }
+            rgb.extend_from_slice(&panel[3 * w * row..3 * w * (row + 1)]);
+        }
+    }
+    write_rgb8_png(path, (width, h), &rgb)
 }
 
 /// Writes already encoded 8-bit RGB pixels (`width × height × 3` bytes,

@@ -85,6 +85,9 @@ impl Outputs<'_> {
             if r.difference {
                 add(every(r.frame_stride), pixels * 3);
             }
+            if r.comparison {
+                add(every(r.frame_stride), 3 * pixels * 3);
+            }
         }
         total
     }

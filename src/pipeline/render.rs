@@ -2,7 +2,7 @@
 //! microstructure chain uses (or its own), and per rendered frame builds the
 //! geometry, makes sure D′'s normals are current, renders every comparison
 //! mode and writes `render/<mode>/frame_NNNN.<ext>` atomically (and, when
-//! asked, `render/difference/frame_NNNN.png`).
+//! asked, `render/difference/` and `render/comparison/frame_NNNN.png`).
 
 use std::path::{Path, PathBuf};
 
@@ -26,6 +26,8 @@ pub(super) struct RenderEngine {
     format: crate::render::FrameFormat,
     /// `render/difference/` when asked.
     difference: Option<PathBuf>,
+    /// `render/comparison/` when asked.
+    comparison: Option<PathBuf>,
     rendered: Vec<usize>,
 }
 
@@ -120,14 +122,17 @@ impl RenderEngine {
             probe_writable(&folder)?;
             folders.push((mode, folder));
         }
-        let difference = if setup.difference {
-            let folder = dir.join("render").join("difference");
+        let extra = |asked: bool, name: &str| -> Result<Option<PathBuf>> {
+            if !asked {
+                return Ok(None);
+            }
+            let folder = dir.join("render").join(name);
             std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
             probe_writable(&folder)?;
-            Some(folder)
-        } else {
-            None
+            Ok(Some(folder))
         };
+        let difference = extra(setup.difference, "difference")?;
+        let comparison = extra(setup.comparison, "comparison")?;
         log::info!(
             "rendering {} × {} px (×{} supersampling), modes {:?}",
             setup.width,
@@ -141,6 +146,7 @@ impl RenderEngine {
             folders,
             format: setup.format,
             difference,
+            comparison,
             rendered: Vec::new(),
         })
     }
@@ -189,9 +195,14 @@ impl RenderEngine {
                 Mode::None => {}
             }
         }
-        if let (Some(folder), [Some(stat), Some(dynamic)]) = (&self.difference, &kept) {
-            let path = folder.join(frames::frame_name(frame, crate::render::FrameFormat::Png8));
-            frames::write_difference(&path, stat, dynamic)?;
+        if let [Some(stat), Some(dynamic)] = &kept {
+            let name = frames::frame_name(frame, crate::render::FrameFormat::Png8);
+            if let Some(folder) = &self.difference {
+                frames::write_difference(&folder.join(&name), stat, dynamic)?;
+            }
+            if let Some(folder) = &self.comparison {
+                frames::write_comparison(&folder.join(&name), stat, dynamic)?;
+            }
         }
         self.rendered.push(frame);
         Ok(())

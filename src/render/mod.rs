@@ -115,6 +115,8 @@ pub struct RenderSetup {
     pub modes: Vec<Mode>,
     /// Write |dynamic − static| in false colour per rendered frame.
     pub difference: bool,
+    /// Write static | dynamic | difference side by side per rendered frame.
+    pub comparison: bool,
     /// Frame file format.
     pub format: FrameFormat,
     /// Render every n-th frame.

@@ -553,6 +553,9 @@ pub struct FitSamples {
     pub neutral: Option<PathBuf>,
     /// Texel size of maps without metadata (µm).
     pub texel_um: Option<f64>,
+    /// Height (µm) of the brightest value (white) of a PNG without
+    /// metadata, or of 1.0 in an EXR without it. Default 1.
+    pub height_unit_um: Option<f64>,
     /// Histogram cells per side.
     pub bins: Option<usize>,
     /// Histogram half range.

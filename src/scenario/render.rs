@@ -33,6 +33,10 @@ pub struct RenderSection {
     /// relative to static, in false colour (black 0, white ≥ 50%). Needs
     /// both modes. Default false.
     pub difference: bool,
+    /// Also write `render/comparison/frame_NNNN.png`: static | dynamic |
+    /// difference side by side (10 px of white between). Needs both modes.
+    /// Default false.
+    pub comparison: bool,
     /// Comparison modes rendered per frame (Nagano et al. 2015 Fig. 1): any of `none`
     /// (mesoscale surface, mesoscale BRDF), `static` (neutral
     /// microstructure), `dynamic` (deformed microstructure D′). Default
@@ -98,6 +102,7 @@ impl Default for RenderSection {
             msaa: 4,
             modes: vec![Mode::Dynamic],
             difference: false,
+            comparison: false,
             format: FrameFormat::Png8,
             frame_stride: 1,
             mp4: false,
@@ -614,11 +619,17 @@ impl RenderSection {
             ));
         }
         let modes = self.modes(has_micro)?;
-        if self.difference && !(modes.contains(&Mode::Static) && modes.contains(&Mode::Dynamic)) {
-            return Err(Error::parameter(
-                "render.difference",
-                "needs both \"static\" and \"dynamic\" in render.modes",
-            ));
+        let both = modes.contains(&Mode::Static) && modes.contains(&Mode::Dynamic);
+        for (key, asked) in [
+            ("render.difference", self.difference),
+            ("render.comparison", self.comparison),
+        ] {
+            if asked && !both {
+                return Err(Error::parameter(
+                    key,
+                    "needs both \"static\" and \"dynamic\" in render.modes",
+                ));
+            }
         }
         let format = self.format;
         if self.frame_stride == 0 {
@@ -657,6 +668,7 @@ impl RenderSection {
             msaa: self.msaa as u32,
             modes,
             difference: self.difference,
+            comparison: self.comparison,
             format,
             frame_stride: self.frame_stride,
             mp4: self.mp4,

@@ -832,3 +832,69 @@ fn roughness_follows_the_stretch() {
     );
     assert!((table.at(0.95) - 0.5 * (m[1] + m[2])).abs() < 1e-12);
 }
+
+/// The shipped fit example finds the kernel its samples were made with —
+/// the built-in forehead model at r = 1.15 and 0.85 — to the search grid
+/// (0.01 in α, 0.5 µm in σ), and writes the kernel file it names.
+#[test]
+fn the_fit_example_finds_the_kernel_it_was_made_with() {
+    let dir = tempfile::tempdir().unwrap();
+    let fit_dir = dir.path().join("examples/fit");
+    std::fs::create_dir_all(&fit_dir).unwrap();
+    for entry in std::fs::read_dir(common::root().join("examples/fit")).unwrap() {
+        let entry = entry.unwrap();
+        std::fs::copy(entry.path(), fit_dir.join(entry.file_name())).unwrap();
+    }
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_skinpatch"))
+        .args(["fit", "examples/fit/samples.toml"])
+        .current_dir(dir.path())
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let model = KernelModel::forehead();
+    for (r, name) in [(1.15, "stretched_115.png"), (0.85, "compressed_085.png")] {
+        let row: Vec<f64> = stdout
+            .lines()
+            .find(|l| l.trim_end().ends_with(name))
+            .unwrap_or_else(|| panic!("no row for {name}: {stdout}"))
+            .split_whitespace()
+            .take(3)
+            .map(|w| w.parse().unwrap())
+            .collect();
+        let truth = model.params(r);
+        assert_eq!(row[0], r);
+        assert!(
+            (row[1] - truth.alpha).abs() <= 0.01 && (row[2] - truth.sigma_um).abs() <= 0.5,
+            "{name}: fitted (α {}, σ {}), made with ({:.3}, {:.2})",
+            row[1],
+            row[2],
+            truth.alpha,
+            truth.sigma_um
+        );
+    }
+    assert!(dir.path().join("out/fit/kernel.toml").is_file());
+    // A height of white that is no height is refused by name.
+    let samples = fit_dir.join("samples.toml");
+    let text = std::fs::read_to_string(&samples).unwrap();
+    std::fs::write(
+        &samples,
+        text.replace("height_unit_um = 120.0", "height_unit_um = -1"),
+    )
+    .unwrap();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_skinpatch"))
+        .args(["fit", "examples/fit/samples.toml"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && stderr.contains("height_unit_um must be a finite height > 0"),
+        "{stderr}"
+    );
+}

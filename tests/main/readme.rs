@@ -126,6 +126,12 @@ const COMMANDS: &[(&str, How)] = &[
     ),
     ("cargo run --release --example probe_control", How::AsWritten),
     (
+        "cargo run --release -- run examples/closeup.toml",
+        How::Smaller(&["--set", "time.duration_s=0.1"]),
+    ),
+    ("skinpatch fit examples/fit/samples.toml", How::AsWritten),
+    ("cargo run --release --example fit_samples", How::AsWritten),
+    (
         "cargo run --release --example probe_control -- --force-n 0.02 --mesh meshes/patch_3k.node --out out/probe_control",
         How::AsWritten,
     ),
@@ -284,7 +290,7 @@ fn readme_commands_run() {
         );
         ran += 1;
     }
-    assert_eq!(ran, 10);
+    assert_eq!(ran, 13);
     // What the commands promise to leave behind.
     for file in [
         "out/press/metrics.csv",
@@ -292,7 +298,18 @@ fn readme_commands_run() {
         "my_patch.node",
         "my_patch.vtu",
         "out/probe_control/metrics.csv",
+        "out/closeup/render/comparison/frame_0003.png",
+        "out/fit/kernel.toml",
     ] {
         assert!(dir.path().join(file).exists(), "{file}");
+    }
+    // The sample maps regenerate to the shipped bytes.
+    for name in ["neutral.png", "stretched_115.png", "compressed_085.png"] {
+        let made = std::fs::read(dir.path().join("examples/fit").join(name)).unwrap();
+        let shipped = std::fs::read(root().join("examples/fit").join(name)).unwrap();
+        assert!(
+            made == shipped,
+            "examples/fit/{name} regenerates differently"
+        );
     }
 }

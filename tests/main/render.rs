@@ -422,14 +422,17 @@ fn golden_images_of_the_three_modes() {
 /// `[render] difference = true` writes |dynamic − static| per rendered
 /// frame in false colour: black at rest (frame 0, where D′ is the neutral
 /// map), coloured under the probe at the end; without both modes it is an
-/// error naming the key.
+/// error naming the key. `comparison = true` writes the strip static |
+/// dynamic | difference: each panel the very pixels of its own file, white
+/// gaps between.
 #[test]
 fn difference_images_show_where_the_microstructure_changed() {
     let Some(_ctx) = context() else { return };
     let path = root().join("tests/fixtures/render_small.toml");
-    let text = std::fs::read_to_string(&path)
-        .unwrap()
-        .replace("[render]\n", "[render]\ndifference = true\n");
+    let text = std::fs::read_to_string(&path).unwrap().replace(
+        "[render]\n",
+        "[render]\ndifference = true\ncomparison = true\n",
+    );
     let scenario = skinpatch::scenario::Scenario::parse(&text, &path).unwrap();
     let mut setup = skinpatch::scenario::Setup::from_scenario(&scenario, &path).unwrap();
     let dir = tempfile::tempdir().unwrap();
@@ -449,6 +452,32 @@ fn difference_images_show_where_the_microstructure_changed() {
     println!("difference pixels: {rest} at rest, {pressed} pressed");
     assert_eq!(rest, 0, "D′ equals the neutral map at rest");
     assert!(pressed > 50, "the pressed skin differs: {pressed} px");
+    let gap = skinpatch::export::frames::COMPARISON_GAP_PX;
+    for frame in [0, 2] {
+        let name = format!("frame_{frame:04}.png");
+        let (w, h, strip) = read_png(&dir.path().join("render/comparison").join(&name));
+        let panels: Vec<Vec<u8>> = ["static", "dynamic", "difference"]
+            .iter()
+            .map(|m| read_png(&dir.path().join("render").join(m).join(&name)).2)
+            .collect();
+        let pw = (w - 2 * gap) / 3;
+        assert_eq!((w, h * pw * 3), (3 * pw + 2 * gap, panels[0].len()));
+        for row in 0..h {
+            let line = &strip[3 * w * row..3 * w * (row + 1)];
+            for (k, panel) in panels.iter().enumerate() {
+                let at = 3 * k * (pw + gap);
+                assert_eq!(
+                    &line[at..at + 3 * pw],
+                    &panel[3 * pw * row..3 * pw * (row + 1)]
+                );
+                if k < 2 {
+                    assert!(line[at + 3 * pw..at + 3 * (pw + gap)]
+                        .iter()
+                        .all(|&c| c == 255));
+                }
+            }
+        }
+    }
     let bad = text.replace(
         "modes = [\"none\", \"static\", \"dynamic\"]",
         "modes = [\"none\", \"dynamic\"]",
@@ -456,6 +485,10 @@ fn difference_images_show_where_the_microstructure_changed() {
     let scenario = skinpatch::scenario::Scenario::parse(&bad, &path).unwrap();
     let err = skinpatch::scenario::Setup::from_scenario(&scenario, &path).unwrap_err();
     assert!(err.to_string().contains("render.difference"), "{err}");
+    let bad = bad.replace("difference = true\n", "");
+    let scenario = skinpatch::scenario::Scenario::parse(&bad, &path).unwrap();
+    let err = skinpatch::scenario::Setup::from_scenario(&scenario, &path).unwrap_err();
+    assert!(err.to_string().contains("render.comparison"), "{err}");
 }
 
 /// The validated `[render]` section of `text` (with a microstructure).
