@@ -8,7 +8,8 @@
 //!   same on both sides of a UV seam), `TANGENT` (along u, with the sign
 //!   that makes the bitangent point up the image), `TEXCOORD_0` (glTF's v
 //!   runs down the image: `1 − v`) and the indices.
-//! - One morph target per shape with `POSITION` and `NORMAL` displacements,
+//! - One morph target per shape with `POSITION`, `NORMAL` and `TANGENT`
+//!   (xyz) displacements,
 //!   and an animation of the morph weights (keyed at the frame times in
 //!   seconds; a tool keying at its own frame rate places a key every
 //!   `its rate / the scenario's rate` frames).
@@ -112,16 +113,26 @@ fn vertex_normals(surface: &AnimatedSurface, displacement: Option<&[Vec3]>) -> V
         .collect()
 }
 
-/// Rest tangents of the surface vertices in glTF's axes, `[x, y, z, w]`:
+/// Tangents of the surface vertices with the rest positions moved by
+/// `displacement` (as [`vertex_normals`]), in glTF's axes, `[x, y, z, w]`:
 /// `xyz` the unit direction of increasing u in the tangent plane of
-/// `normals` (glTF axes), `w` = ±1 so that `w · normal × xyz` points along
-/// increasing skinpatch v (up the image, the +y of the normal maps).
-fn vertex_tangents(surface: &AnimatedSurface, normals: &[Vec3]) -> Vec<[f32; 4]> {
+/// `normals` (glTF axes, of the same shape), `w` = ±1 so that
+/// `w · normal × xyz` points along increasing skinpatch v (up the image, the
+/// +y of the normal maps).
+fn vertex_tangents(
+    surface: &AnimatedSurface,
+    displacement: Option<&[Vec3]>,
+    normals: &[Vec3],
+) -> Vec<[f32; 4]> {
     let top = &surface.top;
+    let at = |v: usize| {
+        let p = surface.positions[top.vertices[v]];
+        to_y_up(&displacement.map_or(p, |d| p + d[top.vertices[v]]))
+    };
     let mut along_u = vec![Vec3::zeros(); top.vertices.len()];
     let mut along_v = along_u.clone();
     for t in &top.triangles {
-        let [p0, p1, p2] = t.map(|v| to_y_up(&surface.positions[top.vertices[v]]));
+        let [p0, p1, p2] = t.map(at);
         let [w0, w1, w2] = t.map(|v| top.uvs[v]);
         let (e1, e2) = (p1 - p0, p2 - p0);
         let (du1, dv1, du2, dv2) = (w1[0] - w0[0], w1[1] - w0[1], w2[0] - w0[0], w2[1] - w0[1]);
@@ -190,10 +201,8 @@ pub fn write_glb_animation(
     let rest_normals = vertex_normals(surface, None);
     let normals: Vec<f32> = rest_normals.iter().flat_map(unit).collect();
     let normal = glb.floats(&normals, "VEC3", 3, false, Some(VERTEX_DATA));
-    let tangents: Vec<f32> = vertex_tangents(surface, &rest_normals)
-        .into_iter()
-        .flatten()
-        .collect();
+    let rest_tangents = vertex_tangents(surface, None, &rest_normals);
+    let tangents: Vec<f32> = rest_tangents.iter().flatten().copied().collect();
     let tangent = glb.floats(&tangents, "VEC4", 4, false, Some(VERTEX_DATA));
     let uvs: Vec<f32> = top
         .uvs
@@ -208,14 +217,21 @@ pub fn write_glb_animation(
             .iter()
             .flat_map(|&v| metres(&displacement[v]))
             .collect();
-        let turned: Vec<f32> = vertex_normals(surface, Some(displacement))
+        let deformed_normals = vertex_normals(surface, Some(displacement));
+        let turned: Vec<f32> = deformed_normals
             .iter()
             .zip(&rest_normals)
             .flat_map(|(n, n0)| unit(&(n - n0)))
             .collect();
+        let swung: Vec<f32> = vertex_tangents(surface, Some(displacement), &deformed_normals)
+            .iter()
+            .zip(&rest_tangents)
+            .flat_map(|(t, t0)| [t[0] - t0[0], t[1] - t0[1], t[2] - t0[2]])
+            .collect();
         targets.push(serde_json::json!({
             "POSITION": glb.floats(&delta, "VEC3", 3, true, Some(VERTEX_DATA)),
             "NORMAL": glb.floats(&turned, "VEC3", 3, false, Some(VERTEX_DATA)),
+            "TANGENT": glb.floats(&swung, "VEC3", 3, false, Some(VERTEX_DATA)),
         }));
     }
     let n_targets = animation.targets.len();

@@ -234,8 +234,11 @@ fn surface_glb_is_y_up_with_normals_and_validates() {
     let view =
         &json["bufferViews"][json["accessors"][accessor]["bufferView"].as_u64().unwrap() as usize];
     let offset = view["byteOffset"].as_u64().unwrap() as usize;
-    for t in bin[offset..offset + 16 * positions.len()].chunks_exact(16) {
-        let t = [0, 4, 8, 12].map(|k| f32::from_le_bytes(t[k..k + 4].try_into().unwrap()));
+    let rest_tangents: Vec<[f32; 4]> = bin[offset..offset + 16 * positions.len()]
+        .chunks_exact(16)
+        .map(|t| [0, 4, 8, 12].map(|k| f32::from_le_bytes(t[k..k + 4].try_into().unwrap())))
+        .collect();
+    for t in &rest_tangents {
         assert!((t[0] - 1.0).abs() < 1e-5 && t[3] == 1.0, "{t:?}");
     }
     let targets = primitive["targets"].as_array().unwrap();
@@ -248,6 +251,28 @@ fn surface_glb_is_y_up_with_normals_and_validates() {
         .map(|d| d[0].abs().max(d[2].abs()))
         .fold(0.0, f32::max);
     assert!(tilt > 0.05, "{tilt}");
+    // Its tangents turn with the skin: rest + delta is a unit vector in the
+    // deformed tangent plane (rest + delta of the normal).
+    let swung = vec3s(&json, &bin, last["TANGENT"].as_u64().unwrap() as usize);
+    let mut largest = 0.0f32;
+    for (k, d) in swung.iter().enumerate() {
+        let t: [f32; 3] = std::array::from_fn(|i| rest_tangents[k][i] + d[i]);
+        let n: [f32; 3] = std::array::from_fn(|i| normals[k][i] + turned[k][i]);
+        let dot = |a: &[f32; 3], b: &[f32; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        assert!(
+            (dot(&t, &t).sqrt() - 1.0).abs() < 1e-5,
+            "tangent {k}: {t:?}"
+        );
+        assert!(
+            dot(&t, &n).abs() < 1e-5,
+            "tangent {k} off the plane: {t:?} · {n:?}"
+        );
+        largest = largest.max(d.iter().fold(0.0, |m: f32, c| m.max(c.abs())));
+    }
+    assert!(
+        largest > 0.02,
+        "the tangents turn under the probe: {largest}"
+    );
     let moved = vec3s(&json, &bin, last["POSITION"].as_u64().unwrap() as usize);
     let deepest = moved.iter().map(|d| d[1]).fold(0.0, f32::min);
     assert!(deepest < -4e-4, "the probe presses down (−y): {deepest} m");
