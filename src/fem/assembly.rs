@@ -336,6 +336,7 @@ pub(crate) mod tests {
             youngs_mpa: 1.0,
             poisson: 0.3,
             density_t_mm3: 1e-9,
+            model: Default::default(),
         };
         tets.iter()
             .map(|t| RestElement::new(t.map(|v| positions[v]), &m))

@@ -1,5 +1,7 @@
-//! Isotropic linear-elastic materials per region, in the FEM's unit system
-//! (mm, N, MPa, t/mm³, s).
+//! Isotropic materials per region, in the FEM's unit system (mm, N, MPa,
+//! t/mm³, s): Young's modulus, Poisson's ratio, density and the energy
+//! density ([`Model`]: corotational linear by default, or stable
+//! Neo-Hookean; see [`super::hyperelastic`]).
 //!
 //! Lamé parameters from Young's modulus E and Poisson's ratio ν:
 //! `μ = E / (2(1 + ν))`, `λ = E ν / ((1 + ν)(1 − 2ν))`.
@@ -9,6 +11,7 @@
 //! hypodermis a few kPa. The defaults (top layer 150 kPa, bottom 15 kPa,
 //! ν = 0.45, 1100 kg/m³) are a soft, plausible middle, not a measurement.
 
+use super::hyperelastic::{Law, Model};
 use crate::error::{shown, Error, Result};
 
 /// Largest Poisson's ratio accepted. Linear tetrahedra lock as ν → 0.5:
@@ -36,6 +39,8 @@ pub struct Material {
     pub poisson: f64,
     /// Mass density (t/mm³); 1100 kg/m³ is 1.1e-9 t/mm³.
     pub density_t_mm3: f64,
+    /// The energy density.
+    pub model: Model,
 }
 
 impl Material {
@@ -84,7 +89,22 @@ impl Material {
             youngs_mpa: youngs_kpa * 1e-3,
             poisson,
             density_t_mm3: density_kg_m3 * 1e-12,
+            model: Model::Corotational,
         })
+    }
+
+    /// The same material with the energy density `model`.
+    pub fn with_model(self, model: Model) -> Material {
+        Material { model, ..self }
+    }
+
+    /// The energy density with this material's Lamé parameters.
+    pub fn law(&self) -> Law {
+        Law {
+            model: self.model,
+            mu: self.mu(),
+            lambda: self.lambda(),
+        }
     }
 
     /// Shear modulus μ (MPa).

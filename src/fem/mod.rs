@@ -1,6 +1,8 @@
 //! Corotational tetrahedral FEM.
 //!
 //! * [`material`]: per-region isotropic materials and Lamé parameters;
+//! * [`hyperelastic`]: the energy densities (corotational linear, stable
+//!   Neo-Hookean) in principal stretches;
 //! * [`corotation`]: per-element rest data, rotation, forces, energy.
 
 pub mod assembly;
@@ -8,6 +10,7 @@ pub mod boundary;
 pub mod coarse;
 pub mod contact;
 pub mod corotation;
+pub mod hyperelastic;
 pub mod integrate;
 pub mod load_steps;
 pub mod material;
@@ -16,4 +19,5 @@ pub mod probe;
 pub mod solve;
 
 pub use corotation::{Corotation, RestElement, TangentKind};
+pub use hyperelastic::Model;
 pub use material::Material;

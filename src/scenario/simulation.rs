@@ -32,6 +32,8 @@ pub struct MaterialSection {
     pub poisson_ratio: Option<f64>,
     /// Density (kg/m³). Default 1100.
     pub density_kg_m3: Option<f64>,
+    /// Energy density: `corotational` (default) or `stable-neo-hookean`.
+    pub model: Option<crate::fem::Model>,
 }
 
 /// `[boundary]`.
@@ -316,7 +318,8 @@ pub fn materials(
             kpa,
             s.poisson_ratio.unwrap_or(0.45),
             s.density_kg_m3.unwrap_or(1100.0),
-        )?;
+        )?
+        .with_model(s.model.unwrap_or_default());
         by_id.insert(region.id, m);
     }
     Ok(mesh.tet_region.iter().map(|id| by_id[id]).collect())

@@ -10,7 +10,7 @@ use skinpatch::fem::boundary::{
 };
 use skinpatch::fem::integrate::Simulation;
 use skinpatch::fem::solve::Filter;
-use skinpatch::fem::{Corotation, Material, TangentKind};
+use skinpatch::fem::{Corotation, Material, Model, TangentKind};
 use skinpatch::mesh::Vec3;
 
 fn skin(region: i32) -> Material {
@@ -25,11 +25,17 @@ fn tight(sim: &mut Simulation) {
 }
 
 /// Prescribes `x = A X + c` on every boundary node and checks that every tet
-/// ends with F = A.
+/// ends with F = A, for each energy density.
 fn patch_test(a: Matrix3<f64>) {
+    for model in [Model::Corotational, Model::StableNeoHookean] {
+        patch_test_with(a, model);
+    }
+}
+
+fn patch_test_with(a: Matrix3<f64>, model: Model) {
     let _ = env_logger::builder().is_test(true).try_init();
     let mesh = patch_3k();
-    let material = vec![skin(1); mesh.num_tets()];
+    let material = vec![skin(1).with_model(model); mesh.num_tets()];
     let mut sim = Simulation::new(&mesh, &material);
     tight(&mut sim);
     let c = Vec3::new(0.3, -0.2, 0.1);
@@ -44,7 +50,10 @@ fn patch_test(a: Matrix3<f64>) {
     for t in 0..mesh.num_tets() {
         worst = worst.max((sim.deformation_gradient(t) - a).abs().max());
     }
-    assert!(worst < 1e-9, "max |F − A| = {worst:e} after {stats:?}");
+    assert!(
+        worst < 1e-9,
+        "{model:?}: max |F − A| = {worst:e} after {stats:?}"
+    );
 }
 
 #[test]
@@ -154,6 +163,72 @@ fn caliper_stretch_is_homogeneous() {
             "tet {t}: F = {f}"
         );
     }
+}
+
+/// The same caliper with the stable Neo-Hookean energy, to 1.5: F =
+/// diag(s, 1, t) with the through-thickness stretch that frees the top,
+/// `t = (κ + μ)/(κ s + μ/s)`, and the Cauchy stress `σ_xx = (μ s + c t) s/J`
+/// (`c = κ(J − 1) − μ`, `J = s t`), the other normal stresses `σ_zz = 0`
+/// and `σ_yy = (μ + c s t)/J`, in every tet to 1e-6.
+#[test]
+fn neo_hookean_caliper_stretch_matches_the_closed_form() {
+    let mesh = patch_3k();
+    let material: Vec<Material> = mesh
+        .tet_region
+        .iter()
+        .map(|&r| skin(r).with_model(Model::StableNeoHookean))
+        .collect();
+    let mut sim = Simulation::new(&mesh, &material);
+    tight(&mut sim);
+    let s = 1.5;
+    let bc = BoundaryConditions {
+        bottom: BottomCondition::Rollers,
+        sides: SideCondition::Rollers,
+        caliper: Some(Caliper {
+            axis: 0,
+            stretch: Keyframes {
+                points: vec![(0.0, 1.0), (1.0, s)],
+            },
+        }),
+        prescribed: vec![],
+    };
+    let sets = NodeSets::of(&mesh);
+    // In load steps, as a run would: 1.5 in one step is beyond Newton's reach
+    // from rest.
+    for step in 1..=5 {
+        let (filters, targets) = bc.constraints(&sets, &mesh.positions, step as f64 / 5.0);
+        sim.set_constraints(filters, targets);
+        sim.solve_static("caliper").unwrap();
+    }
+    let x = sim.positions().to_vec();
+    let stresses = skinpatch::strain::element_stresses(&mesh, &x, &material);
+    for (t, m) in material.iter().enumerate() {
+        let (mu, kappa) = (m.mu(), m.lambda() + m.mu());
+        let lz = (kappa + mu) / (kappa * s + mu / s);
+        let j = s * lz;
+        let c = kappa * (j - 1.0) - mu;
+        let f = sim.deformation_gradient(t);
+        let expected_f = Matrix3::from_diagonal(&Vector3::new(s, 1.0, lz));
+        assert!((f - expected_f).abs().max() < 1e-6, "tet {t}: F = {f}");
+        let sigma = stresses[t].cauchy;
+        let sxx = (mu * s + c * lz) * s / j;
+        let syy = (mu + c * s * lz) / j;
+        assert!(
+            (sigma[(0, 0)] - sxx).abs() < 1e-6 * sxx,
+            "tet {t}: {sigma} vs {sxx}"
+        );
+        assert!(
+            (sigma[(1, 1)] - syy).abs() < 1e-6 * sxx,
+            "tet {t}: {sigma} vs {syy}"
+        );
+        assert!(sigma[(2, 2)].abs() < 1e-6 * sxx, "tet {t}: {sigma}");
+    }
+    // Beyond small strain the two laws part: the linear law's thickness.
+    let linear =
+        1.0 - material[0].lambda() * (s - 1.0) / (material[0].lambda() + 2.0 * material[0].mu());
+    let m = &material[0];
+    let lz = (m.lambda() + 2.0 * m.mu()) / ((m.lambda() + m.mu()) * s + m.mu() / s);
+    assert!((lz - linear).abs() > 0.05, "{lz} vs {linear}");
 }
 
 /// One tet with three vertices fixed and the fourth pushed through the

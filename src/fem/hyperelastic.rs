@@ -1,0 +1,311 @@
+//! The isotropic energy densities of the element, written in the
+//! sign-corrected principal stretches `σ̂` of `F` (see [`super::corotation`]),
+//! with what the element's forces and tangent need of them: the gradient
+//! `Ψ_i = ∂Ψ/∂σ̂_i`, the 3×3 Hessian of the *scaling* modes, and the
+//! eigenvalues of the *flip* and *twist* modes of each pair (i, j),
+//! `(Ψ_i − Ψ_j)/(σ̂_i − σ̂_j)` and `(Ψ_i + Ψ_j)/(σ̂_i + σ̂_j)` (Smith, de Goes &
+//! Kim 2019, "Analytic Eigensystems for Isotropic Distortion Energies").
+//!
+//! - **Corotational linear** (the default): `Ψ = μ Σ(σ̂_i − 1)² +
+//!   λ/2 (Σσ̂_i − 3)²`. Its energy grows only quadratically in the stretches,
+//!   so a tet squeezed to a tenth of its volume costs little.
+//! - **Stable Neo-Hookean** (Smith, de Goes & Kim 2018, "Stable Neo-Hookean
+//!   Flesh Simulation", in the rest-stable form without the logarithm):
+//!   `Ψ = μ/2 (I_C − 3) − μ (J − 1) + κ/2 (J − 1)²` with `I_C = Σσ̂_i²`,
+//!   `J = σ̂₁σ̂₂σ̂₃` and `κ = λ + μ`. The shift of the volume term (the
+//!   paper's `α = 1 + μ/κ`) makes the rest state stress-free, and `κ = λ + μ`
+//!   makes its small-strain limit linear elasticity with the material's
+//!   (μ, λ) — the corotational element's limit too. It is defined through
+//!   inversion (J ≤ 0) without a singularity, and its volume term resists
+//!   compression in proportion to κ.
+//!
+//! With `π_i = J/σ̂_i` (the product of the other two stretches) and
+//! `c = κ(J − 1) − μ`, the Neo-Hookean quantities are closed forms:
+//! `Ψ_i = μσ̂_i + c π_i`; the scaling Hessian `H_ii = μ + κπ_i²`,
+//! `H_ij = κπ_iπ_j + c σ̂_k`; flip `μ − c σ̂_k`, twist `μ + c σ̂_k` (k the
+//! third index), so no ratio of small differences is ever formed.
+
+use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// The energy density of a material.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Model {
+    /// Corotational linear elasticity.
+    #[default]
+    Corotational,
+    /// The stable Neo-Hookean energy of Smith, de Goes & Kim 2018.
+    StableNeoHookean,
+}
+
+impl Model {
+    /// The scenario's spelling.
+    pub fn name(self) -> &'static str {
+        match self {
+            Model::Corotational => "corotational",
+            Model::StableNeoHookean => "stable-neo-hookean",
+        }
+    }
+}
+
+/// A model with its Lamé parameters (MPa): the energy density per rest
+/// volume and its derivatives in the principal stretches.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Law {
+    /// Which energy.
+    pub model: Model,
+    /// Shear modulus μ.
+    pub mu: f64,
+    /// Lamé λ.
+    pub lambda: f64,
+}
+
+/// The third index of the pair (i, j).
+fn third(i: usize, j: usize) -> usize {
+    3 - i - j
+}
+
+impl Law {
+    /// `Ψ(σ̂)` (N/mm², energy per rest volume).
+    pub fn energy(&self, s: &Vector3<f64>) -> f64 {
+        let (mu, lambda) = (self.mu, self.lambda);
+        match self.model {
+            Model::Corotational => {
+                let dev: f64 = s.iter().map(|x| (x - 1.0).powi(2)).sum();
+                let tr = s.sum() - 3.0;
+                mu * dev + 0.5 * lambda * tr * tr
+            }
+            Model::StableNeoHookean => {
+                let j = s.product();
+                0.5 * mu * (s.norm_squared() - 3.0) - mu * (j - 1.0)
+                    + 0.5 * (lambda + mu) * (j - 1.0).powi(2)
+            }
+        }
+    }
+
+    /// `Ψ_i = ∂Ψ/∂σ̂_i`: the principal values of the first Piola stress
+    /// `P = U diag(Ψ_i) Vᵀ`.
+    pub fn gradient(&self, s: &Vector3<f64>) -> Vector3<f64> {
+        let (mu, lambda) = (self.mu, self.lambda);
+        match self.model {
+            Model::Corotational => {
+                let trace_term = lambda * (s.sum() - 3.0);
+                s.map(|si| 2.0 * mu * (si - 1.0) + trace_term)
+            }
+            Model::StableNeoHookean => {
+                let c = (lambda + mu) * (s.product() - 1.0) - mu;
+                let pi = others(s);
+                Vector3::from_fn(|i, _| mu * s[i] + c * pi[i])
+            }
+        }
+    }
+
+    /// `∂²Ψ/∂σ̂_i∂σ̂_j`, the Hessian of the scaling modes.
+    pub fn scaling_hessian(&self, s: &Vector3<f64>) -> Matrix3<f64> {
+        let (mu, lambda) = (self.mu, self.lambda);
+        match self.model {
+            Model::Corotational => Matrix3::identity() * (2.0 * mu) + Matrix3::repeat(lambda),
+            Model::StableNeoHookean => {
+                let kappa = lambda + mu;
+                let c = kappa * (s.product() - 1.0) - mu;
+                let pi = others(s);
+                Matrix3::from_fn(|i, j| {
+                    if i == j {
+                        mu + kappa * pi[i] * pi[i]
+                    } else {
+                        kappa * pi[i] * pi[j] + c * s[third(i, j)]
+                    }
+                })
+            }
+        }
+    }
+
+    /// `(Ψ_i − Ψ_j)/(σ̂_i − σ̂_j)`, the eigenvalue of the flip mode of the
+    /// pair (its limit where the two stretches are equal).
+    pub fn flip(&self, s: &Vector3<f64>, i: usize, j: usize) -> f64 {
+        match self.model {
+            Model::Corotational => 2.0 * self.mu,
+            Model::StableNeoHookean => {
+                let c = (self.lambda + self.mu) * (s.product() - 1.0) - self.mu;
+                self.mu - c * s[third(i, j)]
+            }
+        }
+    }
+
+    /// `(Ψ_i + Ψ_j)/(σ̂_i + σ̂_j)`, the eigenvalue of the twist mode of the
+    /// pair. The corotational one has no closed form: `None` where the sum
+    /// of the stretches is too small to divide by.
+    pub fn twist(&self, s: &Vector3<f64>, i: usize, j: usize) -> Option<f64> {
+        match self.model {
+            Model::Corotational => {
+                let denom = s[i] + s[j];
+                let g = self.gradient(s);
+                (denom > 1e-8).then(|| (g[i] + g[j]) / denom)
+            }
+            Model::StableNeoHookean => {
+                let c = (self.lambda + self.mu) * (s.product() - 1.0) - self.mu;
+                Some(self.mu + c * s[third(i, j)])
+            }
+        }
+    }
+}
+
+/// `π_i`, the product of the stretches other than `σ̂_i` (J/σ̂_i without the
+/// division, so it holds at σ̂_i = 0).
+fn others(s: &Vector3<f64>) -> Vector3<f64> {
+    Vector3::new(s[1] * s[2], s[0] * s[2], s[0] * s[1])
+}
+
+/// The symmetric `m` with its negative eigenvalues set to zero.
+pub fn project_psd(m: &Matrix3<f64>) -> Matrix3<f64> {
+    let eig = m.symmetric_eigen();
+    if eig.eigenvalues.iter().all(|&e| e >= 0.0) {
+        return *m;
+    }
+    let clamped = eig.eigenvalues.map(|e| e.max(0.0));
+    eig.eigenvectors * Matrix3::from_diagonal(&clamped) * eig.eigenvectors.transpose()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn laws() -> [Law; 2] {
+        [Model::Corotational, Model::StableNeoHookean].map(|model| Law {
+            model,
+            mu: 0.05,
+            lambda: 0.4,
+        })
+    }
+
+    const STRETCHES: [[f64; 3]; 5] = [
+        [1.0, 1.0, 1.0],
+        [1.3, 0.9, 0.8],
+        [0.5, 0.45, 0.2],
+        [1.1, 0.7, -0.3],
+        [2.0, 1.0, 1.0],
+    ];
+
+    /// The gradient is the energy's, the scaling Hessian the gradient's,
+    /// by central differences.
+    #[test]
+    fn derivatives_match_finite_differences() {
+        let h = 1e-6;
+        for law in laws() {
+            for s in STRETCHES {
+                let s = Vector3::from(s);
+                let g = law.gradient(&s);
+                let hess = law.scaling_hessian(&s);
+                for i in 0..3 {
+                    let mut sp = s;
+                    let mut sm = s;
+                    sp[i] += h;
+                    sm[i] -= h;
+                    let fd = (law.energy(&sp) - law.energy(&sm)) / (2.0 * h);
+                    assert!(
+                        (fd - g[i]).abs() <= 1e-6 * (1.0 + g[i].abs()),
+                        "{law:?} {s:?}"
+                    );
+                    let dg = (law.gradient(&sp) - law.gradient(&sm)) / (2.0 * h);
+                    for j in 0..3 {
+                        assert!(
+                            (dg[j] - hess[(j, i)]).abs() <= 1e-6 * (1.0 + hess[(j, i)].abs()),
+                            "{law:?} {s:?} ({j}, {i}): {} vs {}",
+                            dg[j],
+                            hess[(j, i)]
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    /// The closed-form flip and twist eigenvalues are the ratios they stand
+    /// for, wherever those ratios can be formed.
+    #[test]
+    fn flip_and_twist_are_the_gradient_ratios() {
+        for law in laws() {
+            for s in STRETCHES {
+                let s = Vector3::from(s);
+                let g = law.gradient(&s);
+                for (i, j) in [(1, 2), (0, 2), (0, 1)] {
+                    if (s[i] - s[j]).abs() > 1e-3 {
+                        let ratio = (g[i] - g[j]) / (s[i] - s[j]);
+                        assert!((law.flip(&s, i, j) - ratio).abs() < 1e-12, "{law:?} {s:?}");
+                    }
+                    if (s[i] + s[j]).abs() > 1e-3 {
+                        let ratio = (g[i] + g[j]) / (s[i] + s[j]);
+                        let twist = law.twist(&s, i, j).unwrap();
+                        assert!((twist - ratio).abs() < 1e-12, "{law:?} {s:?}");
+                    }
+                }
+            }
+        }
+    }
+
+    /// Both energies are zero and stress-free at rest and agree to second
+    /// order in the strain: the same linear elasticity with (μ, λ).
+    #[test]
+    fn the_small_strain_limits_agree() {
+        let [corot, snh] = laws();
+        let rest = Vector3::repeat(1.0);
+        for law in [corot, snh] {
+            assert_eq!(law.energy(&rest), 0.0);
+            assert!(law.gradient(&rest).norm() < 1e-15);
+        }
+        assert!((snh.scaling_hessian(&rest) - corot.scaling_hessian(&rest)).norm() < 1e-15);
+        let dir = Vector3::new(0.3, -0.7, 0.5);
+        for eps in [1e-2, 1e-3] {
+            let s = rest + dir * eps;
+            let diff = (snh.energy(&s) - corot.energy(&s)).abs();
+            // Third order: the difference shrinks a thousandfold per decade.
+            assert!(diff < 0.1 * eps.powi(3), "ε {eps}: {diff:e}");
+        }
+    }
+
+    /// The corotational volume term sees the trace of the stretches, not
+    /// the volume: a squeeze that one stretch's loss is paid for by the
+    /// others' growth (trace 3, J = 0.29) costs it no volumetric energy,
+    /// while the Neo-Hookean one pays κ/2 (J − 1)² for it, and its pressure
+    /// pushes the tet back towards its volume. It stays finite through
+    /// inversion.
+    #[test]
+    fn neo_hookean_sees_volume_that_the_trace_misses() {
+        let [corot, snh] = laws();
+        let squeezed = Vector3::<f64>::new(1.425, 1.425, 0.15);
+        assert!((squeezed.sum() - 3.0).abs() < 1e-12);
+        let j = squeezed.product();
+        let kappa = snh.lambda + snh.mu;
+        let shear_only = corot.mu * squeezed.map(|x| (x - 1.0).powi(2)).sum();
+        assert!((corot.energy(&squeezed) - shear_only).abs() < 1e-15);
+        assert!(snh.energy(&squeezed) > 0.5 * kappa * (j - 1.0).powi(2));
+        assert!(snh.energy(&squeezed) > 3.0 * corot.energy(&squeezed));
+        // The pressure −∂Ψ/∂J along the volume-changing direction σ̂ ∝ (1,1,1):
+        // d/dt Ψ(σ̂(1+t)) at t = 0 is negative, so growing the tet lowers Ψ.
+        let dilate = snh.gradient(&squeezed).dot(&squeezed);
+        assert!(dilate < 0.0, "{dilate}");
+        for s in [[1.0, 1.0, 0.0], [1.0, 1.0, -0.5], [0.0, 0.0, 0.0]] {
+            let s = Vector3::from(s);
+            assert!(snh.energy(&s).is_finite() && snh.gradient(&s).iter().all(|g| g.is_finite()));
+            assert!(snh.scaling_hessian(&s).iter().all(|h| h.is_finite()));
+            // Flat or inverted with its other stretches whole: growing the
+            // third stretch still lowers the energy.
+            if s[0] > 0.0 {
+                assert!(snh.gradient(&s)[2] < 0.0, "{s:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn projection_clamps_negative_eigenvalues_only() {
+        let m = Matrix3::new(2.0, 3.0, 0.0, 3.0, 2.0, 0.0, 0.0, 0.0, 1.0);
+        let p = project_psd(&m);
+        let eig = p.symmetric_eigen().eigenvalues;
+        let mut e: Vec<f64> = eig.iter().copied().collect();
+        e.sort_by(f64::total_cmp);
+        assert!(e[0].abs() < 1e-12 && (e[1] - 1.0).abs() < 1e-12 && (e[2] - 5.0).abs() < 1e-12);
+        let spd = Matrix3::new(2.0, 1.0, 0.0, 1.0, 2.0, 0.0, 0.0, 0.0, 1.0);
+        assert_eq!(project_psd(&spd), spd);
+    }
+}
