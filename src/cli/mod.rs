@@ -32,8 +32,9 @@ pub enum Command {
     /// Outputs go to [output] dir of the scenario (default out/<name>), or
     /// --output:
     /// mesh.vtu (rest mesh with regions, volumes, top-surface UVs), optionally
-    /// mesh.node/.ele/.face; metrics.csv (one row per frame); summary.json
-    /// (the run's record: scenario as run, overrides, metrics, files);
+    /// mesh.node/.ele/.face; metrics.csv (one row per frame); volume.csv
+    /// (each region's volume change per frame); summary.json (the run's
+    /// record: scenario as run, overrides, metrics, files);
     /// frames/frame_NNNN.vtu and frames.pvd (deformed mesh, displacement,
     /// principal strains and directions, surface stretch); with [output]
     /// frames_vtkhdf, the same frames in one frames.vtkhdf (a build with

@@ -152,15 +152,21 @@ impl MetricsRow for SurfaceMetrics {
     }
 }
 
-/// `metrics.csv`, appended and flushed per frame. Each row is formatted
-/// first and written with one call; a write that fails (a full disk)
-/// truncates the file back to its last whole row, so the file never ends
-/// in half a row.
+/// `metrics.csv`, appended and flushed per frame through a [`CsvFile`]
+/// (whole rows only, even on a full disk).
 pub struct MetricsWriter<R: MetricsRow, W: Truncate = std::fs::File> {
     rows: std::marker::PhantomData<fn(&R)>,
+    file: CsvFile<W>,
+}
+
+/// A CSV file appended and flushed line by line. Each line is formatted
+/// first and written with one call; a write that fails (a full disk)
+/// truncates the file back to its last whole line, so the file never ends
+/// in half a row.
+pub struct CsvFile<W: Truncate = std::fs::File> {
     path: PathBuf,
     file: W,
-    /// Length of the file up to its last whole row (bytes).
+    /// Length of the file up to its last whole line (bytes).
     whole: u64,
 }
 
@@ -189,24 +195,41 @@ impl<R: MetricsRow> MetricsWriter<R> {
 impl<R: MetricsRow, W: Truncate> MetricsWriter<R, W> {
     /// Writes the header to `file` (reported as `path` in errors).
     pub fn new(path: &Path, file: W) -> Result<MetricsWriter<R, W>> {
-        let mut writer = MetricsWriter {
+        Ok(MetricsWriter {
             rows: std::marker::PhantomData,
-            path: path.to_path_buf(),
-            file,
-            whole: 0,
-        };
-        writer.write_line(&format!("{}\n", R::HEADER))?;
-        Ok(writer)
+            file: CsvFile::new(path, file, R::HEADER)?,
+        })
     }
 
     /// Appends one row.
     pub fn push(&mut self, row: &R) -> Result<()> {
-        self.write_line(&row.csv_row())
+        self.file.write_line(&row.csv_row())
+    }
+}
+
+impl CsvFile {
+    /// Creates (truncates) the file at `path` and writes `header`.
+    pub fn create(path: &Path, header: &str) -> Result<CsvFile> {
+        let file = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
+        CsvFile::new(path, file, header)
+    }
+}
+
+impl<W: Truncate> CsvFile<W> {
+    /// Writes `header` (no newline) to `file`, reported as `path` in errors.
+    pub fn new(path: &Path, file: W, header: &str) -> Result<CsvFile<W>> {
+        let mut csv = CsvFile {
+            path: path.to_path_buf(),
+            file,
+            whole: 0,
+        };
+        csv.write_line(&format!("{header}\n"))?;
+        Ok(csv)
     }
 
-    /// Writes `line` whole, or on failure cuts the file back to its last
-    /// whole line and reports the error.
-    fn write_line(&mut self, line: &str) -> Result<()> {
+    /// Writes `line` (newline included) whole, or on failure cuts the file
+    /// back to its last whole line and reports the error.
+    pub fn write_line(&mut self, line: &str) -> Result<()> {
         match self
             .file
             .write_all(line.as_bytes())
@@ -557,7 +580,7 @@ mod tests {
                 assert!(written < 100, "the sink never filled");
             };
             assert!(err.to_string().contains("out/metrics.csv"), "{err}");
-            let text = String::from_utf8(w.file.data.clone()).unwrap();
+            let text = String::from_utf8(w.file.file.data.clone()).unwrap();
             assert!(text.ends_with('\n'), "{text:?}");
             assert_eq!(text.lines().count(), 1 + written);
             assert!(

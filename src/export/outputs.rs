@@ -41,6 +41,7 @@ pub fn is_run_output(folder: &str, name: &str) -> bool {
                 | "mesh.ele"
                 | "mesh.face"
                 | "metrics.csv"
+                | "volume.csv"
                 | "frames.pvd"
                 | "frames.vtkhdf"
                 | "summary.json"

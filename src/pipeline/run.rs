@@ -3,7 +3,8 @@
 //! frame's fields read in memory, and — for [`Run::writing`] — each frame's
 //! outputs written as it is solved: the VTU and VTKHDF frames, strain maps,
 //! the top surface's animation, the deformed microstructure, rendered
-//! frames and a `metrics.csv` row. [`run`] steps one through a scenario's
+//! frames, a `volume.csv` row (each region's volume change) and a
+//! `metrics.csv` row. [`run`] steps one through a scenario's
 //! frames. A failing frame stops a writing run with an error naming it;
 //! everything written before stays.
 
@@ -16,6 +17,7 @@ use crate::fem::material::Material;
 use crate::fem::probe::{ContactMode, Probe, ProbePose};
 use crate::mesh::{io, QualityReport, TetMesh, Vec3};
 use crate::scenario::{Setup, SimulationSetup};
+use crate::strain::volume::{self, region_volumes, RegionVolume};
 use crate::strain::{element_stresses, ElementStrains, SurfaceField, TetStress};
 use crate::surface::AnimatedSurface;
 
@@ -40,6 +42,9 @@ pub struct Frame<'a> {
     /// The probe's force on each node in contact, with the contact normal
     /// and the node's area: nodal contact pressure and shear traction.
     pub contact: &'a ContactForces,
+    /// Each region's volume change and its tets below
+    /// `solver.warn_volume_ratio` (the frame's row of `volume.csv`).
+    pub volumes: &'a [RegionVolume],
     materials: &'a [Material],
     strains: &'a std::cell::OnceCell<ElementStrains>,
     stresses: &'a std::cell::OnceCell<Vec<TetStress>>,
@@ -162,12 +167,15 @@ pub struct Run<'a> {
     rows: Vec<FrameMetrics>,
     /// Why a writing run stopped.
     failed: Option<String>,
+    /// Regions already warned about for over-compressed tets.
+    volume_warned: Vec<bool>,
 }
 
 /// The fields of the last solved frame.
 struct LastFrame {
     metrics: FrameMetrics,
     field: SurfaceField,
+    volumes: Vec<RegionVolume>,
     strains: std::cell::OnceCell<ElementStrains>,
     stresses: std::cell::OnceCell<Vec<TetStress>>,
 }
@@ -178,6 +186,7 @@ struct Writer<'a> {
     outputs: FrameOutputs<'a, FrameMetrics>,
     hdf: Option<vtkhdf::Writer>,
     exported: SurfaceExport<'a>,
+    volume: export::CsvFile,
 }
 
 impl<'a> Run<'a> {
@@ -200,6 +209,7 @@ impl<'a> Run<'a> {
             last: None,
             rows: Vec::new(),
             failed: None,
+            volume_warned: vec![false; mesh.regions.len()],
         }
     }
 
@@ -217,12 +227,17 @@ impl<'a> Run<'a> {
         write_rest_mesh(setup)?;
         outputs.start()?;
         let exported = SurfaceExport::open(setup)?;
+        let volume = export::CsvFile::create(
+            &setup.outputs.dir.join("volume.csv"),
+            &volume_header(&setup.mesh),
+        )?;
         let mut run = Run::new(setup);
         run.writer = Some(Writer {
             setup,
             outputs,
             hdf: None,
             exported,
+            volume,
         });
         Ok(run)
     }
@@ -381,9 +396,13 @@ impl<'a> Run<'a> {
         m.rs_range = [rs.0, rs.1];
         m.rt_range = [rt.0, rt.1];
         m.folded_vertices = folded;
+        let threshold = self.simulation.warn_volume_ratio;
+        let volumes = region_volumes(mesh, x, threshold);
+        warn_compressed(&mut self.volume_warned, threshold, &m, &volumes);
         let last = LastFrame {
             metrics: m,
             field,
+            volumes,
             strains: std::cell::OnceCell::new(),
             stresses: std::cell::OnceCell::new(),
         };
@@ -412,6 +431,7 @@ impl<'a> Run<'a> {
             positions: self.stepper.simulation().positions(),
             surface: &last.field,
             contact: self.stepper.contact_forces(),
+            volumes: &last.volumes,
             materials: &self.materials,
             strains: &last.strains,
             stresses: &last.stresses,
@@ -513,8 +533,62 @@ impl Writer<'_> {
             grid: grid.as_ref(),
             geometry: &geometry,
         })?;
+        self.volume
+            .write_line(&volume_row(m.frame, m.time_s, &last.volumes))?;
         self.outputs.row(*m)
     }
+}
+
+/// Warns, once per region and run, of the first frame in which a
+/// region has tets below the warning ratio.
+fn warn_compressed(
+    warned: &mut [bool],
+    threshold: f64,
+    m: &FrameMetrics,
+    volumes: &[RegionVolume],
+) {
+    for (v, warned) in volumes.iter().zip(warned) {
+        if v.tets_below > 0 && !*warned {
+            *warned = true;
+            log::warn!(
+                "frame {}: {} tets of region '{}' are squeezed below volume ratio {threshold} \
+                 (smallest {:.3}, region volume {:+.2}%), which no skin or fat does; \
+                 model = \"stable-neo-hookean\" in \
+                 [material.{}] resists this (README, materials)",
+                m.frame,
+                v.tets_below,
+                v.name,
+                v.min_volume_ratio,
+                100.0 * v.change(),
+                v.name
+            );
+        }
+    }
+}
+
+/// The header of `volume.csv`: per region its relative volume change,
+/// smallest volume ratio and tets below the warning ratio.
+fn volume_header(mesh: &TetMesh) -> String {
+    let mut header = String::from("frame,time_s");
+    for r in &mesh.regions {
+        let name = volume::column_name(&r.name);
+        header += &format!(",{name}_volume_change,{name}_min_volume_ratio,{name}_tets_below");
+    }
+    header
+}
+
+/// One frame's row of `volume.csv`.
+fn volume_row(frame: usize, time_s: f64, volumes: &[RegionVolume]) -> String {
+    let mut row = format!("{frame},{}", export::csv_number(time_s));
+    for v in volumes {
+        row += &format!(
+            ",{},{},{}",
+            export::csv_number(v.change()),
+            export::csv_number(v.min_volume_ratio),
+            v.tets_below
+        );
+    }
+    row + "\n"
 }
 
 /// What the shared output stage needs of a FEM scenario.

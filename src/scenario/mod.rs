@@ -318,6 +318,7 @@ impl Scenario {
             predict: self.solver.predict,
             dynamics: self.time.dynamics(frame_dt, substeps)?,
             max_inverted_fraction: self.solver.max_inverted_fraction()?,
+            warn_volume_ratio: self.solver.warn_volume_ratio()?,
         })
     }
 

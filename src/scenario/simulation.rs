@@ -167,6 +167,10 @@ pub struct SolverSection {
     /// patch has turned inside out and its outputs would be meaningless).
     /// 0 refuses any inverted tet, 1 never stops. Default 0.01.
     pub max_inverted_fraction: f64,
+    /// A tet squeezed below this volume ratio (J = det F) is counted in
+    /// `volume.csv`, and the first frame in which a region has such tets
+    /// logs a warning. In (0, 1]; default 0.5.
+    pub warn_volume_ratio: f64,
 }
 
 /// Largest mass-proportional damping `time.damping_alpha_per_s` (1/s).
@@ -185,6 +189,7 @@ impl Default for SolverSection {
             max_linear_iterations: 3000,
             predict: true,
             max_inverted_fraction: 0.01,
+            warn_volume_ratio: 0.5,
         }
     }
 }
@@ -248,6 +253,8 @@ pub struct SimulationSetup {
     pub dynamics: Option<Dynamics>,
     /// Largest fraction of inverted tets a frame may end with.
     pub max_inverted_fraction: f64,
+    /// Volume ratio below which a tet counts as over-compressed.
+    pub warn_volume_ratio: f64,
 }
 
 fn keyframes<const N: usize>(key: &str, rows: &[[f64; N]]) -> Result<Vec<(f64, [f64; N])>> {
@@ -485,6 +492,19 @@ impl SolverSection {
             Err(Error::parameter(
                 "solver.max_inverted_fraction",
                 format!("must be in [0, 1] (1 never stops), got {f}"),
+            ))
+        }
+    }
+
+    /// `warn_volume_ratio`, checked to lie in (0, 1].
+    pub fn warn_volume_ratio(&self) -> Result<f64> {
+        let r = self.warn_volume_ratio;
+        if r > 0.0 && r <= 1.0 {
+            Ok(r)
+        } else {
+            Err(Error::parameter(
+                "solver.warn_volume_ratio",
+                format!("must be in (0, 1] (a volume ratio J = det F), got {r}"),
             ))
         }
     }

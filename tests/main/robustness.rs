@@ -131,23 +131,25 @@ fn an_inverted_patch_stops_the_run() {
     assert!(column(&metrics, "min_volume_ratio")[10] < 0.0);
 }
 
-/// The limit is a fraction.
+/// The inversion limit is a fraction, the compression warning a volume
+/// ratio.
 #[test]
-fn max_inverted_fraction_is_validated() {
+fn inversion_and_compression_limits_are_validated() {
     let dir = tempfile::tempdir().unwrap();
-    for bad in ["-0.1", "1.5", "nan"] {
+    for (key, bad, says) in [
+        ("max_inverted_fraction", "-0.1", "must be in [0, 1]"),
+        ("max_inverted_fraction", "1.5", "must be in [0, 1]"),
+        ("max_inverted_fraction", "nan", "must be in [0, 1]"),
+        ("warn_volume_ratio", "0.0", "must be in (0, 1]"),
+        ("warn_volume_ratio", "1.2", "must be in (0, 1]"),
+        ("warn_volume_ratio", "nan", "must be in (0, 1]"),
+    ] {
         let out = dir.path().join("out");
-        let o = run_scenario(
-            dir.path(),
-            &format!("[solver]\nmax_inverted_fraction = {bad}\n"),
-            &out,
-        );
+        let o = run_scenario(dir.path(), &format!("[solver]\n{key} = {bad}\n"), &out);
         let stderr = text(&o.stderr);
         assert!(!o.status.success());
-        assert!(
-            stderr.contains("solver.max_inverted_fraction must be in [0, 1]"),
-            "{stderr}"
-        );
+        assert!(stderr.contains(&format!("solver.{key} {says}")), "{stderr}");
+        assert!(!out.exists(), "{key} = {bad} was refused before any output");
     }
 }
 

@@ -201,3 +201,81 @@ fn probe_control_stops_at_its_force_threshold() {
     let csv = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
     assert_eq!(csv.lines().count(), forces.len() + 1, "{csv}");
 }
+
+/// Each frame's region volumes are the sums of the tets' volumes `J V₀`
+/// (from the frame's strains), with the smallest `J` and the tets below
+/// `solver.warn_volume_ratio`; a writing run's `volume.csv` holds the same
+/// numbers, bit for bit, one row a frame.
+#[test]
+fn region_volumes_are_reported_per_frame() {
+    let mut setup = press_small();
+    setup.simulation.warn_volume_ratio = 0.98;
+    let dir = tempfile::tempdir().unwrap();
+    setup.outputs.dir = dir.path().join("out");
+    let mesh = &setup.mesh;
+    let rest: Vec<f64> = mesh
+        .tets
+        .iter()
+        .map(|t| {
+            let [a, b, c, d] = t.map(|v| mesh.positions[v]);
+            skinpatch::mesh::signed_volume(&a, &b, &c, &d)
+        })
+        .collect();
+    let mut expected = Vec::new();
+    let mut counted = 0;
+    pipeline::run(&setup, |frame| {
+        let strains = frame.strains();
+        let mut row = Vec::new();
+        for (k, region) in mesh.regions.iter().enumerate() {
+            let tets: Vec<usize> = (0..mesh.num_tets())
+                .filter(|&t| mesh.tet_region[t] == region.id)
+                .collect();
+            let v0: f64 = tets.iter().map(|&t| rest[t]).sum();
+            let v: f64 = tets
+                .iter()
+                .map(|&t| strains.tets[t].volume_ratio() * rest[t])
+                .sum();
+            let j_min = tets
+                .iter()
+                .map(|&t| strains.tets[t].volume_ratio())
+                .fold(f64::INFINITY, f64::min);
+            let below = tets
+                .iter()
+                .filter(|&&t| strains.tets[t].volume_ratio() < 0.98)
+                .count();
+            let got = &frame.volumes[k];
+            assert_eq!(got.name, region.name);
+            assert!((got.rest_mm3 - v0).abs() <= 1e-12 * v0);
+            assert!(
+                (got.change() - (v / v0 - 1.0)).abs() <= 1e-12,
+                "frame {}: {} against {}",
+                frame.metrics.frame,
+                got.change(),
+                v / v0 - 1.0
+            );
+            assert!((got.min_volume_ratio - j_min).abs() <= 1e-12);
+            assert_eq!(got.tets_below, below);
+            counted += below;
+            row.push((got.change(), got.min_volume_ratio, got.tets_below));
+        }
+        expected.push(row);
+    })
+    .unwrap();
+    assert!(counted > 0, "the press squeezes some tets below 0.98");
+    let csv = std::fs::read_to_string(setup.outputs.dir.join("volume.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    assert_eq!(header.len(), 2 + 3 * mesh.regions.len());
+    assert_eq!(header[2], format!("{}_volume_change", mesh.regions[0].name));
+    let rows: Vec<&str> = lines.collect();
+    assert_eq!(rows.len(), expected.len());
+    for (k, (line, row)) in rows.iter().zip(&expected).enumerate() {
+        let cells: Vec<&str> = line.split(',').collect();
+        assert_eq!(cells[0], k.to_string());
+        for (r, (change, j, below)) in row.iter().enumerate() {
+            assert_eq!(cells[2 + 3 * r].parse::<f64>().unwrap(), *change);
+            assert_eq!(cells[3 + 3 * r].parse::<f64>().unwrap(), *j);
+            assert_eq!(cells[4 + 3 * r].parse::<usize>().unwrap(), *below);
+        }
+    }
+}
