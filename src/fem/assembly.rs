@@ -385,14 +385,14 @@ pub(crate) mod tests {
         let mut asm = Assembly::new(5, &tets);
         let rotations = [rot, Matrix3::identity()];
         asm.assemble_stiffness(|t, a, b| {
-            rotations[t] * rest[t].k0[a][b] * rotations[t].transpose()
+            rotations[t] * rest[t].k0(a, b) * rotations[t].transpose()
         });
         let mut dense = nalgebra::DMatrix::<f64>::zeros(15, 15);
         for (t, tet) in tets.iter().enumerate() {
             let r = if t == 0 { rot } else { Matrix3::identity() };
             for a in 0..4 {
                 for b in 0..4 {
-                    let block = r * rest[t].k0[a][b] * r.transpose();
+                    let block = r * rest[t].k0(a, b) * r.transpose();
                     let (i, j) = (tet[a], tet[b]);
                     for x in 0..3 {
                         for y in 0..3 {
@@ -427,7 +427,7 @@ pub(crate) mod tests {
         let n = positions.len();
         assert!(n > 2 * MULTIPLY_GRAIN, "{n} nodes");
         let mut asm = Assembly::new(n, &tets);
-        asm.assemble_stiffness(|t, a, b| rest[t].k0[a][b]);
+        asm.assemble_stiffness(|t, a, b| rest[t].k0(a, b));
         let x: Vec<f64> = (0..3 * n).map(|k| (k as f64 * 0.731).sin()).collect();
         let mut y = vec![0.0; 3 * n];
         asm.multiply(&x, &mut y);

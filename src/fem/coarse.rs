@@ -275,7 +275,7 @@ mod tests {
         // aggregate size: an assembled elastic cube of 5 tets per cell.
         let (tets, rest, positions) = crate::fem::assembly::tests::cube_mesh(3);
         let mut asm = Assembly::new(positions.len(), &tets);
-        asm.assemble_stiffness(|t, a, b| rest[t].k0[a][b]);
+        asm.assemble_stiffness(|t, a, b| rest[t].k0(a, b));
         let mut coarse = Coarse::new(&positions);
         assert!(coarse.num_aggregates() >= 1);
         let mut seen = vec![0; positions.len()];

@@ -674,7 +674,7 @@ impl Simulation {
         let mut k = vec![0.0; self.num_nodes()];
         for (tet, e) in self.model.tets.iter().zip(&self.model.elements) {
             for (a, &v) in tet.iter().enumerate() {
-                k[v] += e.k0[a][a].trace() / 3.0;
+                k[v] += e.k0(a, a).trace() / 3.0;
             }
         }
         k

@@ -64,7 +64,7 @@ pub fn region_volumes(mesh: &TetMesh, x: &[Vec3], threshold: f64) -> Vec<RegionV
         } else {
             r.min_volume_ratio.min(j)
         };
-        r.tets_below += usize::from(!(j >= threshold));
+        r.tets_below += usize::from(j < threshold || j.is_nan());
     }
     out
 }

@@ -344,6 +344,7 @@ fn a_rerun_replaces_the_previous_run_as_a_set() {
             "metrics.csv",
             "notes.txt",
             "summary.json",
+            "volume.csv",
         ]
     );
     let pvd = std::fs::read_to_string(out.join("frames.pvd")).unwrap();
