@@ -44,12 +44,24 @@ pub struct Assembly {
 impl Assembly {
     /// Builds the pattern for `num_nodes` nodes and the given tets.
     pub fn new(num_nodes: usize, tets: &[[usize; 4]]) -> Assembly {
+        Assembly::with_patches(num_nodes, tets, &[])
+    }
+
+    /// Builds the pattern of the tets plus every pair of nodes that share
+    /// one of `patches` (the nodal volume term of locking-free materials
+    /// couples the nodes of each node's patch, [`super::nodal_pressure`]).
+    pub fn with_patches(num_nodes: usize, tets: &[[usize; 4]], patches: &[Vec<usize>]) -> Assembly {
         let mut lists: Vec<Vec<usize>> = vec![Vec::new(); num_nodes];
         let mut incident: Vec<Vec<(u32, u8)>> = vec![Vec::new(); num_nodes];
         for (t, tet) in tets.iter().enumerate() {
             for (a, &i) in tet.iter().enumerate() {
                 lists[i].extend_from_slice(tet);
                 incident[i].push((t as u32, a as u8));
+            }
+        }
+        for patch in patches {
+            for &i in patch {
+                lists[i].extend_from_slice(patch);
             }
         }
         let mut neighbour_start = Vec::with_capacity(num_nodes + 1);
@@ -137,6 +149,32 @@ impl Assembly {
                     }
                 }
             }
+        });
+    }
+
+    /// Adds blocks row by row, in parallel over rows: `f(i, add)` calls
+    /// `add(j, K)` to add `K` to block `(i, j)`, `j` a neighbour of `i` in
+    /// the pattern. Each row's additions run in the order `f` makes them.
+    pub fn add_row_blocks<F>(&mut self, f: F)
+    where
+        F: Fn(usize, &mut dyn FnMut(usize, &Matrix3<f64>)) + Sync,
+    {
+        let rows = node_rows(&self.neighbour_start, self.matrix.values_mut());
+        let (starts, neighbours) = (&self.neighbour_start, &self.neighbours);
+        rows.into_par_iter().enumerate().for_each(|(i, values)| {
+            let nb = &neighbours[starts[i]..starts[i + 1]];
+            let n = nb.len();
+            f(i, &mut |j, block| {
+                let k = nb
+                    .binary_search(&j)
+                    .expect("a coupled node is in the pattern");
+                for row in 0..3 {
+                    let base = 3 * n * row + 3 * k;
+                    for col in 0..3 {
+                        values[base + col] += block[(row, col)];
+                    }
+                }
+            });
         });
     }
 
@@ -337,6 +375,7 @@ pub(crate) mod tests {
             poisson: 0.3,
             density_t_mm3: 1e-9,
             model: Default::default(),
+            volumetric: Default::default(),
         };
         tets.iter()
             .map(|t| RestElement::new(t.map(|v| positions[v]), &m))

@@ -80,7 +80,7 @@ impl RestElement {
         let g2 = dm_inv.row(1).transpose();
         let g3 = dm_inv.row(2).transpose();
         let grads = [-(g1 + g2 + g3), g1, g2, g3];
-        let (mu, lambda) = (material.mu(), material.lambda());
+        let (mu, lambda) = (material.mu(), material.element_lambda());
         RestElement {
             dm_inv,
             volume,

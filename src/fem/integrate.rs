@@ -35,6 +35,7 @@ use super::assembly::Assembly;
 use super::coarse::Coarse;
 use super::corotation::{Corotation, RestElement, TangentKind, UPPER};
 use super::material::Material;
+use super::nodal_pressure::NodalPressure;
 use super::solve::{CgSettings, CgWorkspace, Coupling, Factor, Filter};
 
 use crate::mesh::{TetMesh, Vec3};
@@ -258,6 +259,8 @@ pub struct Model {
     pub(super) force_floor: f64,
     /// How close (mm) a constrained node must be to its target.
     pub(super) position_tol: f64,
+    /// The nodal volume term of the locking-free materials, if any.
+    pub(super) pressure: Option<NodalPressure>,
 }
 
 /// The deformed state.
@@ -347,11 +350,21 @@ fn material_data(mesh: &TetMesh, tet_material: &[Material]) -> (Vec<RestElement>
     )
 }
 
+/// The matrix pattern of `mesh`, with the patches of its nodal volume term.
+fn pattern(mesh: &TetMesh, pressure: Option<&NodalPressure>) -> Assembly {
+    match pressure {
+        Some(p) => Assembly::with_patches(mesh.num_vertices(), &mesh.tets, &p.patches()),
+        None => Assembly::new(mesh.num_vertices(), &mesh.tets),
+    }
+}
+
 impl Simulation {
     /// Sets up a simulation of `mesh` with one material per tet.
     pub fn new(mesh: &TetMesh, tet_material: &[Material]) -> Simulation {
         let (elements, mass, force_floor) = material_data(mesh, tet_material);
         let (n, m) = (mesh.num_vertices(), elements.len());
+        let pressure = NodalPressure::new(&mesh.tets, &elements, tet_material, n);
+        let assembly = pattern(mesh, pressure.as_ref());
         let (lo, hi) = mesh.bounds();
         let size = (hi - lo).norm();
         Simulation {
@@ -364,6 +377,7 @@ impl Simulation {
                 mass,
                 force_floor,
                 position_tol: 1e-7 * size,
+                pressure,
             },
             state: State {
                 x: mesh.positions.clone(),
@@ -380,7 +394,7 @@ impl Simulation {
             },
             work: Workspace {
                 f_elastic: vec![Vec3::zeros(); n],
-                assembly: Assembly::new(n, &mesh.tets),
+                assembly,
                 corotations: vec![Corotation::of(&Matrix3::identity()); m],
                 x_start: Vec::new(),
                 tet_forces: vec![[Vec3::zeros(); 4]; m],
@@ -411,6 +425,17 @@ impl Simulation {
     pub fn set_materials(&mut self, mesh: &TetMesh, tet_material: &[Material]) {
         (self.model.elements, self.model.mass, self.model.force_floor) =
             material_data(mesh, tet_material);
+        let had_pressure = self.model.pressure.is_some();
+        self.model.pressure = NodalPressure::new(
+            &mesh.tets,
+            &self.model.elements,
+            tet_material,
+            mesh.num_vertices(),
+        );
+        if had_pressure || self.model.pressure.is_some() {
+            self.work.assembly = pattern(mesh, self.model.pressure.as_ref());
+            self.work.element_tangent_kind = None;
+        }
         self.work.factor = Factor::default();
         self.work.coarse_stale = true;
     }
@@ -519,6 +544,14 @@ impl Simulation {
                 *c = Corotation::near(&e.deformation_gradient(&xe), &c.v);
                 *f = e.forces_from(c);
             });
+        if let Some(p) = self.model.pressure.as_mut() {
+            p.add_forces(
+                &self.model.tets,
+                &self.model.elements,
+                &self.state.x,
+                &mut self.work.tet_forces,
+            );
+        }
         self.work
             .assembly
             .gather_forces(&self.work.tet_forces, &mut self.work.f_int);
@@ -598,6 +631,9 @@ impl Simulation {
             .par_iter_mut()
             .enumerate()
             .for_each(|(t, out)| *out = elements[t].tangent(&corotations[t], kind).upper_blocks(k));
+        if let (Some(p), TangentKind::Exact) = (&self.model.pressure, kind) {
+            p.add_geometric_blocks(elements, k, &mut self.work.tet_blocks);
+        }
         let blocks = &self.work.tet_blocks;
         self.work.assembly.assemble_stiffness(|t, a, b| {
             if a <= b {
@@ -606,6 +642,9 @@ impl Simulation {
                 blocks[t][UPPER[b][a]].transpose()
             }
         });
+        if let Some(p) = &self.model.pressure {
+            p.add_coupling(&mut self.work.assembly, k);
+        }
         if let Some(d) = self.dynamics {
             let c = 1.0 / (d.dt * d.dt) + d.alpha / d.dt;
             let diagonal: Vec<f64> = self.model.mass.iter().map(|m| m * c).collect();

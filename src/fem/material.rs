@@ -23,6 +23,27 @@ use crate::error::{shown, Error, Result};
 /// materials"). Above this the answers would be wrong, not just slow.
 pub const MAX_POISSON: f64 = 0.49;
 
+/// Largest Poisson's ratio of a locking-free material
+/// ([`Volumetric::LockingFree`]): λ/μ = 4998 there, about what a linear
+/// solve in double precision still resolves.
+pub const MAX_POISSON_LOCKING_FREE: f64 = 0.4999;
+
+/// How an element measures its change of volume.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Volumetric {
+    /// Each tet's own volume ratio (locks as ν → 0.5).
+    #[default]
+    Standard,
+    /// The volume term on nodal volume ratios averaged over the tets
+    /// around each node (average nodal pressure; Bonet & Burton 1998, "A
+    /// simple average nodal pressure tetrahedral element for incompressible
+    /// and nearly incompressible dynamic explicit applications"): one
+    /// volume constraint per node instead of per tet, which a tet mesh can
+    /// meet without locking. See [`super::nodal_pressure`].
+    LockingFree,
+}
+
 /// Young's moduli accepted (kPa): softer than any gel to stiffer than
 /// diamond. Outside, force scales leave the range the tolerances assume.
 pub const YOUNGS_KPA_RANGE: (f64, f64) = (1e-6, 1e9);
@@ -41,6 +62,8 @@ pub struct Material {
     pub density_t_mm3: f64,
     /// The energy density.
     pub model: Model,
+    /// How its volume change is measured.
+    pub volumetric: Volumetric,
 }
 
 impl Material {
@@ -51,6 +74,24 @@ impl Material {
         youngs_kpa: f64,
         poisson: f64,
         density_kg_m3: f64,
+    ) -> Result<Material> {
+        Material::with_volumetric(
+            region,
+            youngs_kpa,
+            poisson,
+            density_kg_m3,
+            Volumetric::Standard,
+        )
+    }
+
+    /// [`Material::from_scenario_units`] with a volume measure: a
+    /// locking-free material accepts ν up to [`MAX_POISSON_LOCKING_FREE`].
+    pub fn with_volumetric(
+        region: &str,
+        youngs_kpa: f64,
+        poisson: f64,
+        density_kg_m3: f64,
+        volumetric: Volumetric,
     ) -> Result<Material> {
         let key = |k: &str| format!("material.{region}.{k}");
         let (lo, hi) = YOUNGS_KPA_RANGE;
@@ -64,13 +105,26 @@ impl Material {
                 ),
             ));
         }
-        if !(0.0..=MAX_POISSON).contains(&poisson) {
+        if volumetric == Volumetric::LockingFree
+            && !(0.0..=MAX_POISSON_LOCKING_FREE).contains(&poisson)
+        {
+            return Err(Error::parameter(
+                key("poisson_ratio"),
+                format!(
+                    "must be in [0, {MAX_POISSON_LOCKING_FREE}] for a locking-free \
+                     material, got {}",
+                    shown(poisson)
+                ),
+            ));
+        }
+        if volumetric == Volumetric::Standard && !(0.0..=MAX_POISSON).contains(&poisson) {
             return Err(Error::parameter(
                 key("poisson_ratio"),
                 format!(
                     "must be in [0, {MAX_POISSON}], got {}: closer to 0.5 the linear \
                      tetrahedra lock (at 0.499 a Hertz indentation is 72% too stiff), so \
-                     nearly incompressible skin is modelled with ν ≤ {MAX_POISSON}",
+                     nearly incompressible skin is modelled with ν ≤ {MAX_POISSON}, or \
+                     with volumetric = \"locking-free\" (up to {MAX_POISSON_LOCKING_FREE})",
                     shown(poisson)
                 ),
             ));
@@ -90,6 +144,7 @@ impl Material {
             poisson,
             density_t_mm3: density_kg_m3 * 1e-12,
             model: Model::Corotational,
+            volumetric,
         })
     }
 
@@ -110,6 +165,30 @@ impl Material {
     /// Shear modulus μ (MPa).
     pub fn mu(&self) -> f64 {
         self.youngs_mpa / (2.0 * (1.0 + self.poisson))
+    }
+
+    /// The bulk coefficient of the volume term a locking-free material
+    /// moves to the nodes (MPa): the part of the energy density that
+    /// depends on the volume ratio alone, `κ_v/2 (J − 1)²` — λ for the
+    /// corotational energy (whose `λ/2 (Σσ̂ − 3)²` it replaces), λ + μ for
+    /// the Neo-Hookean one.
+    pub fn nodal_bulk(&self) -> f64 {
+        match self.model {
+            Model::Corotational => self.lambda(),
+            Model::StableNeoHookean => self.lambda() + self.mu(),
+        }
+    }
+
+    /// The λ an element of this material keeps: all of it for a standard
+    /// one; for a locking-free one the λ that takes the volume term out of
+    /// its energy (0 for the corotational energy, −μ for the Neo-Hookean
+    /// one, whose volume coefficient is λ + μ).
+    pub fn element_lambda(&self) -> f64 {
+        match (self.volumetric, self.model) {
+            (Volumetric::Standard, _) => self.lambda(),
+            (Volumetric::LockingFree, Model::Corotational) => 0.0,
+            (Volumetric::LockingFree, Model::StableNeoHookean) => -self.mu(),
+        }
     }
 
     /// Lamé's first parameter λ (MPa).

@@ -3,7 +3,8 @@
 //! * [`material`]: per-region isotropic materials and Lamé parameters;
 //! * [`hyperelastic`]: the energy densities (corotational linear, stable
 //!   Neo-Hookean) in principal stretches;
-//! * [`corotation`]: per-element rest data, rotation, forces, energy.
+//! * [`corotation`]: per-element rest data, rotation, forces, energy;
+//! * [`nodal_pressure`]: the nodal volume term of locking-free materials.
 
 pub mod assembly;
 pub mod boundary;
@@ -15,9 +16,10 @@ pub mod integrate;
 pub mod load_steps;
 pub mod material;
 mod newton;
+pub mod nodal_pressure;
 pub mod probe;
 pub mod solve;
 
 pub use corotation::{Corotation, RestElement, TangentKind};
 pub use hyperelastic::Model;
-pub use material::Material;
+pub use material::{Material, Volumetric};

@@ -28,12 +28,16 @@ use crate::mesh::TetMesh;
 pub struct MaterialSection {
     /// Young's modulus (kPa).
     pub youngs_modulus_kpa: Option<f64>,
-    /// Poisson's ratio, in [0, 0.5). Default 0.45.
+    /// Poisson's ratio: at most 0.49, or 0.4999 with `volumetric =
+    /// "locking-free"`. Default 0.45.
     pub poisson_ratio: Option<f64>,
     /// Density (kg/m³). Default 1100.
     pub density_kg_m3: Option<f64>,
     /// Energy density: `corotational` (default) or `stable-neo-hookean`.
     pub model: Option<crate::fem::Model>,
+    /// Volume measure: `standard` (default: each tet's own) or
+    /// `locking-free` (nodal averages, for ν near 0.5).
+    pub volumetric: Option<crate::fem::Volumetric>,
 }
 
 /// `[boundary]`.
@@ -320,11 +324,12 @@ pub fn materials(
                 "is required: the region has no default material",
             )
         })?;
-        let m = Material::from_scenario_units(
+        let m = Material::with_volumetric(
             &region.name,
             kpa,
             s.poisson_ratio.unwrap_or(0.45),
             s.density_kg_m3.unwrap_or(1100.0),
+            s.volumetric.unwrap_or_default(),
         )?
         .with_model(s.model.unwrap_or_default());
         by_id.insert(region.id, m);

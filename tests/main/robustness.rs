@@ -310,6 +310,7 @@ fn a_load_free_state_converges_at_once_for_any_poisson_ratio() {
             poisson: nu,
             density_t_mm3: 1.1e-9,
             model: Default::default(),
+            volumetric: Default::default(),
         };
         let mut sim = Simulation::new(&mesh, &vec![material; mesh.num_tets()]);
         let stats = sim.solve_static("rest").unwrap();

@@ -9,6 +9,7 @@ fn material() -> Material {
         poisson: 0.45,
         density_t_mm3: 1.1e-9,
         model: Default::default(),
+        volumetric: Default::default(),
     }
 }
 
