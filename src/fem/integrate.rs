@@ -352,10 +352,21 @@ fn material_data(mesh: &TetMesh, tet_material: &[Material]) -> (Vec<RestElement>
 
 /// The matrix pattern of `mesh`, with the patches of its nodal volume term.
 fn pattern(mesh: &TetMesh, pressure: Option<&NodalPressure>) -> Assembly {
-    match pressure {
+    let assembly = match pressure {
         Some(p) => Assembly::with_patches(mesh.num_vertices(), &mesh.tets, &p.patches()),
         None => Assembly::new(mesh.num_vertices(), &mesh.tets),
-    }
+    };
+    log::debug!(
+        "stiffness pattern: {} nodes, {} blocks{}",
+        mesh.num_vertices(),
+        assembly.matrix.nnz() / 9,
+        if pressure.is_some() {
+            " (with the nodal volume term's patches)"
+        } else {
+            ""
+        }
+    );
+    assembly
 }
 
 impl Simulation {

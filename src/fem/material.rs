@@ -28,6 +28,10 @@ pub const MAX_POISSON: f64 = 0.49;
 /// solve in double precision still resolves.
 pub const MAX_POISSON_LOCKING_FREE: f64 = 0.4999;
 
+/// λ/μ a locking-free element keeps (that of ν = 1/3; see
+/// [`Material::element_lambda`]).
+pub const LOCKING_FREE_ELEMENT_SHARE: f64 = 2.0;
+
 /// How an element measures its change of volume.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -167,28 +171,32 @@ impl Material {
         self.youngs_mpa / (2.0 * (1.0 + self.poisson))
     }
 
-    /// The bulk coefficient of the volume term a locking-free material
-    /// moves to the nodes (MPa): the part of the energy density that
-    /// depends on the volume ratio alone, `κ_v/2 (J − 1)²` — λ for the
-    /// corotational energy (whose `λ/2 (Σσ̂ − 3)²` it replaces), λ + μ for
-    /// the Neo-Hookean one.
-    pub fn nodal_bulk(&self) -> f64 {
-        match self.model {
-            Model::Corotational => self.lambda(),
-            Model::StableNeoHookean => self.lambda() + self.mu(),
+    /// The λ an element of this material keeps: all of it for a standard
+    /// one. A locking-free one keeps `2μ` (the λ of ν = 1/3; or λ, if
+    /// smaller): a share of the volume term small enough not to lock that
+    /// still gives each tet's own volume a stiffness, against the volume
+    /// modes a purely nodal term cannot see (tets squeezed flat while
+    /// their nodes' volumes hold), as the stabilised average-nodal-pressure
+    /// elements do (Bonet, Marriott & Hassan 2001). Measured on the Hertz
+    /// block at ν = 0.49 and the main job at 0.499 (docs/VERIFICATION.md):
+    /// without a share the force is 0.8% above Hertz and tets invert
+    /// (smallest J −0.04); a `9μ` share (ν = 0.45) keeps J ≥ 0.37 but is
+    /// 3.6% stiff; `2μ` gives +1.5% and J ≥ 0.13.
+    pub fn element_lambda(&self) -> f64 {
+        match self.volumetric {
+            Volumetric::Standard => self.lambda(),
+            Volumetric::LockingFree => self.lambda().min(LOCKING_FREE_ELEMENT_SHARE * self.mu()),
         }
     }
 
-    /// The λ an element of this material keeps: all of it for a standard
-    /// one; for a locking-free one the λ that takes the volume term out of
-    /// its energy (0 for the corotational energy, −μ for the Neo-Hookean
-    /// one, whose volume coefficient is λ + μ).
-    pub fn element_lambda(&self) -> f64 {
-        match (self.volumetric, self.model) {
-            (Volumetric::Standard, _) => self.lambda(),
-            (Volumetric::LockingFree, Model::Corotational) => 0.0,
-            (Volumetric::LockingFree, Model::StableNeoHookean) => -self.mu(),
-        }
+    /// The bulk coefficient of the volume term a locking-free material
+    /// moves to the nodes (MPa): the λ the element does not keep
+    /// ([`Material::element_lambda`]); the nodal term is `κ/2 (J̄ − 1)²`,
+    /// which at small strain is the `λ/2 (Σσ̂ − 3)²` of the corotational
+    /// energy and the `(λ + μ)/2 (J − 1)²` of the Neo-Hookean one (whose
+    /// element keeps its μ part). Zero for a standard material.
+    pub fn nodal_bulk(&self) -> f64 {
+        self.lambda() - self.element_lambda()
     }
 
     /// Lamé's first parameter λ (MPa).
@@ -212,6 +220,21 @@ mod tests {
         // E = μ(3λ + 2μ)/(λ + μ)
         let (l, mu) = (m.lambda(), m.mu());
         assert!((mu * (3.0 * l + 2.0 * mu) / (l + mu) - 0.15).abs() < 1e-14);
+    }
+
+    /// A locking-free material splits λ between the element (2μ at most)
+    /// and the nodes, the whole of it in all; a standard one keeps it.
+    #[test]
+    fn locking_free_materials_split_the_volume_term() {
+        for nu in [0.3, 0.45, 0.499] {
+            let m =
+                Material::with_volumetric("t", 15.0, nu, 1100.0, Volumetric::LockingFree).unwrap();
+            let (le, ln) = (m.element_lambda(), m.nodal_bulk());
+            assert!((le + ln - m.lambda()).abs() < 1e-12 * m.lambda());
+            assert!(le <= 2.0 * m.mu() * (1.0 + 1e-12) && ln >= 0.0);
+            let s = Material::from_scenario_units("t", 15.0, nu.min(0.49), 1100.0).unwrap();
+            assert_eq!((s.element_lambda(), s.nodal_bulk()), (s.lambda(), 0.0));
+        }
     }
 
     #[test]
@@ -238,6 +261,24 @@ mod tests {
             assert!(e.to_string().contains("lock"), "{e}");
         }
         assert!(Material::from_scenario_units("fat", 1.0, MAX_POISSON, 1000.0).is_ok());
+        // Locking-free: up to 0.4999, and the standard refusal names it.
+        let lf = |nu| Material::with_volumetric("fat", 1.0, nu, 1000.0, Volumetric::LockingFree);
+        assert!(lf(MAX_POISSON_LOCKING_FREE).is_ok());
+        for nu in [0.49995, 0.5, -0.1, f64::NAN] {
+            let e = lf(nu).unwrap_err().to_string();
+            assert!(
+                e.starts_with(&format!(
+                    "material.fat.poisson_ratio must be in [0, 0.4999] for a locking-free \
+                     material, got {nu}"
+                )),
+                "{e}"
+            );
+        }
+        let e = Material::from_scenario_units("fat", 1.0, 0.499, 1000.0).unwrap_err();
+        assert!(
+            e.to_string().contains("volumetric = \"locking-free\""),
+            "{e}"
+        );
         let e = Material::from_scenario_units("fat", 1.0, 0.3, f64::NAN).unwrap_err();
         assert_eq!(
             e.to_string(),
