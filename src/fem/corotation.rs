@@ -218,9 +218,7 @@ impl RestElement {
         let trace_term = lambda * (s.sum() - 3.0);
         let psi = s.map(|si| 2.0 * mu * (si - 1.0) + trace_term);
         let a = (Matrix3::identity() * (2.0 * mu) + Matrix3::repeat(lambda)) * vol;
-        let mut diag = [0.0; 3];
-        let mut cross = [0.0; 3];
-        for (k, &(i, j)) in PAIRS.iter().enumerate() {
+        let modes = PAIRS.map(|(i, j)| {
             let flip = 2.0 * mu;
             let denom = s[i] + s[j];
             let twist = if denom > 1e-8 {
@@ -233,9 +231,22 @@ impl RestElement {
             } else {
                 0.0
             };
-            diag[k] = vol * 0.5 * (twist + flip);
-            cross[k] = vol * 0.5 * (flip - twist);
-        }
+            (flip, twist)
+        });
+        self.tangent_of_modes(rot, a, modes)
+    }
+
+    /// The tangent with scaling-mode Hessian `a` (times the volume) and the
+    /// (flip, twist) eigenvalues of each pair of [`PAIRS`].
+    fn tangent_of_modes(
+        &self,
+        rot: &Corotation,
+        a: Matrix3<f64>,
+        modes: [(f64, f64); 3],
+    ) -> Tangent {
+        let vol = self.volume;
+        let diag = modes.map(|(flip, twist)| vol * 0.5 * (twist + flip));
+        let cross = modes.map(|(flip, twist)| vol * 0.5 * (flip - twist));
         let vt = rot.v.transpose();
         Tangent {
             u: rot.u,
@@ -268,22 +279,13 @@ impl RestElement {
         } else {
             hessian
         } * vol;
-        let mut diag = [0.0; 3];
-        let mut cross = [0.0; 3];
-        for (k, &(i, j)) in PAIRS.iter().enumerate() {
-            let flip = clamp(law.flip(&s, i, j));
-            let twist = law.twist(&s, i, j).map_or(0.0, clamp);
-            diag[k] = vol * 0.5 * (twist + flip);
-            cross[k] = vol * 0.5 * (flip - twist);
-        }
-        let vt = rot.v.transpose();
-        Tangent {
-            u: rot.u,
-            c: self.grads.map(|g| vt * g),
-            a,
-            diag,
-            cross,
-        }
+        let modes = PAIRS.map(|(i, j)| {
+            (
+                clamp(law.flip(&s, i, j)),
+                law.twist(&s, i, j).map_or(0.0, clamp),
+            )
+        });
+        self.tangent_of_modes(rot, a, modes)
     }
 }
 

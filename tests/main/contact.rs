@@ -437,15 +437,23 @@ fn bonded_probe_pulls_the_surface() {
 /// and contact radius a = √(Rδ). At δ = 0.05 and 0.1 mm the force is within
 /// 5% and the radius (of the contact area, a = √(A/π)) within 10%; at
 /// δ = 0.2 mm finite-size and large-deformation effects are allowed 10%.
+/// Hertz's force (N) and contact radius (mm) of the fixture's sphere
+/// (R = 2 mm) pressed `delta` mm into a half-space of E = 100 kPa and
+/// Poisson's ratio `nu`.
+fn hertz(nu: f64, delta: f64) -> (f64, f64) {
+    let (e_mpa, r): (f64, f64) = (0.1, 2.0);
+    let force = (4.0 / 3.0) * e_mpa / (1.0 - nu * nu) * r.sqrt() * delta.powf(1.5);
+    (force, (r * delta).sqrt())
+}
+
 #[test]
 fn hertz_indentation_matches_theory() {
     let (summary, _dir) = common::run_fixture("hertz.toml", |t| t);
-    let (e_mpa, nu, r): (f64, f64, f64) = (0.1, 0.3, 2.0);
+    let nu = 0.3;
     let mut report = String::new();
     for m in &summary.frames[1..] {
         let delta = 0.2 * m.time_s;
-        let force = (4.0 / 3.0) * e_mpa / (1.0 - nu * nu) * r.sqrt() * delta.powf(1.5);
-        let a = (r * delta).sqrt();
+        let (force, a) = hertz(nu, delta);
         let a_fem = (m.contact_area_mm2 / std::f64::consts::PI).sqrt();
         let force_err = m.probe_force_n[2] / force - 1.0;
         let radius_err = a_fem / a - 1.0;
@@ -490,8 +498,7 @@ fn hertz_converges_for_nearly_incompressible_blocks() {
         assert_eq!(summary.frames.len(), 3);
         for m in &summary.frames[1..] {
             let delta = 0.2 * m.time_s;
-            let (e_mpa, r): (f64, f64) = (0.1, 2.0);
-            let force = (4.0 / 3.0) * e_mpa / (1.0 - nu * nu) * r.sqrt() * delta.powf(1.5);
+            let (force, _) = hertz(nu, delta);
             let err = m.probe_force_n[2] / force - 1.0;
             report += &format!(
                 "ν {nu}, δ {delta:.2} mm: force {:+.2}% of Hertz, {} Newton iterations, residual {:.1e}\n",
@@ -535,9 +542,7 @@ fn locking_free_hertz_matches_theory_near_incompressibility() {
         assert_eq!(summary.frames.len(), 3);
         for m in &summary.frames[1..] {
             let delta = 0.2 * m.time_s;
-            let (e_mpa, r): (f64, f64) = (0.1, 2.0);
-            let force = (4.0 / 3.0) * e_mpa / (1.0 - nu * nu) * r.sqrt() * delta.powf(1.5);
-            let a = (r * delta).sqrt();
+            let (force, a) = hertz(nu, delta);
             let a_fem = (m.contact_area_mm2 / std::f64::consts::PI).sqrt();
             let (force_err, radius_err) = (m.probe_force_n[2] / force - 1.0, a_fem / a - 1.0);
             report += &format!(

@@ -133,6 +133,29 @@ fn global_stiffness_is_symmetric_and_forces_balance() {
     }
 }
 
+/// Stretches the patch along x to `s` between frictionless jaws, the
+/// bottom and the y sides on rollers and the top free, in `steps` equal
+/// load steps solved to equilibrium.
+fn caliper_stretch(sim: &mut Simulation, mesh: &skinpatch::mesh::TetMesh, s: f64, steps: usize) {
+    let bc = BoundaryConditions {
+        bottom: BottomCondition::Rollers,
+        sides: SideCondition::Rollers,
+        caliper: Some(Caliper {
+            axis: 0,
+            stretch: Keyframes {
+                points: vec![(0.0, 1.0), (1.0, s)],
+            },
+        }),
+        prescribed: vec![],
+    };
+    let sets = NodeSets::of(mesh);
+    for step in 1..=steps {
+        let (filters, targets) = bc.constraints(&sets, &mesh.positions, step as f64 / steps as f64);
+        sim.set_constraints(filters, targets);
+        sim.solve_static("caliper").unwrap();
+    }
+}
+
 /// Caliper stretch 1.2 with a free top, bottom on rollers and the y sides on
 /// rollers: F = diag(1.2, 1, λ_z) exactly, so every tet's largest principal
 /// stretch is 1.2 along x.
@@ -142,21 +165,7 @@ fn caliper_stretch_is_homogeneous() {
     let material: Vec<Material> = mesh.tet_region.iter().map(|&r| skin(r)).collect();
     let mut sim = Simulation::new(&mesh, &material);
     tight(&mut sim);
-    let bc = BoundaryConditions {
-        bottom: BottomCondition::Rollers,
-        sides: SideCondition::Rollers,
-        caliper: Some(Caliper {
-            axis: 0,
-            stretch: Keyframes {
-                points: vec![(0.0, 1.0), (1.0, 1.2)],
-            },
-        }),
-        prescribed: vec![],
-    };
-    let sets = NodeSets::of(&mesh);
-    let (filters, targets) = bc.constraints(&sets, &mesh.positions, 1.0);
-    sim.set_constraints(filters, targets);
-    sim.solve_static("caliper").unwrap();
+    caliper_stretch(&mut sim, &mesh, 1.2, 1);
     for (t, m) in material.iter().enumerate() {
         let c = Corotation::of(&sim.deformation_gradient(t));
         let k = c.sigma.imax();
@@ -193,25 +202,9 @@ fn neo_hookean_caliper_stretch_matches_the_closed_form() {
     let mut sim = Simulation::new(&mesh, &material);
     tight(&mut sim);
     let s = 1.5;
-    let bc = BoundaryConditions {
-        bottom: BottomCondition::Rollers,
-        sides: SideCondition::Rollers,
-        caliper: Some(Caliper {
-            axis: 0,
-            stretch: Keyframes {
-                points: vec![(0.0, 1.0), (1.0, s)],
-            },
-        }),
-        prescribed: vec![],
-    };
-    let sets = NodeSets::of(&mesh);
     // In load steps, as a run would: 1.5 in one step is beyond Newton's reach
     // from rest.
-    for step in 1..=5 {
-        let (filters, targets) = bc.constraints(&sets, &mesh.positions, step as f64 / 5.0);
-        sim.set_constraints(filters, targets);
-        sim.solve_static("caliper").unwrap();
-    }
+    caliper_stretch(&mut sim, &mesh, s, 5);
     let x = sim.positions().to_vec();
     let stresses = skinpatch::strain::element_stresses(&mesh, &x, &material);
     for (t, m) in material.iter().enumerate() {
@@ -263,23 +256,7 @@ fn locking_free_caliper_keeps_the_volume_at_0_499() {
     let mut sim = Simulation::new(&mesh, &material);
     tight(&mut sim);
     let s = 1.2;
-    let bc = BoundaryConditions {
-        bottom: BottomCondition::Rollers,
-        sides: SideCondition::Rollers,
-        caliper: Some(Caliper {
-            axis: 0,
-            stretch: Keyframes {
-                points: vec![(0.0, 1.0), (1.0, s)],
-            },
-        }),
-        prescribed: vec![],
-    };
-    let sets = NodeSets::of(&mesh);
-    for step in 1..=2 {
-        let (filters, targets) = bc.constraints(&sets, &mesh.positions, step as f64 / 2.0);
-        sim.set_constraints(filters, targets);
-        sim.solve_static("caliper").unwrap();
-    }
+    caliper_stretch(&mut sim, &mesh, s, 2);
     for (t, m) in material.iter().enumerate() {
         let (mu, le, ln) = (m.mu(), m.element_lambda(), m.nodal_bulk());
         let lz = (2.0 * mu + le * (2.0 - s) + ln * s) / (2.0 * mu + le + ln * s * s);
