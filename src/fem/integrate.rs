@@ -653,8 +653,13 @@ impl Simulation {
                 blocks[t][UPPER[b][a]].transpose()
             }
         });
-        if let Some(p) = &self.model.pressure {
-            p.add_coupling(&mut self.work.assembly, k);
+        if let Some(p) = self.model.pressure.as_mut() {
+            p.add_coupling(
+                &self.model.tets,
+                &self.model.elements,
+                &mut self.work.assembly,
+                k,
+            );
         }
         if let Some(d) = self.dynamics {
             let c = 1.0 / (d.dt * d.dt) + d.alpha / d.dt;

@@ -284,7 +284,6 @@ impl NodalPressure {
                 }
             }
         });
-        self.update_gamma(tets, elements);
     }
 
     /// `γ_a` on each node's patch: `Σ_e V_e cof(F_e) g_b / 4` over the
@@ -333,9 +332,18 @@ impl NodalPressure {
         });
     }
 
-    /// Adds `scale · Σ_a (κ_a/V_a) γ_a γ_aᵀ` to the matrix of `asm` (whose
-    /// pattern holds every point's patch).
-    pub fn add_coupling(&self, asm: &mut Assembly, scale: f64) {
+    /// Adds `scale · Σ_a (κ_a/V_a) γ_a γ_aᵀ` at the last evaluation of the
+    /// forces to the matrix of `asm` (whose pattern holds every point's
+    /// patch). The `γ_a` are computed here, not with the forces, which the
+    /// line search evaluates more often than the tangent is assembled.
+    pub fn add_coupling(
+        &mut self,
+        tets: &[[usize; 4]],
+        elements: &[RestElement],
+        asm: &mut Assembly,
+        scale: f64,
+    ) {
+        self.update_gamma(tets, elements);
         asm.add_row_blocks(|i, add| {
             // The points whose patch holds node i: for each point of i, the
             // points of its material at the nodes of its patch.
