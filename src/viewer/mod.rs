@@ -129,7 +129,7 @@ fn initial_state(
         .filter_map(|region| {
             let t = setup.mesh.tet_region.iter().position(|&r| r == region.id)?;
             let m = &setup.simulation.tet_material[t];
-            Some((region.name.clone(), m.youngs_mpa * 1e3, m.poisson))
+            Some(state::RegionMaterial::new(&region.name, m))
         })
         .collect();
     let friction = match setup.simulation.probe.as_ref().map(|p| p.mode) {

@@ -23,7 +23,7 @@ pub fn recorded_scenario(
     dest: &Path,
     path: &[[f64; 4]],
     axis: &[[f64; 4]],
-    materials: &[(String, f64, f64)],
+    materials: &[super::state::RegionMaterial],
     friction: Option<f64>,
 ) -> Result<Scenario> {
     let mut s = original.clone();
@@ -46,10 +46,10 @@ pub fn recorded_scenario(
     }
     // Frame k of the replay is at k / rate, where the viewer solved it.
     s.time.duration_s = (path.len() - 1) as f64 / s.time.frame_rate_hz;
-    for (region, e, nu) in materials {
-        let m = s.material.entry(region.clone()).or_default();
-        m.youngs_modulus_kpa = Some(*e);
-        m.poisson_ratio = Some(*nu);
+    for edited in materials {
+        let m = s.material.entry(edited.region.clone()).or_default();
+        m.youngs_modulus_kpa = Some(edited.youngs_kpa);
+        m.poisson_ratio = Some(edited.poisson);
     }
     let dest = dest.canonicalize().ok();
     let absolute = |p: &Path| -> PathBuf {

@@ -400,6 +400,37 @@ pub enum Command {
     Friction(f64),
 }
 
+/// One region's material as the panel edits it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RegionMaterial {
+    /// Region name (the scenario's `[material.<region>]`).
+    pub region: String,
+    /// Young's modulus (kPa).
+    pub youngs_kpa: f64,
+    /// Poisson ratio.
+    pub poisson: f64,
+    /// The largest ν the region's volume measure accepts
+    /// ([`MAX_POISSON`](crate::fem::material::MAX_POISSON) for the standard
+    /// tet, more for a locking-free one).
+    pub max_poisson: f64,
+}
+
+impl RegionMaterial {
+    /// The panel's copy of `material`, for region `region`.
+    pub fn new(region: &str, material: &crate::fem::Material) -> RegionMaterial {
+        use crate::fem::material::{MAX_POISSON, MAX_POISSON_LOCKING_FREE};
+        RegionMaterial {
+            region: region.to_string(),
+            youngs_kpa: material.youngs_mpa * 1e3,
+            poisson: material.poisson,
+            max_poisson: match material.volumetric {
+                crate::fem::Volumetric::Standard => MAX_POISSON,
+                crate::fem::Volumetric::LockingFree => MAX_POISSON_LOCKING_FREE,
+            },
+        }
+    }
+}
+
 /// Everything the viewer shows and drives.
 #[derive(Clone, Debug)]
 pub struct ViewerState {
@@ -420,8 +451,8 @@ pub struct ViewerState {
     pub key_light: Option<(f32, f32)>,
     /// Scale of every light's intensity.
     pub light_scale: f32,
-    /// Materials by region: Young's modulus (kPa) and Poisson ratio.
-    pub materials: Vec<(String, f64, f64)>,
+    /// Materials by region, as the panel edits them.
+    pub materials: Vec<RegionMaterial>,
     /// Coulomb friction (None: the scenario's contact is not Coulomb).
     pub friction: Option<f64>,
     /// Bumped by every material or friction edit (the simulation follows).
@@ -441,7 +472,7 @@ impl ViewerState {
         camera: &Camera,
         lights: &[Light],
         probe: Option<ProbeControl>,
-        materials: Vec<(String, f64, f64)>,
+        materials: Vec<RegionMaterial>,
         friction: Option<f64>,
         viewport: [f32; 2],
     ) -> ViewerState {
@@ -522,21 +553,21 @@ impl ViewerState {
                 "material.{region}: Young's modulus must be > 0 kPa, got {e}"
             ));
         }
-        let most = crate::fem::material::MAX_POISSON;
+        let known: Vec<String> = self.materials.iter().map(|m| m.region.clone()).collect();
+        let slot = self
+            .materials
+            .iter_mut()
+            .find(|m| m.region == region)
+            .ok_or_else(|| format!("no region {region} (regions: {})", known.join(", ")))?;
+        let most = slot.max_poisson;
         if !(nu.is_finite() && (0.0..=most).contains(&nu)) {
             return Err(format!(
                 "material.{region}: Poisson ratio must be in [0, {most}], got {nu}"
             ));
         }
-        let known: Vec<String> = self.materials.iter().map(|m| m.0.clone()).collect();
-        let slot = self
-            .materials
-            .iter_mut()
-            .find(|m| m.0 == region)
-            .ok_or_else(|| format!("no region {region} (regions: {})", known.join(", ")))?;
-        if (slot.1, slot.2) != (e, nu) {
-            slot.1 = e;
-            slot.2 = nu;
+        if (slot.youngs_kpa, slot.poisson) != (e, nu) {
+            slot.youngs_kpa = e;
+            slot.poisson = nu;
             self.materials_version += 1;
         }
         Ok(())
@@ -686,6 +717,7 @@ mod tests {
     use super::*;
     use crate::fem::boundary::Keyframes;
     use crate::fem::probe::{ContactMode, ProbeShape};
+    use crate::fem::{Material, Volumetric};
     use glam::Mat4;
     use nalgebra::Vector3;
 
@@ -730,7 +762,17 @@ mod tests {
             &camera,
             &[light],
             Some(control),
-            vec![("dermis".into(), 150.0, 0.45)],
+            vec![
+                RegionMaterial::new(
+                    "dermis",
+                    &Material::from_scenario_units("d", 150.0, 0.45, 1100.0).unwrap(),
+                ),
+                RegionMaterial::new(
+                    "fat",
+                    &Material::with_volumetric("f", 15.0, 0.45, 1000.0, Volumetric::LockingFree)
+                        .unwrap(),
+                ),
+            ],
             Some(0.8),
             [640.0, 360.0],
         )
@@ -849,9 +891,18 @@ mod tests {
         assert_eq!((s.materials_version, s.friction), (2, Some(0.3)));
         s.apply(Command::Material("dermis".into(), 200.0, 0.5));
         assert!(s.rejected.as_deref().unwrap().contains("Poisson"));
+        s.apply(Command::Material("dermis".into(), 200.0, 0.499));
+        assert!(s.rejected.as_deref().unwrap().contains("[0, 0.49]"));
         s.apply(Command::Material("bone".into(), 200.0, 0.3));
-        assert!(s.rejected.as_deref().unwrap().contains("regions: dermis"));
+        assert!(s
+            .rejected
+            .as_deref()
+            .unwrap()
+            .contains("regions: dermis, fat"));
         assert_eq!(s.materials_version, 2);
+        // A locking-free region takes ν up to its own limit.
+        s.apply(Command::Material("fat".into(), 15.0, 0.499));
+        assert_eq!((s.materials_version, s.materials[1].poisson), (3, 0.499));
     }
 
     #[test]

@@ -271,6 +271,120 @@ fn locking_free_caliper_keeps_the_volume_at_0_499() {
     }
 }
 
+/// Simple shear `x = X + γ Z e_x` prescribed on the whole boundary of the
+/// patch, raised to γ = 1 in five steps, with the stable Neo-Hookean energy
+/// (standard at ν = 0.45 and locking-free at 0.499): J = 1, so the pressure
+/// term vanishes and the Cauchy stress is `μ(B − I)` — shear `σ_xz = μγ`,
+/// normal `σ_xx = μγ²` (the Poynting effect the linear law lacks), every
+/// other component 0 — in every tet to 1e-6 of μγ.
+#[test]
+fn neo_hookean_simple_shear_matches_the_closed_form() {
+    let mesh = patch_3k();
+    let (lo, _) = mesh.bounds();
+    for (volumetric, nu) in [
+        (Volumetric::Standard, 0.45),
+        (Volumetric::LockingFree, 0.499),
+    ] {
+        let m = Material::with_volumetric("test", 150.0, nu, 1100.0, volumetric)
+            .unwrap()
+            .with_model(Model::StableNeoHookean);
+        let material = vec![m; mesh.num_tets()];
+        let mut sim = Simulation::new(&mesh, &material);
+        tight(&mut sim);
+        for step in 1..=5 {
+            let gamma = 0.2 * step as f64;
+            let a = Matrix3::new(1.0, 0.0, gamma, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0);
+            for f in &mesh.boundary {
+                for &v in &f.nodes {
+                    sim.loads_mut().filters[v] = Filter::Fixed;
+                    sim.loads_mut().targets[v] = a * (mesh.positions[v] - lo) + lo;
+                }
+            }
+            sim.solve_static("simple shear").unwrap();
+            let x = sim.positions().to_vec();
+            let stresses = skinpatch::strain::element_stresses(&mesh, &x, &material);
+            let mu = m.mu();
+            let expected = mu * (a * a.transpose() - Matrix3::identity());
+            assert!((expected[(0, 2)] - mu * gamma).abs() < 1e-12 * mu);
+            assert!((expected[(0, 0)] - mu * gamma * gamma).abs() < 1e-12 * mu);
+            for (t, stress) in stresses.iter().enumerate() {
+                let f = sim.deformation_gradient(t);
+                assert!(
+                    (f - a).abs().max() < 1e-6,
+                    "{volumetric:?}, γ {gamma}: tet {t}: F = {f}"
+                );
+                let sigma = stress.cauchy;
+                assert!(
+                    (sigma - expected).abs().max() < 1e-6 * mu * gamma,
+                    "{volumetric:?}, γ {gamma}: tet {t}: σ = {sigma}, expected {expected}"
+                );
+            }
+        }
+    }
+}
+
+/// Confined compression at ν = 0.499 with the locking-free tet, both
+/// models: the bottom fixed, the sides on rollers and the top pressed 5%
+/// down as a bonded plate. The exact solution is homogeneous, F =
+/// diag(1, 1, s), J = s = 0.95 in every tet (to 1e-9, well inside the 1e-3
+/// asked of an incompressible material's volume), with the axial stress of
+/// the whole bulk modulus `σ_zz = (λ + 2μ)(s − 1)` to 1e-6 — 500 times the
+/// shear modulus, which no locking-free split may lose.
+#[test]
+fn locking_free_confined_compression_is_exact_at_0_499() {
+    use skinpatch::fem::boundary::{NodeSet, Prescribed};
+    let mesh = patch_3k();
+    let sets = NodeSets::of(&mesh);
+    let (lo, hi) = mesh.bounds();
+    let s = 0.95;
+    let bc = BoundaryConditions {
+        bottom: BottomCondition::Fixed,
+        sides: SideCondition::Rollers,
+        caliper: None,
+        prescribed: vec![Prescribed {
+            name: "top".into(),
+            nodes: sets.get(NodeSet::Top).to_vec(),
+            displacement: Keyframes {
+                points: vec![
+                    (0.0, Vector3::zeros()),
+                    (1.0, Vector3::new(0.0, 0.0, (s - 1.0) * (hi.z - lo.z))),
+                ],
+            },
+        }],
+    };
+    for model in [Model::Corotational, Model::StableNeoHookean] {
+        let m = Material::with_volumetric("test", 150.0, 0.499, 1100.0, Volumetric::LockingFree)
+            .unwrap()
+            .with_model(model);
+        let material = vec![m; mesh.num_tets()];
+        let mut sim = Simulation::new(&mesh, &material);
+        tight(&mut sim);
+        for step in 1..=2 {
+            let (filters, targets) = bc.constraints(&sets, &mesh.positions, step as f64 / 2.0);
+            sim.set_constraints(filters, targets);
+            sim.solve_static("confined compression").unwrap();
+        }
+        let x = sim.positions().to_vec();
+        let stresses = skinpatch::strain::element_stresses(&mesh, &x, &material);
+        let expected = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, s));
+        let szz = (m.lambda() + 2.0 * m.mu()) * (s - 1.0);
+        assert!(szz.abs() > 25.0 * m.mu());
+        for (t, stress) in stresses.iter().enumerate() {
+            let f = sim.deformation_gradient(t);
+            assert!(
+                (f - expected).abs().max() < 1e-9,
+                "{model:?}: tet {t}: F = {f}"
+            );
+            assert!((f.determinant() - s).abs() < 1e-9);
+            let sigma = stress.cauchy;
+            assert!(
+                (sigma[(2, 2)] - szz).abs() < 1e-6 * szz.abs(),
+                "{model:?}: tet {t}: σ = {sigma}, expected σ_zz {szz}"
+            );
+        }
+    }
+}
+
 /// One tet with three vertices fixed and the fourth pushed through the
 /// opposite face (inverted, and counted as such) returns to rest when
 /// released.

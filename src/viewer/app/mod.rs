@@ -286,10 +286,10 @@ impl App {
         if self.state.materials_version != self.materials_sent {
             self.materials_sent = self.state.materials_version;
             let mut scenario = self.loaded.scenario.clone();
-            for (region, e, nu) in &self.state.materials {
-                let m = scenario.material.entry(region.clone()).or_default();
-                m.youngs_modulus_kpa = Some(*e);
-                m.poisson_ratio = Some(*nu);
+            for edited in &self.state.materials {
+                let m = scenario.material.entry(edited.region.clone()).or_default();
+                m.youngs_modulus_kpa = Some(edited.youngs_kpa);
+                m.poisson_ratio = Some(edited.poisson);
             }
             if let (Some(p), Some(mu)) = (scenario.probe.as_mut(), self.state.friction) {
                 p.friction = Some(mu);

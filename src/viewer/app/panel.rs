@@ -164,10 +164,10 @@ impl App {
         ui.separator();
         // Materials: edits apply from the next frame.
         ui.label("Material (applied from the next frame)");
-        for (region, e, nu) in &s.materials {
-            let (mut e2, mut nu2) = (*e, *nu);
+        for m in &s.materials {
+            let (mut e2, mut nu2) = (m.youngs_kpa, m.poisson);
             ui.horizontal(|ui| {
-                ui.label(region);
+                ui.label(&m.region);
                 let a = ui
                     .add(
                         egui::DragValue::new(&mut e2)
@@ -178,14 +178,14 @@ impl App {
                 let b = ui
                     .add(
                         egui::DragValue::new(&mut nu2)
-                            .range(0.0..=crate::fem::material::MAX_POISSON)
+                            .range(0.0..=m.max_poisson)
                             .speed(0.005)
                             .prefix("ν "),
                     )
                     .changed();
                 if a || b {
                     out.commands
-                        .push(Command::Material(region.clone(), e2, nu2));
+                        .push(Command::Material(m.region.clone(), e2, nu2));
                 }
             });
         }
