@@ -36,6 +36,10 @@ pub enum Error {
         path: PathBuf,
         /// What is wrong, naming the key (and line where known).
         message: String,
+        /// The dotted key at fault, where one is (also in `message`).
+        key: Option<String>,
+        /// Its 1-based line in the file, where known (also in `message`).
+        line: Option<usize>,
     },
 
     /// A parameter outside its valid range, named by its scenario key or flag.

@@ -353,33 +353,40 @@ pub fn load_with<T: serde::de::DeserializeOwned>(path: &Path, overrides: &[Strin
     if overrides.is_empty() {
         return Ok(parsed);
     }
-    let fail = |message: String| Error::Scenario {
+    let fail = |key: Option<&str>, message: String| Error::Scenario {
         path: path.to_path_buf(),
         message,
+        key: key.map(str::to_string),
+        line: None,
     };
     let mut table: toml::Table =
-        toml::from_str(&text).map_err(|e| fail(describe_toml_error(&e, &text)))?;
+        toml::from_str(&text).map_err(|e| fail(None, describe_toml_error(&e, &text)))?;
     for o in overrides {
         if o.contains(['\n', '\r']) {
-            return Err(fail(format!(
-                "--set {}: the override spans lines; give each key its own --set",
-                o.lines().next().unwrap_or("")
-            )));
+            return Err(fail(
+                None,
+                format!(
+                    "--set {}: the override spans lines; give each key its own --set",
+                    o.lines().next().unwrap_or("")
+                ),
+            ));
         }
         let (key, value) = o
             .split_once('=')
-            .ok_or_else(|| fail(format!("--set {o}: expected key=value")))?;
-        set_key(&mut table, key.trim(), override_value(value.trim()))
-            .map_err(|reason| fail(format!("--set {}: {reason}", key.trim())))?;
+            .ok_or_else(|| fail(None, format!("--set {o}: expected key=value")))?;
+        let key = key.trim();
+        set_key(&mut table, key, override_value(value.trim()))
+            .map_err(|reason| fail(Some(key), format!("--set {key}: {reason}")))?;
     }
     // A value tree has no spans, so the message names the key without a
     // line.
     serde_path_to_error::deserialize(toml::Value::Table(table)).map_err(|e| {
         let key = e.path().to_string();
-        fail(format!(
+        let message = format!(
             "with --set: {}",
             describe_schema_error(&key, e.inner(), "")
-        ))
+        );
+        fail(schema_key(&key, e.inner()).as_deref(), message)
     })
 }
 
@@ -404,15 +411,71 @@ pub fn check_output_flag(output: Option<&Path>, overrides: &[String]) -> Result<
 
 /// Parses TOML text of type `T`; errors name `path`, the key and line.
 fn parse_toml<T: serde::de::DeserializeOwned>(text: &str, path: &Path) -> Result<T> {
-    let fail = |message: String| Error::Scenario {
+    let fail = |e: &toml::de::Error, key: Option<String>, message: String| Error::Scenario {
         path: path.to_path_buf(),
         message,
+        key,
+        line: e.span().map(|s| line_of(text, s.start)),
     };
-    let de = toml::Deserializer::parse(text).map_err(|e| fail(describe_toml_error(&e, text)))?;
+    let de = toml::Deserializer::parse(text)
+        .map_err(|e| fail(&e, None, describe_toml_error(&e, text)))?;
     serde_path_to_error::deserialize(de).map_err(|e| {
         let key = e.path().to_string();
-        fail(describe_schema_error(&key, e.inner(), text))
+        fail(
+            e.inner(),
+            schema_key(&key, e.inner()),
+            describe_schema_error(&key, e.inner(), text),
+        )
     })
+}
+
+/// The full dotted key of a schema error at `key`: for an unknown key, the
+/// key itself (serde's path stops at its table); `None` at the top level.
+fn schema_key(key: &str, e: &toml::de::Error) -> Option<String> {
+    let key = key.trim_start_matches('.');
+    let full = match parse_unknown_field(e.message().trim()) {
+        Some((unknown, _)) if key.is_empty() => unknown,
+        Some((unknown, _)) if !key.ends_with(&unknown) => format!("{key}.{unknown}"),
+        _ => key.to_string(),
+    };
+    (!full.is_empty()).then_some(full)
+}
+
+/// The 1-based line of the dotted `key` (`material.dermis.poisson_ratio`,
+/// `render.lights.0.intensity`) in TOML `text`: where its value is written,
+/// or for a table, its header; `None` when the text does not parse or does
+/// not hold the key. Lets a caller point a validation error
+/// ([`Error::Parameter`], which names the key) at its line.
+pub fn key_line(text: &str, key: &str) -> Option<usize> {
+    use toml::de::{DeTable, DeValue};
+    let doc = DeTable::parse(text).ok()?;
+    let mut table = doc.get_ref();
+    let mut parts = key.split('.').peekable();
+    while let Some(part) = parts.next() {
+        let (k, v) = table.get_key_value(part)?;
+        let mut value = v;
+        // Numeric parts index arrays (of tables).
+        while let (DeValue::Array(items), Some(next)) = (value.get_ref(), parts.peek()) {
+            let Ok(index) = next.parse::<usize>() else {
+                break;
+            };
+            parts.next();
+            value = items.get(index)?;
+        }
+        match (value.get_ref(), parts.peek()) {
+            (DeValue::Table(inner), Some(_)) => table = inner,
+            (_, None) => {
+                let span = if matches!(value.get_ref(), DeValue::Table(_)) {
+                    k.span()
+                } else {
+                    value.span()
+                };
+                return Some(line_of(text, span.start));
+            }
+            _ => return None,
+        }
+    }
+    None
 }
 
 /// The TOML value of an override's right-hand side, or the text itself as

@@ -179,3 +179,34 @@ fn strain_image_options_are_checked() {
         assert!(err.contains(key), "{text}: {err}");
     }
 }
+
+#[test]
+fn key_line_finds_values_tables_and_array_entries() {
+    let text = "[mesh]\nfile = \"m.node\"\n\n[material.dermis]\nyoungs_modulus_kpa = 150\n\
+                poisson_ratio = 0.45\n\n[[render.lights]]\nintensity = 1\n\n[[render.lights]]\n\
+                intensity = 2\n";
+    assert_eq!(key_line(text, "mesh.file"), Some(2));
+    assert_eq!(key_line(text, "material.dermis"), Some(4));
+    assert_eq!(key_line(text, "material.dermis.poisson_ratio"), Some(6));
+    assert_eq!(key_line(text, "render.lights.1.intensity"), Some(12));
+    assert_eq!(key_line(text, "render.lights.2.intensity"), None);
+    assert_eq!(key_line(text, "material.fat"), None);
+    assert_eq!(key_line("not toml [", "mesh"), None);
+}
+
+#[test]
+fn schema_errors_carry_their_key_and_line() {
+    let path = Path::new("s.toml");
+    let at = |text: &str| match Scenario::parse(text, path).unwrap_err() {
+        Error::Scenario { key, line, .. } => (key, line),
+        e => panic!("{e}"),
+    };
+    let unknown = "[mesh]\nfile = \"m.node\"\n[material.dermis]\nyoung_modulus_kpa = 3\n";
+    assert_eq!(
+        at(unknown),
+        (Some("material.dermis.young_modulus_kpa".into()), Some(4))
+    );
+    let wrong_type = "[mesh]\nfile = \"m.node\"\n[probe]\nradius_mm = \"big\"\n";
+    assert_eq!(at(wrong_type), (Some("probe.radius_mm".into()), Some(4)));
+    assert_eq!(at("[mesh\n"), (None, Some(1)));
+}

@@ -108,6 +108,8 @@ pub fn save_scenario(file: &Path, scenario: &Scenario, header: &str) -> Result<(
     let text = toml::to_string(scenario).map_err(|e| Error::Scenario {
         path: file.to_path_buf(),
         message: format!("cannot be written as TOML: {e}"),
+        key: None,
+        line: None,
     })?;
     let mut out = String::new();
     for line in header.lines() {

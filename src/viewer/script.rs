@@ -173,6 +173,8 @@ impl Script {
             let fail = |message: String| Error::Scenario {
                 path: path.to_path_buf(),
                 message: format!("step {} ({}): {message}", k + 1, step.name()),
+                key: None,
+                line: None,
             };
             step.check().map_err(fail)?;
             if let Step::Screenshot { file, .. } | Step::SavePath { file } = step {

@@ -125,6 +125,8 @@ impl App {
         Error::Scenario {
             path: self.options.script.clone().unwrap_or_default(),
             message: format!("step {index} ({what}): {why}"),
+            key: None,
+            line: None,
         }
     }
 
