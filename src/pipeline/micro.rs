@@ -134,24 +134,10 @@ impl MicroEngine {
         frame: usize,
     ) -> Result<()> {
         let stage = format!("the microstructure ({})", self.describe());
-        let (deformed, normals) = match self {
-            MicroEngine::Tiled(chains) => {
-                return write_tiled_frame(chains, micro, field, folder, tag, frame)
-            }
-            MicroEngine::Gpu(chain) => {
-                let frame = chain.deform(field, micro.normal_maps)?;
-                (frame.map, frame.normals)
-            }
-            MicroEngine::Cpu => (
-                crate::micro::convolve::deform_stepped(
-                    micro.neutral.whole("the CPU microstructure stages")?,
-                    &micro.model,
-                    field,
-                    micro.raster_step,
-                ),
-                None,
-            ),
-        };
+        if let MicroEngine::Tiled(chains) = self {
+            return write_tiled_frame(chains, micro, field, folder, tag, frame);
+        }
+        let (deformed, normals) = self.deform_whole(micro, field, micro.normal_maps)?;
         crate::error::check_finite(&stage, frame, deformed.width, 1, &deformed.data)?;
         if let Some(n) = &normals {
             crate::error::check_finite(
@@ -170,6 +156,88 @@ impl MicroEngine {
             normals,
         )?;
         Ok(())
+    }
+}
+
+impl MicroEngine {
+    /// One frame's deformed map (and its normals when asked for) from an
+    /// engine of a whole map.
+    fn deform_whole(
+        &mut self,
+        micro: &MicroSetup,
+        field: &SurfaceField,
+        normals: bool,
+    ) -> Result<(DisplacementMap, Option<Vec<[f32; 3]>>)> {
+        Ok(match self {
+            MicroEngine::Tiled(_) => {
+                return Err(Error::parameter(
+                    "microstructure.map",
+                    "a tiled map is deformed tile by tile into files: run the scenario \
+                     with its outputs to get its frames",
+                ))
+            }
+            MicroEngine::Gpu(chain) => {
+                let frame = chain.deform(field, normals)?;
+                (frame.map, frame.normals)
+            }
+            MicroEngine::Cpu => (
+                crate::micro::convolve::deform_stepped(
+                    micro.neutral.whole("the CPU microstructure stages")?,
+                    &micro.model,
+                    field,
+                    micro.raster_step,
+                ),
+                None,
+            ),
+        })
+    }
+}
+
+/// A scenario's microstructure stages for callers that want each frame's
+/// deformed map in memory rather than in files (the Python package's
+/// `Frame.deformed_map`): the GPU chain when an adapter is usable, the CPU
+/// references otherwise — the engine a run picks. A tiled map is refused:
+/// its frames only exist as files.
+pub struct MapDeformer {
+    engine: MicroEngine,
+}
+
+impl MapDeformer {
+    /// The engine for `micro` (its neutral map must be whole).
+    pub fn new(micro: &MicroSetup) -> Result<MapDeformer> {
+        if let NeutralMap::Tiled(map) = &micro.neutral {
+            return Err(Error::parameter(
+                "microstructure.map",
+                format!(
+                    "{} is a tiled map, deformed tile by tile into files: run the \
+                     scenario with its outputs to get its frames",
+                    map.dir.display()
+                ),
+            ));
+        }
+        Ok(MapDeformer {
+            engine: MicroEngine::new(micro)?,
+        })
+    }
+
+    /// Where the stages run (`GPU: <adapter>` or `CPU reference stages`).
+    pub fn describe(&self) -> String {
+        self.engine.describe()
+    }
+
+    /// The neutral map deformed by frame `frame`'s surface field, checked
+    /// for NaN (an error names the frame); heights in the neutral map's
+    /// units.
+    pub fn deform(
+        &mut self,
+        micro: &MicroSetup,
+        field: &SurfaceField,
+        frame: usize,
+    ) -> Result<DisplacementMap> {
+        let stage = format!("the microstructure ({})", self.engine.describe());
+        let (map, _) = self.engine.deform_whole(micro, field, false)?;
+        crate::error::check_finite(&stage, frame, map.width, 1, &map.data)?;
+        Ok(map)
     }
 }
 

@@ -27,7 +27,7 @@ pub mod surface;
 pub mod synth;
 mod vtkhdf;
 
-pub use micro::gpu_chain;
+pub use micro::{gpu_chain, MapDeformer};
 pub use outputs::{RunKind, RunSummary};
 pub use render::{roughness_curve, texel_mm};
 pub use run::{run, FemRunSummary, Frame, Run};
