@@ -63,6 +63,11 @@ impl Frame<'_> {
             .get_or_init(|| ElementStrains::compute(self.mesh, self.positions))
     }
 
+    /// The material of every tet as the frame was solved.
+    pub fn materials(&self) -> &[Material] {
+        self.materials
+    }
+
     /// Cauchy stress, von Mises stress and strain energy density of every
     /// tet (computed on first use, and shared with the frame's VTU).
     pub fn stresses(&self) -> &[TetStress] {
@@ -344,7 +349,7 @@ impl<'a> Run<'a> {
     pub fn step(&mut self) -> Result<Frame<'_>> {
         if let Some(why) = &self.failed {
             return Err(Error::Solver(format!(
-                "the run stopped at an earlier error and cannot go on: {why}"
+                "the run cannot go on: {why}"
             )));
         }
         let frame = self.stepper.next_frame();
@@ -380,7 +385,7 @@ impl<'a> Run<'a> {
                     self.probe = probe;
                     self.driven = driven;
                 }
-                None => self.failed = Some(e.to_string()),
+                None => self.failed = Some(format!("it stopped at an earlier error: {e}")),
             }
             return Err(e);
         }
@@ -441,13 +446,23 @@ impl<'a> Run<'a> {
     /// Ends the run: a writing run closes its files (the surface GLB, the
     /// MP4, the VTKHDF file) and lists them. The summary holds every
     /// frame's metrics.
-    pub fn finish(self) -> Result<FemRunSummary> {
-        let Some(w) = self.writer else {
+    pub fn finish(mut self) -> Result<FemRunSummary> {
+        self.close()
+    }
+
+    /// [`Run::finish`] for a caller that cannot give the run up (one that
+    /// owns it behind a reference, as the Python package does): the same
+    /// summary, after which the run refuses further steps. A second call
+    /// returns an empty summary.
+    pub fn close(&mut self) -> Result<FemRunSummary> {
+        let rows = std::mem::take(&mut self.rows);
+        self.failed = Some("it was finished".into());
+        let Some(w) = self.writer.take() else {
             return Ok(RunSummary {
                 kind: RunKind::Fem,
                 written: Vec::new(),
                 quality: Some(QualityReport::of(self.mesh)),
-                frames: self.rows,
+                frames: rows,
                 micro_device: None,
             });
         };

@@ -1,0 +1,92 @@
+//! The Python exceptions and how the library's errors become them.
+
+use std::path::Path;
+
+use pyo3::exceptions::{PyException, PyFileNotFoundError, PyOSError, PyValueError};
+use pyo3::prelude::*;
+use skinpatch::Error;
+
+pyo3::create_exception!(
+    skinpatch,
+    SkinpatchError,
+    PyException,
+    "Base class of the errors skinpatch raises."
+);
+pyo3::create_exception!(
+    skinpatch,
+    ScenarioError,
+    SkinpatchError,
+    "A scenario that does not parse or validate. Attributes: `file` (the scenario \
+     file), `line` (1-based, or None where the key is not in the file, e.g. an \
+     override) and `key` (the dotted key at fault, or None)."
+);
+pyo3::create_exception!(
+    skinpatch,
+    MeshError,
+    SkinpatchError,
+    "A mesh file that does not parse, or a mesh the simulation cannot use."
+);
+pyo3::create_exception!(
+    skinpatch,
+    SolverError,
+    SkinpatchError,
+    "A frame whose equilibrium was not reached (the message names the frame and \
+     residual); an in-memory run stays at its last good frame."
+);
+pyo3::create_exception!(
+    skinpatch,
+    GpuError,
+    SkinpatchError,
+    "A GPU stage that failed (or, with SKINPATCH_REQUIRE_GPU=1, no GPU adapter)."
+);
+
+/// The scenario file an error came from, with its text (to find a key's line).
+pub struct Source<'a> {
+    pub path: &'a Path,
+    pub text: &'a str,
+}
+
+/// `e` as a Python exception. With `source`, a parameter error names its
+/// scenario key and becomes a `ScenarioError` at that key's line.
+pub fn to_py(py: Python<'_>, e: Error, source: Option<&Source<'_>>) -> PyErr {
+    let message = e.to_string();
+    match e {
+        Error::Scenario {
+            path, key, line, ..
+        } => scenario_error(py, &message, &path, line, key),
+        Error::Parameter { key, .. } => match source {
+            Some(s) => {
+                let line = skinpatch::scenario::key_line(s.text, &key);
+                scenario_error(py, &message, s.path, line, Some(key))
+            }
+            None => PyValueError::new_err(message),
+        },
+        Error::Io { cause, .. } if cause.kind() == std::io::ErrorKind::NotFound => {
+            PyFileNotFoundError::new_err(message)
+        }
+        Error::Io { .. } => PyOSError::new_err(message),
+        Error::Parse { .. } | Error::InvalidMesh { .. } | Error::MeshGeneration(_) => {
+            MeshError::new_err(message)
+        }
+        Error::Solver(_) => SolverError::new_err(message),
+        Error::Gpu(_) => GpuError::new_err(message),
+        _ => SkinpatchError::new_err(message),
+    }
+}
+
+fn scenario_error(
+    py: Python<'_>,
+    message: &str,
+    path: &Path,
+    line: Option<usize>,
+    key: Option<String>,
+) -> PyErr {
+    let err = ScenarioError::new_err(message.to_string());
+    let value = err.value(py);
+    // Setting attributes on a fresh exception object cannot fail short of
+    // running out of memory, which the raise would report anyway.
+    let _ = value.setattr("file", path.to_string_lossy().into_owned());
+    let _ = value.setattr("line", line);
+    let _ = value.setattr("key", key);
+    err
+}
