@@ -40,10 +40,12 @@ pyo3::create_exception!(
     "A GPU stage that failed (or, with SKINPATCH_REQUIRE_GPU=1, no GPU adapter)."
 );
 
-/// The scenario file an error came from, with its text (to find a key's line).
+/// The scenario file an error came from, with its text (to find a key's
+/// line) and the keys overrides set (whose values are not in the text).
 pub struct Source<'a> {
     pub path: &'a Path,
     pub text: &'a str,
+    pub overridden: &'a [String],
 }
 
 /// `e` as a Python exception. With `source`, a parameter error names its
@@ -56,7 +58,15 @@ pub fn to_py(py: Python<'_>, e: Error, source: Option<&Source<'_>>) -> PyErr {
         } => scenario_error(py, &message, &path, line, key),
         Error::Parameter { key, .. } => match source {
             Some(s) => {
-                let line = skinpatch::scenario::key_line(s.text, &key);
+                let line = if s.overridden.iter().any(|o| o == &key) {
+                    None
+                } else {
+                    skinpatch::scenario::key_line(s.text, &key)
+                };
+                let message = match line {
+                    Some(line) => format!("{}: line {line}: {message}", s.path.display()),
+                    None => format!("{}: {message}", s.path.display()),
+                };
                 scenario_error(py, &message, s.path, line, Some(key))
             }
             None => PyValueError::new_err(message),

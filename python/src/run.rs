@@ -118,8 +118,9 @@ impl Run {
                     }
                     (None, None) => {}
                 }
-                let frame = run.step()?;
-                Ok(Frame::of(&frame, setup, deformer))
+                let mut solved = Frame::of(&run.step()?, setup, deformer);
+                solved.probe = run.probe_pose().map(|p| p.centre);
+                Ok(solved)
             })
         });
         solved.map_err(|e| to_py(py, e, None))
@@ -207,6 +208,8 @@ impl Drop for Run {
 /// frame stays valid after later steps). Arrays are new on every access.
 #[pyclass(module = "skinpatch", frozen)]
 pub struct Frame {
+    /// The probe's centre where the frame was solved.
+    probe: Option<Vec3>,
     setup: Arc<Setup>,
     deformer: Deformer,
     metrics: FrameMetrics,
@@ -222,6 +225,7 @@ pub struct Frame {
 impl Frame {
     fn of(frame: &skinpatch::pipeline::Frame<'_>, setup: Arc<Setup>, deformer: Deformer) -> Frame {
         Frame {
+            probe: None,
             setup,
             deformer,
             metrics: *frame.metrics,
@@ -339,6 +343,14 @@ impl Frame {
             flat[2 * v + 1] = svd.rt;
         }
         arrays::rows(py, flat, 2)
+    }
+
+    /// The probe's centre where the frame was solved, `(3,)` float64, mm
+    /// (None without a probe).
+    #[getter]
+    fn probe_centre<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
+        self.probe
+            .map(|c| PyArray1::from_vec(py, vec![c.x, c.y, c.z]))
     }
 
     /// The force the skin exerts on the probe, `(3,)` float64, N.

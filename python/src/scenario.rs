@@ -16,6 +16,8 @@ use crate::mesh::Mesh;
 pub struct Scenario {
     pub(crate) path: PathBuf,
     pub(crate) text: String,
+    /// The keys the overrides set.
+    pub(crate) overridden: Vec<String>,
     pub(crate) setup: Arc<Setup>,
 }
 
@@ -25,6 +27,7 @@ impl Scenario {
         Source {
             path: &self.path,
             text: &self.text,
+            overridden: &self.overridden,
         }
     }
 }
@@ -44,7 +47,7 @@ impl Scenario {
         path: PathBuf,
         overrides: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Scenario> {
-        let mut sets = Vec::new();
+        let (mut sets, mut overridden) = (Vec::new(), Vec::new());
         if let Some(overrides) = overrides {
             for (key, value) in overrides.iter() {
                 let key: String = key
@@ -54,12 +57,14 @@ impl Scenario {
                     PyTypeError::new_err(format!("override {key}: {why}"))
                 })?;
                 sets.push(format!("{key}={value}"));
+                overridden.push(key);
             }
         }
         let text = std::fs::read_to_string(&path).unwrap_or_default();
         let source = Source {
             path: &path,
             text: &text,
+            overridden: &overridden,
         };
         let loaded = py.detach(|| {
             let scenario = skinpatch::scenario::Scenario::load_with(&path, &sets)?;
@@ -69,6 +74,7 @@ impl Scenario {
         Ok(Scenario {
             path,
             text,
+            overridden,
             setup: Arc::new(setup),
         })
     }

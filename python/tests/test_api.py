@@ -1,0 +1,279 @@
+"""The Python package against the binary's files and its documented API."""
+
+import csv
+import math
+import os
+import signal
+import threading
+
+import numpy as np
+import pytest
+
+import skinpatch
+
+
+def press_small(root, **overrides):
+    return skinpatch.Scenario.load(root / "tests/fixtures/press_small.toml", overrides)
+
+
+def test_metrics_equal_the_binarys_to_the_last_digit(root, run_binary, tmp_path):
+    out = run_binary(root / "tests/fixtures/press_small.toml", tmp_path / "bin")
+    with open(out / "metrics.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    frames = list(skinpatch.Run(press_small(root)))
+    assert len(frames) == len(rows) == 7
+    for frame, row in zip(frames, rows):
+        metrics = frame.metrics
+        assert list(metrics) == list(row), "the dict has metrics.csv's columns in order"
+        for key, text in row.items():
+            if key == "step_wall_s":
+                continue
+            value = metrics[key]
+            # The CSV holds the shortest digits that read back to the same bits.
+            assert float(text) == value, (frame.index, key, text, value)
+            assert type(value) is (int if key in INTEGER_COLUMNS else float)
+
+
+INTEGER_COLUMNS = {
+    "frame",
+    "contact_nodes",
+    "newton_iterations",
+    "linear_iterations",
+    "folded_vertices",
+    "inverted_tets",
+}
+
+
+def test_frame_vtu_files_are_the_binarys_byte_for_byte(root, run_binary, tmp_path):
+    scenario = root / "tests/fixtures/press_small.toml"
+    out = run_binary(scenario, tmp_path / "bin", "output.frames_vtu=true")
+    for frame in skinpatch.Run(skinpatch.Scenario.load(scenario, {"output.frames_vtu": True})):
+        mine = tmp_path / f"frame_{frame.index:04}.vtu"
+        frame.write_vtu(mine)
+        theirs = out / "frames" / f"frame_{frame.index:04}.vtu"
+        assert mine.read_bytes() == theirs.read_bytes(), frame.index
+
+
+def test_arrays_are_the_vtu_arrays_bit_for_bit(root, run_binary, tmp_path):
+    meshio = pytest.importorskip("meshio") if not _require("MESHIO") else __import__("meshio")
+    scenario = root / "tests/fixtures/press_small.toml"
+    out = run_binary(scenario, tmp_path / "bin", "output.frames_vtu=true")
+    frames = list(skinpatch.Run(press_small(root)))
+    last = frames[-1]
+    grid = meshio.read(out / "frames" / f"frame_{last.index:04}.vtu")
+    assert np.array_equal(grid.points, last.positions)
+    assert np.array_equal(grid.point_data["displacement_mm"], last.displacements)
+    assert np.array_equal(grid.point_data["surface_stretch"], last.surface_stretch, equal_nan=True)
+    cells = {k: v[0] for k, v in grid.cell_data.items()}
+    assert np.array_equal(cells["principal_biot_strain"], last.principal_strains)
+    assert np.array_equal(cells["principal_stretch"], last.principal_stretches)
+    assert np.array_equal(cells["volume_ratio"], last.volume_ratio)
+    assert np.array_equal(cells["von_mises_stress_n_mm2"], last.von_mises)
+    s = last.stresses
+    voigt = np.stack(
+        [s[:, 0, 0], s[:, 1, 1], s[:, 2, 2], s[:, 0, 1], s[:, 1, 2], s[:, 0, 2]], axis=1
+    )
+    assert np.array_equal(cells["cauchy_stress_n_mm2"], voigt)
+    pressure = np.zeros(len(last.positions))
+    pressure[last.contact_nodes] = last.contact_pressure
+    assert np.array_equal(grid.point_data["contact_pressure_n_mm2"], pressure)
+    force = np.zeros((len(last.positions), 3))
+    force[last.contact_nodes] = last.contact_forces
+    assert np.array_equal(grid.point_data["contact_force_n"], force)
+
+
+def _require(what):
+    import os
+
+    return os.environ.get(f"SKINPATCH_REQUIRE_{what}") == "1"
+
+
+def test_arrays_have_the_documented_shapes_and_dtypes(root):
+    scenario = press_small(root)
+    mesh = scenario.mesh
+    n, t = mesh.num_vertices, mesh.num_tets
+    run = skinpatch.Run(scenario)
+    run.step()
+    frame = run.step()
+    expected = {
+        "positions": ((n, 3), np.float64),
+        "displacements": ((n, 3), np.float64),
+        "principal_strains": ((t, 3), np.float64),
+        "principal_stretches": ((t, 3), np.float64),
+        "volume_ratio": ((t,), np.float64),
+        "surface_stretch": ((n, 2), np.float64),
+        "probe_force": ((3,), np.float64),
+        "probe_centre": ((3,), np.float64),
+        "stresses": ((t, 3, 3), np.float64),
+        "von_mises": ((t,), np.float64),
+    }
+    for name, (shape, dtype) in expected.items():
+        a = getattr(frame, name)
+        assert (a.shape, a.dtype) == (shape, dtype), name
+    k = len(frame.contact_nodes)
+    assert k > 0 and frame.contact_nodes.dtype == np.int64
+    assert frame.contact_forces.shape == (k, 3) and frame.contact_pressure.shape == (k,)
+    assert (mesh.positions.shape, mesh.tets.shape) == ((n, 3), (t, 4))
+    assert mesh.tets.dtype == np.int64 and mesh.tet_region.dtype == np.int32
+    assert set(mesh.regions.values()) == {"dermis", "hypodermis"}
+    top = mesh.top_vertices
+    assert mesh.top_uvs.shape == (len(top), 2)
+    assert set(np.unique(mesh.top_triangles)) <= set(top)
+    # Off the top surface the stretch is NaN, on it finite.
+    on_top = np.zeros(n, bool)
+    on_top[top] = True
+    assert np.isfinite(frame.surface_stretch[on_top]).all()
+    assert np.isnan(frame.surface_stretch[~on_top]).all()
+    # Consistency between fields.
+    assert np.allclose(frame.displacements, frame.positions - mesh.positions, rtol=0, atol=1e-15)
+    assert np.array_equal(frame.principal_strains, frame.principal_stretches - 1.0)
+    assert frame.probe_force[2] == frame.metrics["probe_force_z_n"]
+    assert np.allclose(frame.contact_forces.sum(axis=0), -frame.probe_force, atol=1e-12)
+    vol = frame.region_volumes["dermis"]
+    assert math.isclose(vol["change"], vol["deformed_mm3"] / vol["rest_mm3"] - 1.0, rel_tol=1e-12)
+
+
+def test_a_probe_driven_from_python_follows_the_scenario_path(root):
+    # press_small's path: (0, 0, 1.5) at t 0, (0, 0, 1.0) at 0.5 s, (0.5, 0, 1.0) at 1 s.
+    scenario = press_small(root)
+    keys = [(0.0, (0.0, 0.0, 1.5)), (0.5, (0.0, 0.0, 1.0)), (1.0, (0.5, 0.0, 1.0))]
+
+    def pose(t):
+        for (t0, a), (t1, b) in zip(keys, keys[1:]):
+            if t <= t1:
+                s = (t - t0) / (t1 - t0)
+                return tuple(x + s * (y - x) for x, y in zip(a, b))
+        return keys[-1][1]
+
+    scripted = list(skinpatch.Run(scenario))
+    driven = skinpatch.Run(scenario)
+    for frame in scripted:
+        mine = driven.step(probe_target=pose(frame.time))
+        assert np.allclose(mine.probe_centre, frame.probe_centre, rtol=0, atol=1e-12)
+        assert np.abs(mine.positions - frame.positions).max() < 1e-9, frame.index
+        assert np.abs(mine.probe_force - frame.probe_force).max() < 1e-9
+    with pytest.raises(StopIteration):
+        next(driven)
+
+
+def test_scenario_errors_carry_file_line_and_key(root, tmp_path):
+    text = (root / "tests/fixtures/press_small.toml").read_text()
+    text = text.replace('"../../meshes/', f'"{root}/meshes/')
+    bad = tmp_path / "bad.toml"
+
+    bad.write_text(text.replace("friction = 0.8", "fricton = 0.8"))
+    with pytest.raises(skinpatch.ScenarioError) as e:
+        skinpatch.Scenario.load(bad)
+    line = text.splitlines().index("friction = 0.8") + 1
+    assert (e.value.file, e.value.line, e.value.key) == (str(bad), line, "probe.fricton")
+    assert "did you mean friction" in str(e.value)
+
+    bad.write_text(text.replace("friction = 0.8", "friction = -0.8"))
+    with pytest.raises(skinpatch.ScenarioError) as e:
+        skinpatch.Scenario.load(bad)
+    assert (e.value.line, e.value.key) == (line, "probe.friction")
+    assert f"line {line}" in str(e.value) and "-0.8" in str(e.value)
+
+    # A bad override names its key; its value is in no line of the file.
+    with pytest.raises(skinpatch.ScenarioError) as e:
+        press_small(root, **{"material.dermis.poisson_ratio": 0.7})
+    assert (e.value.line, e.value.key) == (None, "material.dermis.poisson_ratio")
+    with pytest.raises(skinpatch.ScenarioError) as e:
+        press_small(root, **{"probe.radius_mm": "big"})
+    assert e.value.key == "probe.radius_mm"
+
+    with pytest.raises(FileNotFoundError):
+        skinpatch.Scenario.load(tmp_path / "missing.toml")
+    bad.write_text(text.replace("patch_3k.node", "no_such_mesh.node"))
+    with pytest.raises((FileNotFoundError, skinpatch.SkinpatchError)):
+        skinpatch.Scenario.load(bad)
+
+
+def test_overrides_change_the_run(root):
+    soft = list(skinpatch.Run(press_small(root)))[3]
+    stiff_scenario = press_small(root, **{"material.dermis.youngs_modulus_kpa": 600.0})
+    stiff = list(skinpatch.Run(stiff_scenario))[3]
+    assert stiff.probe_force[2] > 1.2 * soft.probe_force[2]
+
+
+def test_ctrl_c_stops_between_frames_and_the_run_goes_on(root):
+    run = skinpatch.Run(press_small(root))
+    solved = []
+    ctrl_c = threading.Timer(0.3, lambda: os.kill(os.getpid(), signal.SIGINT))
+    with pytest.raises(KeyboardInterrupt):
+        ctrl_c.start()
+        while True:  # an in-memory run steps on past the scenario's end
+            solved.append(run.step().index)
+    ctrl_c.join()
+    assert len(solved) > 1
+    # The frame being solved when Ctrl-C came finishes (or is never begun).
+    assert run.next_frame in (len(solved), len(solved) + 1)
+    assert run.step().index == run.next_frame - 1
+
+
+def test_a_failed_frame_keeps_the_run_at_its_last_good_state(root):
+    run = skinpatch.Run(press_small(root))
+    run.step()
+    with pytest.raises(ValueError):
+        run.step(probe_target=(float("nan"), 0.0, 1.0))
+    assert run.step().index == 1
+
+
+def test_a_run_with_outputs_writes_what_the_binary_writes(root, run_binary, tmp_path):
+    scenario = press_small(root)
+    with skinpatch.Run(scenario, outputs=True, output_dir=tmp_path / "py") as run:
+        frames = [f.index for f in run]
+    assert frames == list(range(7))
+    written = run.finish()
+    assert tmp_path / "py" / "metrics.csv" in map(type(tmp_path), written)
+    with pytest.raises(skinpatch.SkinpatchError):
+        run.step()
+    out = run_binary(root / "tests/fixtures/press_small.toml", tmp_path / "bin")
+
+    def rows(path):
+        # All but the wall time (the last column).
+        return [line.rsplit(",", 1)[0] for line in path.read_text().splitlines()]
+
+    assert rows(tmp_path / "py" / "metrics.csv") == rows(out / "metrics.csv")
+    assert (tmp_path / "py" / "volume.csv").read_text() == (out / "volume.csv").read_text()
+
+
+def test_maps_are_in_micrometres_and_deform_under_the_probe(root):
+    scenario = skinpatch.Scenario.load(root / "tests/fixtures/render_small.toml")
+    neutral = skinpatch.neutral_map(scenario)
+    assert neutral.dtype == np.float32 and neutral.shape == (256, 256)
+    assert 1.0 < float(neutral.std()) < 500.0, "heights in µm"
+    run = skinpatch.Run(scenario)
+    rest = run.step().deformed_map()
+    run.step()
+    pressed = run.step().deformed_map()  # the probe 0.7 mm down
+    assert rest.shape == pressed.shape == neutral.shape
+    # At rest the kernel leaves the map as it is (to the filter's rounding).
+    assert np.abs(rest - neutral).max() < 1e-3 * np.abs(neutral).max()
+    assert np.abs(pressed - neutral).max() > 1e-2 * np.abs(neutral).max()
+    with pytest.raises(skinpatch.SkinpatchError):
+        list(skinpatch.Run(press_small(root)))[0].deformed_map()
+
+
+def test_mesh_io_round_trips(root, tmp_path):
+    mesh = skinpatch.read_mesh(root / "meshes/patch_3k.node")
+    scenario_mesh = press_small(root).mesh
+    assert np.array_equal(mesh.positions, scenario_mesh.positions)
+    assert np.array_equal(mesh.tets, scenario_mesh.tets)
+    j = np.linspace(0.0, 1.0, mesh.num_tets)
+    skinpatch.write_vtu(
+        tmp_path / "m.vtu",
+        mesh,
+        point_data={"height": mesh.positions[:, 2], "uvw": mesh.positions},
+        cell_data={"j": j, "label": np.arange(mesh.num_tets, dtype=np.int32)},
+    )
+    again = skinpatch.read_mesh(tmp_path / "m.vtu")
+    assert np.array_equal(again.positions, mesh.positions)
+    assert np.array_equal(again.tets, mesh.tets)
+    assert np.array_equal(again.tet_region, mesh.tet_region)
+    with pytest.raises(ValueError, match="point array 'bad'"):
+        skinpatch.write_vtu(tmp_path / "x.vtu", mesh, point_data={"bad": j})
+    with pytest.raises(skinpatch.MeshError):
+        bad = tmp_path / "bad.vtu"
+        bad.write_text("<VTKFile>")
+        skinpatch.read_mesh(bad)
