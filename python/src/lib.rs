@@ -21,9 +21,12 @@ fn neutral_map<'py>(
     py: Python<'py>,
     scenario: &scenario::Scenario,
 ) -> PyResult<Bound<'py, numpy::PyArray2<f32>>> {
-    let micro = scenario.setup.outputs.micro.as_ref().ok_or_else(|| {
-        SkinpatchError::new_err("the scenario has no [microstructure]")
-    })?;
+    let micro = scenario
+        .setup
+        .outputs
+        .micro
+        .as_ref()
+        .ok_or_else(|| SkinpatchError::new_err("the scenario has no [microstructure]"))?;
     let map = micro
         .neutral
         .whole("neutral_map")

@@ -107,7 +107,11 @@ impl Mesh {
             "Mesh({} vertices, {} tets, regions {:?})",
             self.mesh.num_vertices(),
             self.mesh.num_tets(),
-            self.mesh.regions.iter().map(|r| &r.name).collect::<Vec<_>>()
+            self.mesh
+                .regions
+                .iter()
+                .map(|r| &r.name)
+                .collect::<Vec<_>>()
         )
     }
 }
@@ -180,7 +184,9 @@ fn field(name: &str, value: &Bound<'_, PyAny>, rows: usize, kind: &str) -> PyRes
         let values = a
             .as_array()
             .iter()
-            .map(|&v| i32::try_from(v).map_err(|_| bad(format!("{v} does not fit a 32-bit integer"))))
+            .map(|&v| {
+                i32::try_from(v).map_err(|_| bad(format!("{v} does not fit a 32-bit integer")))
+            })
             .collect::<PyResult<Vec<i32>>>()?;
         return Ok(Field::i32(name, k, values));
     }

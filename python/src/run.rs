@@ -149,7 +149,8 @@ impl Run {
     /// Frames in the scenario, the rest frame included.
     #[getter]
     fn scenario_frames(&mut self) -> usize {
-        self.inner.with_dependent_mut(|_, run| run.scenario_frames())
+        self.inner
+            .with_dependent_mut(|_, run| run.scenario_frames())
     }
 
     /// Time between frames (s).
@@ -178,7 +179,11 @@ impl Run {
     }
 
     #[pyo3(signature = (*_args))]
-    fn __exit__(&mut self, py: Python<'_>, _args: &Bound<'_, pyo3::types::PyTuple>) -> PyResult<bool> {
+    fn __exit__(
+        &mut self,
+        py: Python<'_>,
+        _args: &Bound<'_, pyo3::types::PyTuple>,
+    ) -> PyResult<bool> {
         self.finish(py)?;
         Ok(false)
     }
@@ -188,7 +193,11 @@ impl Run {
         format!(
             "Run('{}', next frame {next} of {frames}{})",
             self.setup.name,
-            if self.writing { ", writing outputs" } else { "" }
+            if self.writing {
+                ", writing outputs"
+            } else {
+                ""
+            }
         )
     }
 }
@@ -313,7 +322,12 @@ impl Frame {
     /// Principal stretches of every tet, λ1 ≥ λ2 ≥ λ3, `(n_tets, 3)` float64.
     #[getter]
     fn principal_stretches<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let flat = self.strain_data().tets.iter().flat_map(|s| s.stretch.iter().copied().collect::<Vec<_>>()).collect();
+        let flat = self
+            .strain_data()
+            .tets
+            .iter()
+            .flat_map(|s| s.stretch.iter().copied().collect::<Vec<_>>())
+            .collect();
         arrays::rows(py, flat, 3)
     }
 
@@ -321,14 +335,26 @@ impl Frame {
     /// `principal_stretches`, `(n_tets, 3)` float64.
     #[getter]
     fn principal_strains<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let flat = self.strain_data().tets.iter().flat_map(|s| s.biot().iter().copied().collect::<Vec<_>>()).collect();
+        let flat = self
+            .strain_data()
+            .tets
+            .iter()
+            .flat_map(|s| s.biot().iter().copied().collect::<Vec<_>>())
+            .collect();
         arrays::rows(py, flat, 3)
     }
 
     /// Volume ratio J = det F of every tet, `(n_tets,)` float64.
     #[getter]
     fn volume_ratio<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_vec(py, self.strain_data().tets.iter().map(|s| s.volume_ratio()).collect())
+        PyArray1::from_vec(
+            py,
+            self.strain_data()
+                .tets
+                .iter()
+                .map(|s| s.volume_ratio())
+                .collect(),
+        )
     }
 
     /// Surface stretch ratios (r_s, r_t) at every vertex, `(n_vertices, 2)`
@@ -389,7 +415,10 @@ impl Frame {
     /// Von Mises stress of every tet, `(n_tets,)` float64, N/mm² (MPa).
     #[getter]
     fn von_mises<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_vec(py, self.stress_data().iter().map(|s| s.von_mises()).collect())
+        PyArray1::from_vec(
+            py,
+            self.stress_data().iter().map(|s| s.von_mises()).collect(),
+        )
     }
 
     /// Each region's volume: `{region: {"rest_mm3", "deformed_mm3",

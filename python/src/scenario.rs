@@ -53,9 +53,8 @@ impl Scenario {
                 let key: String = key
                     .extract()
                     .map_err(|_| PyTypeError::new_err("override keys must be strings"))?;
-                let value = toml_value(&value).map_err(|why| {
-                    PyTypeError::new_err(format!("override {key}: {why}"))
-                })?;
+                let value = toml_value(&value)
+                    .map_err(|why| PyTypeError::new_err(format!("override {key}: {why}")))?;
                 sets.push(format!("{key}={value}"));
                 overridden.push(key);
             }
@@ -142,16 +141,24 @@ impl Scenario {
 /// A Python value as TOML (for an override's right-hand side).
 fn toml_value(v: &Bound<'_, PyAny>) -> Result<toml::Value, String> {
     if v.is_instance_of::<PyBool>() {
-        return Ok(toml::Value::Boolean(v.extract::<bool>().map_err(|e| e.to_string())?));
+        return Ok(toml::Value::Boolean(
+            v.extract::<bool>().map_err(|e| e.to_string())?,
+        ));
     }
     if v.is_instance_of::<PyInt>() {
-        return Ok(toml::Value::Integer(v.extract::<i64>().map_err(|e| e.to_string())?));
+        return Ok(toml::Value::Integer(
+            v.extract::<i64>().map_err(|e| e.to_string())?,
+        ));
     }
     if v.is_instance_of::<PyFloat>() {
-        return Ok(toml::Value::Float(v.extract::<f64>().map_err(|e| e.to_string())?));
+        return Ok(toml::Value::Float(
+            v.extract::<f64>().map_err(|e| e.to_string())?,
+        ));
     }
     if v.is_instance_of::<PyString>() {
-        return Ok(toml::Value::String(v.extract::<String>().map_err(|e| e.to_string())?));
+        return Ok(toml::Value::String(
+            v.extract::<String>().map_err(|e| e.to_string())?,
+        ));
     }
     if v.is_instance_of::<PyList>() || v.is_instance_of::<PyTuple>() {
         let items = v
@@ -175,6 +182,9 @@ fn toml_value(v: &Bound<'_, PyAny>) -> Result<toml::Value, String> {
     }
     Err(format!(
         "{} is not a TOML value (bool, int, float, str, list or dict)",
-        v.get_type().name().map(|n| n.to_string()).unwrap_or_default()
+        v.get_type()
+            .name()
+            .map(|n| n.to_string())
+            .unwrap_or_default()
     ))
 }

@@ -348,9 +348,7 @@ impl<'a> Run<'a> {
     /// Solves the next frame (and writes its files, for a writing run).
     pub fn step(&mut self) -> Result<Frame<'_>> {
         if let Some(why) = &self.failed {
-            return Err(Error::Solver(format!(
-                "the run cannot go on: {why}"
-            )));
+            return Err(Error::Solver(format!("the run cannot go on: {why}")));
         }
         let frame = self.stepper.next_frame();
         if self.writer.is_some() && frame > self.simulation.frames {

@@ -382,10 +382,7 @@ pub fn load_with<T: serde::de::DeserializeOwned>(path: &Path, overrides: &[Strin
     // line.
     serde_path_to_error::deserialize(toml::Value::Table(table)).map_err(|e| {
         let key = e.path().to_string();
-        let message = format!(
-            "with --set: {}",
-            describe_schema_error(&key, e.inner(), "")
-        );
+        let message = format!("with --set: {}", describe_schema_error(&key, e.inner(), ""));
         fail(schema_key(&key, e.inner()).as_deref(), message)
     })
 }
