@@ -29,6 +29,14 @@ const COMMANDS: &[(&str, How)] = &[
     ),
     ("cargo test --release", How::Skip("the command that runs this test")),
     (
+        "python3 -m pip install ./python pytest && python3 -m pytest python/tests",
+        How::Skip("the Python tests: .ci/run runs them after this suite (python/tests/test_readme.py runs the README's Python example)"),
+    ),
+    (
+        "python3 -m pip install ./python",
+        How::Skip("builds and installs the wheel, as .ci/run does before the Python tests"),
+    ),
+    (
         "skinpatch run <scenario.toml> [--output DIR] [--force] [--set KEY=VALUE]… [--quiet]",
         How::Skip("usage line"),
     ),
