@@ -44,7 +44,9 @@ type Deformer = Arc<Mutex<Option<MapDeformer>>>;
 /// `run.step(probe_target=(x, y, z))` moves the probe's centre there
 /// instead (from then on the path is no longer followed). Iterating
 /// (`for frame in run`) steps to the scenario's last frame. The solve runs
-/// without the GIL; Ctrl-C stops the run between frames.
+/// without the GIL; Ctrl-C stops the run between frames. A run belongs to
+/// the thread that made it (another thread's call raises); frames may go
+/// anywhere.
 #[pyclass(module = "skinpatch", unsendable)]
 pub struct Run {
     inner: OwnedRun,
