@@ -228,7 +228,6 @@ pub struct Frame {
     field: SurfaceField,
     contact: ContactForces,
     volumes: Vec<RegionVolume>,
-    materials: Vec<skinpatch::fem::Material>,
     strains: OnceLock<ElementStrains>,
     stresses: OnceLock<Vec<TetStress>>,
 }
@@ -244,7 +243,6 @@ impl Frame {
             field: frame.surface.clone(),
             contact: frame.contact.clone(),
             volumes: frame.volumes.to_vec(),
-            materials: frame.materials().to_vec(),
             strains: OnceLock::new(),
             stresses: OnceLock::new(),
         }
@@ -257,7 +255,12 @@ impl Frame {
 
     fn stress_data(&self) -> &[TetStress] {
         self.stresses
-            .get_or_init(|| element_stresses(&self.setup.mesh, &self.positions, &self.materials))
+            // A Python run keeps the scenario's materials (it has no
+            // set_materials), so the setup's are the frame's.
+            .get_or_init(|| {
+                let materials = &self.setup.simulation.tet_material;
+                element_stresses(&self.setup.mesh, &self.positions, materials)
+            })
     }
 }
 
