@@ -79,11 +79,13 @@ impl Mesh {
         arrays::rows(py, flat, 2)
     }
 
+    /// Number of vertices.
     #[getter]
     fn num_vertices(&self) -> usize {
         self.mesh.num_vertices()
     }
 
+    /// Number of tets.
     #[getter]
     fn num_tets(&self) -> usize {
         self.mesh.num_tets()
