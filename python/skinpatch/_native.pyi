@@ -76,7 +76,7 @@ class Scenario:
     """A validated scenario with its mesh."""
 
     @staticmethod
-    def load(path: _Path, overrides: Optional[Mapping[str, Any]] = None) -> Scenario:
+    def load(path: _Path, overrides: Optional[dict[str, Any]] = None) -> Scenario:
         """Reads and validates a scenario; `overrides` maps dotted keys to values
         (``{"material.dermis.youngs_modulus_kpa": 200}``). Raises ScenarioError,
         MeshError or FileNotFoundError."""

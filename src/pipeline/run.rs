@@ -63,11 +63,6 @@ impl Frame<'_> {
             .get_or_init(|| ElementStrains::compute(self.mesh, self.positions))
     }
 
-    /// The material of every tet as the frame was solved.
-    pub fn materials(&self) -> &[Material] {
-        self.materials
-    }
-
     /// Cauchy stress, von Mises stress and strain energy density of every
     /// tet (computed on first use, and shared with the frame's VTU).
     pub fn stresses(&self) -> &[TetStress] {
