@@ -323,6 +323,49 @@ fn synth_never_writes_over_its_inputs() {
     assert_eq!(std::fs::read(&result).unwrap(), before);
 }
 
+/// `run` reading its mesh from its own output folder (the `mesh.node` an
+/// earlier run wrote with `mesh_tetgen`) is refused before the folder is
+/// touched, naming the key and both files; the mesh stays as it was.
+#[test]
+fn run_never_clears_its_own_mesh_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    std::fs::create_dir(&out).unwrap();
+    for ext in ["node", "ele"] {
+        std::fs::copy(
+            crate::common::root().join(format!("meshes/patch_3k.{ext}")),
+            out.join(format!("mesh.{ext}")),
+        )
+        .unwrap();
+    }
+    let before = std::fs::read(out.join("mesh.ele")).unwrap();
+    let fixture = crate::common::root().join("tests/fixtures/press_small.toml");
+    let text = std::fs::read_to_string(&fixture)
+        .unwrap()
+        .replace("../../meshes/patch_3k.node", "out/mesh.node");
+    let file = dir.path().join("again.toml");
+    std::fs::write(&file, text).unwrap();
+    let o = skinpatch(&["run", file.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(
+        e.contains("mesh.file") && e.contains("mesh.node") && e.contains("output.dir"),
+        "{e}"
+    );
+    assert_eq!(std::fs::read(out.join("mesh.ele")).unwrap(), before);
+    assert!(!out.join("metrics.csv").exists());
+    // Elsewhere, the same mesh runs.
+    let o = skinpatch(&[
+        "run",
+        file.to_str().unwrap(),
+        "-o",
+        dir.path().join("other").to_str().unwrap(),
+        "--set",
+        "time.duration_s=0.2",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
 /// An override that spans lines (whose later lines were dropped without a
 /// word) and `--output` beside `--set output.dir` (one of which was
 /// ignored) are refused, for `run` and `synth` alike.
