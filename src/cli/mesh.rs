@@ -19,7 +19,7 @@ pub struct MeshArgs {
     /// Read the [mesh] section of this scenario.
     #[arg(long, conflicts_with = "input")]
     scenario: Option<PathBuf>,
-    /// Load this mesh (.msh, .node/.ele or TetGen base name) instead of generating.
+    /// Load this mesh (.msh, .vtu, .vtk, .node/.ele or a TetGen base name) instead of generating.
     #[arg(long)]
     input: Option<PathBuf>,
     /// Write BASE.node/.ele/.face, BASE.vtu (and BASE.poly when generating).

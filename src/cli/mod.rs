@@ -43,7 +43,7 @@ pub enum Command {
     /// [microstructure], micro/height_neutral.png, micro/height_NNNN.png and
     /// micro/normal_NNNN.png (16-bit; .exr too when asked) and, when asked,
     /// micro/roughness.csv; with [render], render/<mode>/frame_NNNN.png (or
-    /// .exr) and, when asked, render/<mode>.mp4. The README lists every
+    /// .exr) and, when asked, render/<mode>.mp4. docs/GUIDE.md lists every
     /// array and column.
     Run(run::RunArgs),
     /// Generate a layered patch mesh with TetGen, or inspect a mesh file.
@@ -65,7 +65,7 @@ pub enum Command {
     /// Image-analogies texture synthesis: a measured micro map (the
     /// exemplar) details a coarser mesostructure map (a scan), keeping the
     /// scan's low frequencies. The file's [synthesis] table names the
-    /// inputs and parameters (README, "Synthesizing a neutral map"); the
+    /// inputs and parameters (docs/GUIDE.md, "Synthesizing a neutral map"); the
     /// outputs go to [output] dir (default out/<name>) or --output:
     /// synthesized.exr/.png (+ normal maps), albedo.png with an exemplar
     /// albedo, preview.png (exemplar, mesostructure, result, render) and

@@ -9,7 +9,7 @@ use clap::Args;
 pub struct ViewArgs {
     /// Scenario file (TOML).
     scenario: PathBuf,
-    /// Play these input steps (TOML, see the README) as the window runs.
+    /// Play these input steps (TOML, see docs/GUIDE.md, "Interactive viewer") as the window runs.
     #[arg(long)]
     script: Option<PathBuf>,
     /// Close the window after this many seconds (an error if a script has

@@ -69,14 +69,7 @@ impl StrainImages {
             }
         }
         for row in 0..h {
-            // Top row = 1 + range, bottom row = 1 − range.
-            let r = 1.0 + range * (1.0 - 2.0 * (row as f64 + 0.5) / h as f64);
-            let tick = (r - 1.0).abs() < range / h as f64;
-            let colour = if tick {
-                Rgb([0, 0, 0])
-            } else {
-                diverging(r, range)
-            };
+            let colour = bar_colour(row, h, range);
             for x in w + gap..w + gap + bar {
                 rs.put_pixel(x, row, colour);
                 rt.put_pixel(x, row, colour);
@@ -110,6 +103,18 @@ impl StrainImages {
         }
         Ok(written)
     }
+}
+
+/// The colour bar's row `row` of `h`: the diverging colour of its ratio,
+/// from `1 + range` (top row) to `1 − range` (bottom row), and black on the
+/// one row whose span holds the ratio 1 (for an even `h`, the row just
+/// below it).
+fn bar_colour(row: u32, h: u32, range: f64) -> Rgb<u8> {
+    if row == h / 2 {
+        return Rgb([0, 0, 0]);
+    }
+    let r = 1.0 + range * (1.0 - 2.0 * (row as f64 + 0.5) / h as f64);
+    diverging(r, range)
 }
 
 /// Writes the raster's strain as float data, `strain/strain_[TAG]NNNN.exr`
@@ -223,6 +228,24 @@ mod tests {
 
     /// The data map holds the ratios and the axis of a known stretch, and
     /// the neutral values with A = 0 outside the surface.
+    /// The bar has exactly one tick row, and the ratio 1 lies within it,
+    /// for odd and even heights (the default 512 among them).
+    #[test]
+    fn the_colour_bar_ticks_ratio_one_once() {
+        let range = 0.3;
+        for h in [1u32, 2, 3, 7, 8, 511, 512] {
+            let ticks: Vec<u32> = (0..h)
+                .filter(|&row| bar_colour(row, h, range) == Rgb([0, 0, 0]))
+                .collect();
+            assert_eq!(ticks.len(), 1, "height {h}: tick rows {ticks:?}");
+            // Row i spans ratios from 1 + range(1 − 2(i + 1)/h) to 1 + range(1 − 2i/h).
+            let i = ticks[0] as f64;
+            let top = 1.0 + range * (1.0 - 2.0 * i / h as f64);
+            let bottom = 1.0 + range * (1.0 - 2.0 * (i + 1.0) / h as f64);
+            assert!(bottom <= 1.0 && 1.0 <= top, "height {h}: row {i} spans {bottom}..{top}");
+        }
+    }
+
     #[test]
     fn strain_data_reads_back_as_the_stretch_it_was_given() {
         let (w, h) = (6, 4);

@@ -23,6 +23,8 @@ pub struct Found {
     pub drivers: Vec<PathBuf>,
     /// The variable that overrode the manifest folders, if any.
     pub override_var: Option<&'static str>,
+    /// The manifests among `drivers` that do not exist on disk.
+    pub missing: Vec<PathBuf>,
 }
 
 /// Looks for the loader and the driver manifests.
@@ -67,11 +69,22 @@ pub fn look() -> Found {
             found
         }
     };
+    let missing = not_on_disk(&drivers);
     Found {
         loader,
         drivers,
         override_var,
+        missing,
     }
+}
+
+/// The paths among `paths` that do not exist.
+fn not_on_disk(paths: &[PathBuf]) -> Vec<PathBuf> {
+    paths
+        .iter()
+        .filter(|p| !Path::new(p).exists())
+        .cloned()
+        .collect()
 }
 
 fn names(paths: &[PathBuf]) -> String {
@@ -87,7 +100,8 @@ fn names(paths: &[PathBuf]) -> String {
         .join(", ")
 }
 
-/// The message for "no adapter": what was found and what is missing.
+/// The message for "no adapter": what was found and what is missing. It
+/// reads nothing from the machine: [`look`] does.
 pub fn explain(found: &Found) -> String {
     let Some(loader) = &found.loader else {
         return format!(
@@ -111,12 +125,6 @@ pub fn explain(found: &Found) -> String {
             ),
         };
     }
-    let missing: Vec<PathBuf> = found
-        .drivers
-        .iter()
-        .filter(|p| !Path::new(p).exists())
-        .cloned()
-        .collect();
     let mut text = format!(
         "no Vulkan adapter: loader {} and drivers {}{} found, but none of them gave an adapter \
          (a driver for other hardware, or one that failed to start: VK_LOADER_DEBUG=error shows \
@@ -127,8 +135,11 @@ pub fn explain(found: &Found) -> String {
             .override_var
             .map_or(String::new(), |v| format!(" (from {v})")),
     );
-    if !missing.is_empty() {
-        text += &format!("; these manifests do not exist: {}", names(&missing));
+    if !found.missing.is_empty() {
+        text += &format!(
+            "; these manifests do not exist: {}",
+            names(&found.missing)
+        );
     }
     text
 }
@@ -138,7 +149,8 @@ mod tests {
     use super::*;
 
     /// Each situation names what was found and what to do, and only the
-    /// ones that lack a piece suggest installing it.
+    /// ones that lack a piece suggest installing it. The cases are data:
+    /// nothing here depends on what this machine has installed.
     #[test]
     fn the_message_follows_what_was_found() {
         let none = explain(&Found::default());
@@ -161,6 +173,7 @@ mod tests {
             loader: loader.clone(),
             drivers: vec![],
             override_var: Some("VK_ICD_FILENAMES"),
+            missing: vec![],
         });
         assert!(
             overridden.contains("VK_ICD_FILENAMES is set"),
@@ -173,6 +186,7 @@ mod tests {
                 PathBuf::from("/nowhere/gone.json"),
             ],
             override_var: Some("VK_DRIVER_FILES"),
+            missing: vec![PathBuf::from("/nowhere/gone.json")],
         });
         assert!(
             both.contains("drivers lvp_icd.x86_64.json, gone.json (from VK_DRIVER_FILES) found"),
@@ -183,5 +197,16 @@ mod tests {
             !both.contains("apt-get"),
             "installed pieces are not suggested: {both}"
         );
+    }
+
+    /// The manifests `look` reports as missing are exactly those not on
+    /// disk (here: one written to a scratch folder, one that is not).
+    #[test]
+    fn only_absent_manifests_are_missing() {
+        let dir = tempfile::tempdir().unwrap();
+        let here = dir.path().join("here.json");
+        std::fs::write(&here, "{}").unwrap();
+        let gone = dir.path().join("gone.json");
+        assert_eq!(not_on_disk(&[here, gone.clone()]), vec![gone]);
     }
 }

@@ -563,7 +563,7 @@ fn warn_compressed(
                 "frame {}: {} tets of region '{}' are squeezed below volume ratio {threshold} \
                  (smallest {:.3}, region volume {:+.2}%), which no skin or fat does; \
                  model = \"stable-neo-hookean\" in \
-                 [material.{}] resists this (README, materials)",
+                 [material.{}] resists this (docs/SCENARIO.md, `model`)",
                 m.frame,
                 v.tets_below,
                 v.name,

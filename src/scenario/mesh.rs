@@ -13,7 +13,7 @@ use crate::mesh::generate::{LayerSpec, PatchSpec, RefineZone, ZoneShape};
 /// The patch spans x ∈ [−w/2, w/2], y ∈ [−d/2, d/2], z ∈ [−h, 0] with the
 /// skin surface at z = 0. All generation keys are optional; their defaults
 /// are the design's skin patch.
-#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MeshSection {
     /// Mesh file to load instead of generating: `.msh` (Gmsh 4.1 or 2.2),
@@ -49,7 +49,7 @@ pub struct MeshSection {
 }
 
 /// Shape of a refinement zone.
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum ZoneKind {
     /// Hemisphere of `radius_mm` below `center_mm` (meshed as its circumscribing box).
@@ -59,7 +59,7 @@ pub enum ZoneKind {
 }
 
 /// `[mesh.refine]`: where tets are smaller (contact accuracy needs it).
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RefineSection {
     /// `sphere` or `box`.

@@ -20,7 +20,7 @@ use crate::micro::{DisplacementMap, Edge, KernelModel, PiecewiseLinear};
 pub const HEIGHT_RANGE_MARGIN: f64 = 0.25;
 
 /// `[microstructure]`.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct MicrostructureSection {
     /// Neutral map file (`.png` 16-bit greyscale or `.exr`), relative to the
@@ -101,7 +101,7 @@ impl Default for MicrostructureSection {
 }
 
 /// `[microstructure.procedural]`: every [`SkinParams`] field, optional.
-#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct ProceduralSection {
     /// Texels per side. Default 1024 here (the generator's own default is 2048).
@@ -131,7 +131,7 @@ pub struct ProceduralSection {
 }
 
 /// `[microstructure.kernel]`: piecewise-linear tables `[[r, value], …]`.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct KernelSection {
     /// α(r), through (1, 0), values in [−2, 1].
@@ -217,7 +217,7 @@ pub struct MicroSetup {
 }
 
 /// A map file format of `formats` lists.
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum MapFormat {
     /// 16-bit grey PNG.
@@ -546,7 +546,7 @@ impl ProceduralSection {
 /// alpha = -2.0
 /// sigma_um = 6.5
 /// ```
-#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FitSamples {
     /// The neutral map (required with `[[sample]]`s).
@@ -575,7 +575,7 @@ pub struct FitSamples {
 }
 
 /// `[[sample]]`: a deformed map or a target histogram (one of them).
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FitSample {
     /// Deformed map file.
@@ -590,7 +590,7 @@ pub struct FitSample {
 }
 
 /// `[[point]]`.
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FitPoint {
     /// Stretch ratio.

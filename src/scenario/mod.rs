@@ -25,6 +25,7 @@ mod arrays;
 mod mesh;
 mod micro;
 mod render;
+pub mod reference;
 mod simulation;
 mod surface;
 mod synth;
@@ -48,7 +49,7 @@ pub const TOP_REGION_ID: i32 = 1;
 pub const BOTTOM_REGION_ID: i32 = 2;
 
 /// A whole scenario file.
-#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Scenario {
     /// The patch mesh: generated (default) or loaded from a file.
@@ -81,7 +82,7 @@ pub struct Scenario {
 }
 
 /// `[output]`: where results go.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct OutputSection {
     /// Output folder, relative to the working directory. Default `out/<scenario name>`.
@@ -130,7 +131,7 @@ pub struct OutputSection {
 }
 
 /// `output.vtu_precision`.
-#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum VtuPrecision {
     /// Float64 arrays and points.
@@ -141,7 +142,7 @@ pub enum VtuPrecision {
 }
 
 /// `output.vtu_compression`.
-#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum VtuCompression {
     /// zlib blocks (lossless).

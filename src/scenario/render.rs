@@ -14,7 +14,7 @@ use crate::render::specular::{region_lobes, Lobes};
 use crate::render::{AlbedoSource, FrameFormat, MicroFilter, Mode, RenderSetup, Roughness};
 
 /// `[render]`.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct RenderSection {
     /// Image width in pixels. Default 640.
@@ -127,7 +127,7 @@ impl Default for RenderSection {
 }
 
 /// `render.region`: the facial region of the measured specular lobes.
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Region {
     /// Forehead.
@@ -156,7 +156,7 @@ impl Region {
 }
 
 /// `render.camera.projection`.
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum ProjectionKind {
     /// Perspective with `fov_deg`.
@@ -166,7 +166,7 @@ pub enum ProjectionKind {
 }
 
 /// `render.lights[k].kind`.
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum LightType {
     /// Parallel light along `direction`.
@@ -176,7 +176,7 @@ pub enum LightType {
 }
 
 /// `render.environment.preset`.
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum EnvironmentPreset {
     /// Grace Cathedral's irradiance (Ramamoorthi & Hanrahan 2001).
@@ -186,7 +186,7 @@ pub enum EnvironmentPreset {
 }
 
 /// `[render.camera]`.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct CameraSection {
     /// `perspective` or `orthographic`. Default `perspective`.
@@ -222,7 +222,7 @@ impl Default for CameraSection {
 }
 
 /// `[[render.lights]]`.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LightSection {
     /// `directional` or `point`.
@@ -246,7 +246,7 @@ fn white() -> [f64; 3] {
 }
 
 /// `[render.environment]`.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct EnvironmentSection {
     /// `grace_cathedral` (Ramamoorthi & Hanrahan 2001) or `none`; not

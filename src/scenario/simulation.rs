@@ -23,7 +23,7 @@ use crate::mesh::TetMesh;
 /// `[material.<region>]`: one region's material. Defaults: the top layer
 /// (`dermis`) 150 kPa, the bottom layer (`hypodermis`) 15 kPa, ν = 0.45,
 /// 1100 kg/m³. Other regions need a section.
-#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MaterialSection {
     /// Young's modulus (kPa).
@@ -41,7 +41,7 @@ pub struct MaterialSection {
 }
 
 /// `[boundary]`.
-#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct BoundarySection {
     /// `fixed` (default) or `rollers`.
@@ -55,7 +55,7 @@ pub struct BoundarySection {
 }
 
 /// `[boundary.caliper]`: frictionless jaws on the sides normal to `axis`.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CaliperSection {
     /// `x` or `y`.
@@ -66,7 +66,7 @@ pub struct CaliperSection {
 }
 
 /// The axis a caliper's jaws are normal to.
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum CaliperAxis {
     /// Jaws on the x_min and x_max sides.
@@ -76,7 +76,7 @@ pub enum CaliperAxis {
 }
 
 /// `probe.shape`.
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum ProbeShapeKind {
     /// A sphere of `radius_mm`.
@@ -88,7 +88,7 @@ pub enum ProbeShapeKind {
 }
 
 /// `probe.contact`.
-#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum ContactKind {
     /// No friction.
@@ -101,7 +101,7 @@ pub enum ContactKind {
 }
 
 /// `time.integrator`.
-#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum Integrator {
     /// Equilibrium at every step.
@@ -112,7 +112,7 @@ pub enum Integrator {
 }
 
 /// `[[boundary.prescribed]]`: a node set moved by a displacement over time.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PrescribedSection {
     /// `top`, `bottom`, `x_min`, `x_max`, `y_min` or `y_max`.
@@ -123,7 +123,7 @@ pub struct PrescribedSection {
 }
 
 /// `[probe]`: a rigid probe on a keyframed path.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ProbeSection {
     /// `sphere`, `capsule` or `punch`.
@@ -146,7 +146,7 @@ pub struct ProbeSection {
 }
 
 /// `[solver]`.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct SolverSection {
     /// Linear solver for Newton steps: `two-level` (PCG with block Jacobi
@@ -200,7 +200,7 @@ impl Default for SolverSection {
 
 /// `[time]`: frames at a fixed rate; each frame may take several quasi-static
 /// load substeps.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct TimeSection {
     /// `quasi-static` (default: equilibrium at every step) or

@@ -11,7 +11,7 @@ use crate::error::{Error, Result};
 use crate::surface::{AnimatedSurface, LengthUnit, ReadOptions, UvLayout, UvPiece};
 
 /// `[surface]`: the rest mesh with UVs and its animation.
-#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SurfaceSection {
     /// The surface: `.gltf`/`.glb` (mesh with `TEXCOORD_0`, morph targets

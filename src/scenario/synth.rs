@@ -30,7 +30,7 @@ use crate::micro::synth::{gauss, SynthInputs, SynthParams};
 use crate::micro::{DisplacementMap, Edge};
 
 /// A `skinpatch synth` file: `[synthesis]` and `[output]`.
-#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SynthFile {
     /// What to synthesize from, and how.
@@ -41,7 +41,7 @@ pub struct SynthFile {
 }
 
 /// `[output]` of a synthesis file.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct SynthOutputSection {
     /// Output folder, relative to the working directory. Default
@@ -92,7 +92,7 @@ impl SynthOutputSection {
 }
 
 /// `[synthesis]` / `[microstructure.synthesis]`.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct SynthesisSection {
     /// The exemplar micro map A′ (16-bit PNG or EXR), relative to the file
@@ -194,7 +194,7 @@ impl Default for SynthesisSection {
 
 /// `[…_generated]`: a map from the procedural generator, optionally
 /// blurred and resampled (a stand-in for a scan).
-#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct GeneratedSection {
     /// Side of the map on the skin (mm).

@@ -924,7 +924,7 @@ fn incremental_microstructure_frames_with_tolerance_zero_change_nothing() {
     }
     let stdout = text(&incremental.1.stdout);
     if !stdout.contains("microstructure stages: GPU") {
-        eprintln!("no GPU adapter: the CPU reference ran both (skipped)");
+        crate::common::skip("no GPU adapter: the CPU reference ran both");
         return;
     }
     assert!(
@@ -1520,7 +1520,7 @@ fn a_tiled_neutral_map_runs_tile_by_tile() {
     let runs = [tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap()];
     let (tiled_out, o) = run_press_small_with(runs[0].path(), &section(&tiles));
     if !o.status.success() && text(&o.stderr).contains("no usable GPU adapter") {
-        eprintln!("no GPU adapter: skipped");
+        crate::common::skip("no GPU adapter");
         return;
     }
     assert!(o.status.success(), "stderr: {}", text(&o.stderr));

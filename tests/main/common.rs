@@ -15,6 +15,42 @@ pub fn patch_3k() -> skinpatch::mesh::TetMesh {
     skinpatch::mesh::io::read_tetgen(&root().join("meshes/patch_3k")).unwrap()
 }
 
+/// Records that the running test skipped its check (a tool or an adapter
+/// this machine lacks), prints `why` now, and — once per test binary — has
+/// the process print the list of skips after libtest's summary, so a run
+/// that skipped checks does not read as a clean pass.
+pub fn skip(why: &str) {
+    use std::sync::{Mutex, Once};
+    static SKIPS: Mutex<Vec<String>> = Mutex::new(Vec::new());
+    static AT_EXIT: Once = Once::new();
+    extern "C" {
+        fn atexit(callback: extern "C" fn()) -> std::os::raw::c_int;
+    }
+    extern "C" fn report() {
+        let skips = SKIPS.lock().map(|s| s.clone()).unwrap_or_default();
+        eprintln!(
+            "\n{} check(s) skipped (the tool or adapter is missing here; CI requires them):",
+            skips.len()
+        );
+        for s in &skips {
+            eprintln!("  skipped: {s}");
+        }
+    }
+    let test = std::thread::current()
+        .name()
+        .unwrap_or("a test")
+        .to_string();
+    eprintln!("skipped: {why}");
+    if let Ok(mut skips) = SKIPS.lock() {
+        skips.push(format!("{test}: {why}"));
+    }
+    // SAFETY: `report` is a plain function that only reads a static; the C
+    // library calls it once when the test process exits.
+    AT_EXIT.call_once(|| unsafe {
+        atexit(report);
+    });
+}
+
 /// The GPU adapter, or `None` (test skipped with a note) when there is
 /// none and a GPU is not required (`SKINPATCH_REQUIRE_GPU=1` makes a
 /// missing adapter a failure).
@@ -22,7 +58,7 @@ pub fn context() -> Option<skinpatch::gpu::Context> {
     match skinpatch::gpu::acquire() {
         Ok(Some(ctx)) => Some(ctx),
         Ok(None) => {
-            eprintln!("no GPU adapter: skipped (set SKINPATCH_REQUIRE_GPU=1 to fail instead)");
+            skip("no GPU adapter (set SKINPATCH_REQUIRE_GPU=1 to fail instead)");
             None
         }
         Err(e) => panic!("{e}"),
@@ -148,7 +184,9 @@ pub fn python_check(
             !required,
             "{package} check required ({require_var}=1): {why}"
         );
-        eprintln!("{package} check skipped ({why}; set {require_var}=1 to fail instead)");
+        skip(&format!(
+            "{package} check ({why}; set {require_var}=1 to fail instead)"
+        ));
         None
     };
     match std::process::Command::new("python3")

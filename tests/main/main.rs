@@ -8,6 +8,7 @@ mod common;
 
 mod bad_input;
 mod cli;
+mod docs;
 mod contact;
 mod dcc_outputs;
 mod doors;

@@ -1,9 +1,10 @@
-//! Every command in the README's shell blocks, kept in sync with a list
-//! here: each is run as written (in a scratch folder holding copies of the
-//! examples, fixtures and meshes it reads), run with arguments that make it
-//! small (stated), or named with the reason it is not run and the test that
-//! covers it. A command added to the README without a line here fails the
-//! test, and so does a line here the README no longer has.
+//! Every command in the shell blocks of the README and the docs
+//! ([`DOCS`]), kept in sync with a list here: each is run as written (in a
+//! scratch folder holding copies of the examples, fixtures and meshes it
+//! reads), run with arguments that make it small (stated), or named with
+//! the reason it is not run and the test that covers it. A command added to
+//! a page without a line here fails the test, and so does a line here that
+//! no page has any more.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -145,11 +146,36 @@ const COMMANDS: &[(&str, How)] = &[
     ),
 ];
 
-/// The commands of the README's `sh` blocks: continuation lines joined,
+/// The pages whose `sh` blocks hold commands a reader types.
+pub(crate) const DOCS: &[&str] = &[
+    "README.md",
+    "ARCHITECTURE.md",
+    "docs/API.md",
+    "docs/GUIDE.md",
+    "docs/PERFORMANCE.md",
+    "docs/REFERENCES.md",
+    "docs/SCENARIO.md",
+    "docs/SYNTHESIS.md",
+    "docs/VERIFICATION.md",
+    "meshes/README.md",
+    "python/README.md",
+];
+
+/// The commands of every page's `sh` blocks, page by page.
+fn readme_commands() -> Vec<String> {
+    DOCS.iter()
+        .flat_map(|page| {
+            let text = std::fs::read_to_string(root().join(page))
+                .unwrap_or_else(|e| panic!("{page}: {e}"));
+            sh_commands(&text)
+        })
+        .collect()
+}
+
+/// The commands of `text`'s `sh` blocks: continuation lines joined,
 /// comments and blank lines dropped, several commands on one line (`a, b`
 /// in the synopsis) split.
-fn readme_commands() -> Vec<String> {
-    let text = std::fs::read_to_string(root().join("README.md")).unwrap();
+fn sh_commands(text: &str) -> Vec<String> {
     let mut commands = Vec::new();
     let mut in_sh = false;
     let mut pending = String::new();
@@ -193,7 +219,7 @@ fn readme_commands() -> Vec<String> {
     commands
 }
 
-/// The README and the list above name the same commands, in order.
+/// The pages and the list above name the same commands.
 #[test]
 fn the_list_matches_the_readme() {
     let readme = readme_commands();
@@ -201,13 +227,13 @@ fn the_list_matches_the_readme() {
     for c in &readme {
         assert!(
             listed.contains(&c.as_str()),
-            "a README command is not in tests/main/readme.rs: {c:?}"
+            "a command of the docs is not in tests/main/readme.rs: {c:?}"
         );
     }
     for c in &listed {
         assert!(
             readme.iter().any(|r| r == c),
-            "tests/main/readme.rs lists a command the README no longer has: {c:?}"
+            "tests/main/readme.rs lists a command no page has any more: {c:?}"
         );
     }
 }

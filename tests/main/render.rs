@@ -913,7 +913,7 @@ fn mp4_holds_every_rendered_frame() {
             !required,
             "ffmpeg is required (SKINPATCH_REQUIRE_FFMPEG=1) but not found"
         );
-        eprintln!("no ffmpeg: skipped");
+        crate::common::skip("no ffmpeg (set SKINPATCH_REQUIRE_FFMPEG=1 to fail instead)");
         return;
     }
     let dir = tempfile::tempdir().unwrap();
@@ -1176,7 +1176,7 @@ fn prefiltered_specular_matches_the_supersampled_reference() {
 fn moment_lookups_by_sampler_and_by_loads_agree() {
     let Some(ctx) = context() else { return };
     if !ctx.features.contains(skinpatch::gpu::OPTIONAL_FEATURES) {
-        eprintln!("the adapter does not filter f32 textures: one path only, skipped");
+        crate::common::skip("the adapter does not filter f32 textures: one path only");
         return;
     }
     let sampled = close_up(&ctx, "moments", 1, 0.0);

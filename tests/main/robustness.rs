@@ -1,4 +1,4 @@
-//! Reliability by class (see README, "What a failed run leaves behind"):
+//! Reliability by class (see docs/GUIDE.md, "What a run leaves behind"):
 //! wrong physics is an error, not a success; every case asserts the exit
 //! status, that the message names the key or frame, and what is left of
 //! the outputs.

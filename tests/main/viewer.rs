@@ -33,7 +33,7 @@ fn xvfb_run() -> Option<Command> {
         !required,
         "SKINPATCH_REQUIRE_XVFB=1 but xvfb-run is not installed"
     );
-    eprintln!("xvfb-run not found: viewer session skipped (apt-get install xvfb)");
+    crate::common::skip("xvfb-run not found: viewer session (apt-get install xvfb)");
     None
 }
 
