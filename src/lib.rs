@@ -22,7 +22,7 @@
 //! * [`export`]: frame grids, strain images and metrics;
 //! * [`scenario`]: TOML scenario → validated [`scenario::Setup`];
 //! * [`pipeline`]: runs a setup frame by frame and writes its outputs;
-//! * [`bench`]: the benchmarks behind `skinpatch bench`;
+//! * [`mod@bench`]: the benchmarks behind `skinpatch bench`;
 //! * `viewer` (feature `viewer`): the interactive window.
 //!
 //! Units: millimetres, newtons, MPa, tonnes/mm³ and seconds inside the

@@ -58,7 +58,8 @@ pub struct GpuArgs {
     /// source tree this binary was built from].
     #[arg(long)]
     scenario: Option<PathBuf>,
-    /// Small sizes for a software adapter (CI): the same parts, in seconds.
+    /// Small sizes for a software adapter (CI): the same parts, in a few
+    /// minutes on lavapipe (about 3 on 2 cores).
     #[arg(long)]
     quick: bool,
     /// The JSON report; the Markdown is written beside it (`.md`).

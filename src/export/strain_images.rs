@@ -242,7 +242,10 @@ mod tests {
             let i = ticks[0] as f64;
             let top = 1.0 + range * (1.0 - 2.0 * i / h as f64);
             let bottom = 1.0 + range * (1.0 - 2.0 * (i + 1.0) / h as f64);
-            assert!(bottom <= 1.0 && 1.0 <= top, "height {h}: row {i} spans {bottom}..{top}");
+            assert!(
+                bottom <= 1.0 && 1.0 <= top,
+                "height {h}: row {i} spans {bottom}..{top}"
+            );
         }
     }
 

@@ -26,7 +26,17 @@ use super::solve::Filter;
 use crate::mesh::{TetMesh, Vec3};
 
 /// Condition on the bottom face (`boundary.bottom`: `fixed`, `rollers`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    serde::Deserialize,
+    serde::Serialize,
+    schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum BottomCondition {
     #[default]
@@ -38,7 +48,17 @@ pub enum BottomCondition {
 
 /// Condition on the four side faces (`boundary.sides`: `clamped`,
 /// `rollers`, `free`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    serde::Deserialize,
+    serde::Serialize,
+    schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum SideCondition {
     /// All components fixed.
@@ -113,7 +133,9 @@ pub struct BoundaryConditions {
 
 /// One of the geometric node sets (`top`, `bottom`, `x_min`, `x_max`,
 /// `y_min`, `y_max` in scenario files).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum NodeSet {
     /// Nodes at z_max.

@@ -42,7 +42,17 @@ use crate::mesh::{TetMesh, Vec3};
 
 /// Which linear solver Newton steps use (`solver.linear`: `cg`, `direct`,
 /// `factored-cg`, `two-level`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    serde::Deserialize,
+    serde::Serialize,
+    schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum LinearSolver {
     /// Block-Jacobi preconditioned conjugate gradients.

@@ -9,8 +9,8 @@
 //! (block Jacobi). Dot products reduce over fixed-size chunks in a fixed
 //! order, so results do not depend on the thread count.
 //!
-//! [`DirectSolver`] solves the same filtered system with a sparse Cholesky
-//! factorisation (faer, AMD ordering); its symbolic analysis is done once for
+//! The direct solver ([`crate::fem::integrate::LinearSolver::Direct`])
+//! solves the same filtered system with a sparse Cholesky factorisation (faer, AMD ordering); its symbolic analysis is done once for
 //! the fixed pattern and reused for every numeric factorisation.
 
 use nalgebra::{Matrix3, Vector3};

@@ -1,5 +1,5 @@
 //! GPU pass of the spatially varying convolution (`shaders/convolve.wgsl`;
-//! CPU reference [`crate::micro::convolve`]).
+//! CPU reference [`mod@crate::micro::convolve`]).
 //!
 //! One dispatch is one 1D pass: the s pass reads the neutral map into an
 //! intermediate, the t pass reads that into the output (eq. 4–5). Where a

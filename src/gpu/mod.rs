@@ -8,7 +8,7 @@
 //!   parameters per axis, dilation past the surface edge —
 //!   [`crate::strain::Svd2`], [`crate::micro::KernelField`];
 //! * [`convolve`] (`shaders/convolve.wgsl`): one spatially varying 1D pass —
-//!   [`crate::micro::convolve`]; in the per-frame chain each pass evaluates
+//!   [`mod@crate::micro::convolve`]; in the per-frame chain each pass evaluates
 //!   the svd2 functions at its texel instead of reading a parameter buffer;
 //! * [`normals`] (`shaders/normals.wgsl`): normal map —
 //!   [`crate::micro::normals::normal_map`];

@@ -136,10 +136,7 @@ pub fn explain(found: &Found) -> String {
             .map_or(String::new(), |v| format!(" (from {v})")),
     );
     if !found.missing.is_empty() {
-        text += &format!(
-            "; these manifests do not exist: {}",
-            names(&found.missing)
-        );
+        text += &format!("; these manifests do not exist: {}", names(&found.missing));
     }
     text
 }

@@ -21,7 +21,9 @@ pub struct Image {
 }
 
 /// Frame file format (`png8`, `png16`, `exr` in scenario files).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum FrameFormat {
     /// 8-bit sRGB PNG.

@@ -9,7 +9,9 @@
 use rayon::prelude::*;
 
 /// What reads outside the grid return (`wrap` or `clamp` in files).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Edge {
     /// Periodic: the map tiles.

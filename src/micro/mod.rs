@@ -5,7 +5,7 @@
 //! * [`procedural`]: the seeded neutral skin generator;
 //! * [`kernel`]: the 1D kernel `(1 − α)δ + αG(σ)` and the kernel model
 //!   (stretch ratio → α, σ; the forehead model built in);
-//! * [`convolve`]: the spatially varying two-pass convolution along the
+//! * [`mod@convolve`]: the spatially varying two-pass convolution along the
 //!   strain axes, and its constant-kernel form;
 //! * [`normals`]: normal maps, 64 × 64 normal histograms, slope variance;
 //! * [`fit`]: fitting (α, σ) to measured deformations (eq. 7) and the

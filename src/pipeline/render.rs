@@ -33,11 +33,10 @@ pub(super) struct RenderEngine {
 
 /// The message for a render request without a GPU.
 pub(crate) fn no_gpu() -> Error {
-    Error::Gpu(
-        "[render] needs a GPU adapter (the warning above says why none is usable) — or remove \
-         the [render] section"
-            .into(),
-    )
+    let why = crate::gpu::vulkan::explain(&crate::gpu::vulkan::look());
+    Error::Gpu(format!(
+        "[render] needs a GPU adapter — or remove the [render] section; {why}"
+    ))
 }
 
 /// m(r)/m(1) of the map under the kernel model at the curve's ratios

@@ -2,7 +2,7 @@
 //! stretch ratios or the stretch axes as colour in place of the skin's
 //! albedo (the viewer's overlays). The colours are those of the strain
 //! images ([`crate::imaging::colour`]), which are the CPU reference:
-//! [`reference`] here, [`evaluate_gpu`] runs the shader's function on the
+//! [`reference()`] here, [`evaluate_gpu`] runs the shader's function on the
 //! GPU for the parity test.
 
 use crate::error::Result;

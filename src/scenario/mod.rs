@@ -24,8 +24,8 @@ use crate::mesh::{io, TetMesh};
 mod arrays;
 mod mesh;
 mod micro;
-mod render;
 pub mod reference;
+mod render;
 mod simulation;
 mod surface;
 mod synth;
@@ -131,7 +131,9 @@ pub struct OutputSection {
 }
 
 /// `output.vtu_precision`.
-#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum VtuPrecision {
     /// Float64 arrays and points.
@@ -142,7 +144,9 @@ pub enum VtuPrecision {
 }
 
 /// `output.vtu_compression`.
-#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum VtuCompression {
     /// zlib blocks (lossless).

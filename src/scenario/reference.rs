@@ -211,14 +211,19 @@ fn section_of<'a>(defs: &'a Map<String, Value>, schema: &'a Value) -> Option<(Ne
 /// The TOML type of a value's schema.
 fn kind(defs: &Map<String, Value>, schema: &Value) -> String {
     let schema = resolve(defs, schema);
-    let words: Vec<String> = match (schema.get("enum"), schema.get("oneOf").or(schema.get("anyOf"))) {
+    let words: Vec<String> = match (
+        schema.get("enum"),
+        schema.get("oneOf").or(schema.get("anyOf")),
+    ) {
         (Some(Value::Array(values)), _) => values.iter().map(toml_text).collect(),
         (_, Some(Value::Array(variants))) => variants
             .iter()
-            .map(|v| match v.get("const").or(v.get("enum").and_then(|e| e.get(0))) {
-                Some(c) => toml_text(c),
-                None => kind(defs, v),
-            })
+            .map(
+                |v| match v.get("const").or(v.get("enum").and_then(|e| e.get(0))) {
+                    Some(c) => toml_text(c),
+                    None => kind(defs, v),
+                },
+            )
             .collect(),
         _ => Vec::new(),
     };
@@ -236,7 +241,9 @@ fn kind(defs: &Map<String, Value>, schema: &Value) -> String {
         Some("number") => "number".into(),
         Some("string") => "string".into(),
         Some("array") => {
-            let item = schema.get("items").map_or("value".to_string(), |i| kind(defs, i));
+            let item = schema
+                .get("items")
+                .map_or("value".to_string(), |i| kind(defs, i));
             let min = schema.get("minItems").and_then(Value::as_u64);
             let max = schema.get("maxItems").and_then(Value::as_u64);
             match (min, max) {
@@ -289,7 +296,11 @@ fn split_default(meaning: &str) -> (String, Option<String>) {
     // The sentence ends at ". " or at the end of the comment.
     let end = value.find(". ").unwrap_or(value.len());
     let stated = value[..end].trim_end_matches('.').trim().to_string();
-    let rest = format!("{}{}", &meaning[..start], value[end..].trim_start_matches(". "));
+    let rest = format!(
+        "{}{}",
+        &meaning[..start],
+        value[end..].trim_start_matches(". ")
+    );
     (rest.trim().to_string(), Some(stated))
 }
 

@@ -88,7 +88,9 @@ pub enum ProbeShapeKind {
 }
 
 /// `probe.contact`.
-#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum ContactKind {
     /// No friction.
@@ -101,7 +103,9 @@ pub enum ContactKind {
 }
 
 /// `time.integrator`.
-#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum Integrator {
     /// Equilibrium at every step.

@@ -4,7 +4,7 @@
 //! Read: the mesh of one node (named, or the only node with a mesh), all its
 //! triangle primitives, UVs from `TEXCOORD_0` (glTF's v runs down the image;
 //! skinpatch's up, so `v = 1 − v_glTF`), morph targets' position
-//! displacements, and one animation ([`super::clip`]): the node's morph
+//! displacements, and one animation (`super::clip`): the node's morph
 //! weights and the translation, rotation and scale of the node, its skin's
 //! joints and their ancestors, sampled at the scenario's frame rate from
 //! the animation's first to its last keyframe. Positions are the morphed

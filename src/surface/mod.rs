@@ -46,7 +46,17 @@ pub struct AnimatedSurface {
 
 /// How UVs outside the unit square are read (`unit`, `udim` or `wrap` in
 /// scenario files).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    serde::Deserialize,
+    serde::Serialize,
+    schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum UvLayout {
     /// Every UV lies in [0, 1]² (an error otherwise).
@@ -468,7 +478,9 @@ impl Default for ReadOptions {
 
 /// The length unit of a surface file (`mm`, `cm`, `m` or `in` in
 /// scenario files).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum LengthUnit {
     /// Millimetres.

@@ -1,7 +1,7 @@
 //! The viewer's render loop without a window, timed for `skinpatch bench
 //! gpu`: the FEM thread, the microstructure chain, the renderer and the
 //! present pass run as in `skinpatch view`, on the same frame code
-//! ([`super::frame`]), but the present pass draws into an offscreen
+//! (`super::frame`), but the present pass draws into an offscreen
 //! texture and nothing waits for a display refresh.
 //!
 //! The probe plays the scenario's path in a loop at display time, so the

@@ -121,7 +121,10 @@ fn the_generated_tables_hold_keys_from_every_corner() {
     let mix = find("scenario", "[render]", "mix_ratio");
     assert_eq!((mix.kind.as_str(), mix.default.as_str()), ("number", "0.5"));
     let width = find("scenario", "[render]", "width_px");
-    assert_eq!((width.kind.as_str(), width.default.as_str()), ("integer", "640"));
+    assert_eq!(
+        (width.kind.as_str(), width.default.as_str()),
+        ("integer", "640")
+    );
     let model = find("scenario", "[material.<name>]", "model");
     assert!(model.kind.contains("\"corotational\""), "{model:?}");
     let intensity = find("scenario", "[[render.lights]]", "intensity");
@@ -141,7 +144,9 @@ fn citations(text: &str) -> BTreeSet<(String, String)> {
     for (i, w) in words.iter().enumerate() {
         let year: String = w.chars().filter(char::is_ascii_digit).collect();
         let clean = w.trim_matches(|c: char| !c.is_ascii_digit());
-        if clean.len() != 4 || year.len() != 4 || !(year.starts_with("19") || year.starts_with("20"))
+        if clean.len() != 4
+            || year.len() != 4
+            || !(year.starts_with("19") || year.starts_with("20"))
         {
             continue;
         }
@@ -154,7 +159,10 @@ fn citations(text: &str) -> BTreeSet<(String, String)> {
         }
         let name = name.trim_matches(|c: char| !c.is_alphabetic() && c != '\'');
         let capitalised = name.chars().next().is_some_and(char::is_uppercase)
-            && name.chars().skip(1).all(|c| c.is_lowercase() || c == '\'' || c == '-');
+            && name
+                .chars()
+                .skip(1)
+                .all(|c| c.is_lowercase() || c == '\'' || c == '-');
         if capitalised && name.chars().count() > 2 && !NOT_AUTHORS.contains(&name) {
             found.insert((name.to_string(), year));
         }
@@ -164,10 +172,34 @@ fn citations(text: &str) -> BTreeSet<(String, String)> {
 
 /// Capitalised words that stand before a year without naming an author.
 const NOT_AUTHORS: &[&str] = &[
-    "Blender", "Debian", "Graphics", "Eurographics", "Interface", "Conference", "Talks",
-    "January", "Python", "Ubuntu", "Pergamon", "Forum", "Grace", "Cathedral", "Asia",
-    "Computing", "Engineering", "Wisconsin", "Mathematik", "Rendering", "Software",
-    "Animation", "Applications", "Madison", "Games", "Environments", "Since", "Until",
+    "Blender",
+    "Debian",
+    "Graphics",
+    "Eurographics",
+    "Interface",
+    "Conference",
+    "Talks",
+    "January",
+    "Python",
+    "Ubuntu",
+    "Pergamon",
+    "Forum",
+    "Grace",
+    "Cathedral",
+    "Asia",
+    "Computing",
+    "Engineering",
+    "Wisconsin",
+    "Mathematik",
+    "Rendering",
+    "Software",
+    "Animation",
+    "Applications",
+    "Madison",
+    "Games",
+    "Environments",
+    "Since",
+    "Until",
 ];
 
 /// Every author–year citation of the code, shaders, Python, examples and
@@ -186,7 +218,10 @@ fn every_citation_has_a_reference() {
         collect(&root().join(dir), &mut texts);
     }
     for page in DOCS {
-        texts.push((page.to_string(), std::fs::read_to_string(root().join(page)).unwrap()));
+        texts.push((
+            page.to_string(),
+            std::fs::read_to_string(root().join(page)).unwrap(),
+        ));
     }
     let mut unknown = Vec::new();
     for (file, text) in &texts {
@@ -208,10 +243,9 @@ fn collect(dir: &Path, out: &mut Vec<(String, String)>) {
         let path = entry.path();
         if path.is_dir() {
             collect(&path, out);
-        } else if path
-            .extension()
-            .is_some_and(|e| ["rs", "wgsl", "py", "pyi", "toml", "md"].contains(&e.to_str().unwrap()))
-        {
+        } else if path.extension().is_some_and(|e| {
+            ["rs", "wgsl", "py", "pyi", "toml", "md"].contains(&e.to_str().unwrap())
+        }) {
             if let Ok(text) = std::fs::read_to_string(&path) {
                 out.push((path.display().to_string(), text));
             }
@@ -312,7 +346,10 @@ fn modules_import_only_lower_layers() {
         .collect::<Vec<_>>()
         .join(" → ");
     assert!(
-        arch.split_whitespace().collect::<Vec<_>>().join(" ").contains(&stated),
+        arch.split_whitespace()
+            .collect::<Vec<_>>()
+            .join(" ")
+            .contains(&stated),
         "ARCHITECTURE.md states the layers as: {stated}"
     );
     let mut files = Vec::new();
@@ -321,7 +358,12 @@ fn modules_import_only_lower_layers() {
     let mut upward = Vec::new();
     for (path, text) in &files {
         let rel = Path::new(path).strip_prefix(&src).unwrap();
-        let top = rel.components().next().unwrap().as_os_str().to_string_lossy();
+        let top = rel
+            .components()
+            .next()
+            .unwrap()
+            .as_os_str()
+            .to_string_lossy();
         let top = top.trim_end_matches(".rs");
         if top == "lib" || top == "main" {
             continue;

@@ -8,9 +8,9 @@ mod common;
 
 mod bad_input;
 mod cli;
-mod docs;
 mod contact;
 mod dcc_outputs;
+mod docs;
 mod doors;
 mod fem_verification;
 mod fuzz;

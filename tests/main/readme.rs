@@ -28,7 +28,15 @@ const COMMANDS: &[(&str, How)] = &[
         "cargo run --release -- run examples/press.toml",
         How::Smaller(&["--set", "time.duration_s=0.05"]),
     ),
+    (
+        "apt-get install g++ mesa-vulkan-drivers",
+        How::Skip("system packages (.ci/run installs them)"),
+    ),
     ("cargo test --release", How::Skip("the command that runs this test")),
+    (
+        "cargo install --path .",
+        How::Skip("installs the binary this suite runs from target/ (a full release build)"),
+    ),
     (
         "python3 -m pip install ./python pytest && python3 -m pytest python/tests",
         How::Skip("the Python tests: .ci/run runs them after this suite (python/tests/test_readme.py runs the README's Python example)"),
@@ -36,6 +44,46 @@ const COMMANDS: &[(&str, How)] = &[
     (
         "python3 -m pip install ./python",
         How::Skip("builds and installs the wheel, as .ci/run does before the Python tests"),
+    ),
+    (
+        "pip install ./python",
+        How::Skip("python/README.md's form of the install above"),
+    ),
+    (
+        "skinpatch run examples/press.toml --set output.surface_glb=true",
+        How::Skip("the main job with one more output; dcc_outputs::* write and check surface.glb"),
+    ),
+    (
+        "blender --python examples/python/blender_load.py -- out/press",
+        How::Skip("needs Blender; python/tests run the loader outside Blender"),
+    ),
+    (
+        "skinpatch synth benches/synth_1024.toml -o /tmp/s",
+        How::Skip("a synthesis benchmark (PERFORMANCE.md); synth::* run synthesis files"),
+    ),
+    (
+        "skinpatch synth benches/synth_1024.toml -o /tmp/s --set synthesis.pca_dims=0",
+        How::Skip("a synthesis benchmark (PERFORMANCE.md)"),
+    ),
+    (
+        "skinpatch synth benches/synth_1024.toml -o /tmp/s --set synthesis.mesostructure_generated.extent_mm=10.24 --set synthesis.mesostructure_generated.skin.size_px=2048",
+        How::Skip("a synthesis benchmark (PERFORMANCE.md)"),
+    ),
+    (
+        "skinpatch synth benches/synth_1024.toml -o /tmp/s --set synthesis.mesostructure_generated.extent_mm=20.48 --set synthesis.mesostructure_generated.skin.size_px=4096",
+        How::Skip("a synthesis benchmark (PERFORMANCE.md)"),
+    ),
+    (
+        "xvfb-run -a -s \"-screen 0 1920x1080x24\" skinpatch view examples/press.toml --script examples/scripts/press_session.toml --width 1920 --height 1080",
+        How::Skip("a viewer benchmark (PERFORMANCE.md); viewer::* run scripted sessions"),
+    ),
+    (
+        "cargo run --release --example step_timing -- examples/press.toml",
+        How::Skip("the Python layer's benchmark, the main job (PERFORMANCE.md)"),
+    ),
+    (
+        "python3 examples/python/step_timing.py examples/press.toml",
+        How::Skip("the same benchmark from Python; python/tests run the examples"),
     ),
     (
         "skinpatch run <scenario.toml> [--output DIR] [--force] [--set KEY=VALUE]… [--quiet]",
@@ -71,7 +119,7 @@ const COMMANDS: &[(&str, How)] = &[
         How::Skip("usage line; cli::bench_gpu_quick_writes_every_part_of_the_report runs it"),
     ),
     (
-        "skinpatch view <scenario.toml> [--script FILE] [--exit-after S] [--record-dir DIR]",
+        "skinpatch view <scenario.toml> [--script FILE] [--exit-after S] [--record-dir DIR] [--width PX --height PX]",
         How::Skip("usage line"),
     ),
     (

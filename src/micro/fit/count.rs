@@ -22,7 +22,7 @@ pub struct Slopes {
 }
 
 impl Slopes {
-    /// The central-difference slopes of `map` (as [`NormalHistogram::of`],
+    /// The central-difference slopes of `map` (as [`crate::micro::normals::NormalHistogram::of`],
     /// which reads the same texels: interior texels without edge handling).
     pub fn of(map: &DisplacementMap) -> Slopes {
         let (w, h) = (map.width, map.height);
@@ -68,7 +68,7 @@ impl Slopes {
 /// (f32, the same arithmetic as `shaders/fit.wgsl`): each texel's normal
 /// `(−s_x, −s_y)/√(1 + |s|²)` falls into cell `⌊(c + range)·bins/(2·range)⌋`
 /// per component, clamped to the edge cells (a NaN to the first). Candidates are counted
-/// [`GROUP`] at a time in parallel; counts are integers, so the result
+/// `GROUP` at a time in parallel; counts are integers, so the result
 /// does not depend on the thread count.
 pub fn count_histograms(
     base: &Slopes,

@@ -49,7 +49,9 @@ use super::normals::{normal_of, slope, NormalHistogram};
 use crate::error::{Error, Result};
 
 /// The axis of a sample's deformation (the map's u or v direction).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Axis {
     /// Along u (texel x).
