@@ -10,8 +10,9 @@
 //! order, so results do not depend on the thread count.
 //!
 //! The direct solver ([`crate::fem::integrate::LinearSolver::Direct`])
-//! solves the same filtered system with a sparse Cholesky factorisation (faer, AMD ordering); its symbolic analysis is done once for
-//! the fixed pattern and reused for every numeric factorisation.
+//! solves the same filtered system with a sparse Cholesky factorisation
+//! (faer, AMD ordering); its symbolic analysis is done once for the fixed
+//! pattern and reused for every numeric factorisation.
 
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
