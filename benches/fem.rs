@@ -10,7 +10,7 @@ use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
 use skinpatch::fem::contact::{solve_with_contact, ContactState};
-use skinpatch::fem::integrate::{LinearSolver, Simulation};
+use skinpatch::fem::simulation::{LinearSolver, Simulation};
 use skinpatch::fem::TangentKind;
 use skinpatch::mesh::Vec3;
 use skinpatch::scenario::Setup;

@@ -19,7 +19,7 @@ pub struct BenchFigures {
     /// Linear-solver iterations.
     pub linear_iterations: usize,
     /// Solver time split.
-    pub timings: crate::fem::integrate::Timings,
+    pub timings: crate::fem::simulation::Timings,
 }
 
 /// Simulates the first `frames` frames of `setup` without writing anything

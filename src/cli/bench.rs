@@ -219,7 +219,7 @@ fn bench_gpu(args: &GpuArgs) -> anyhow::Result<()> {
 
 /// `bench fem`: the first frames with each linear solver, in one run.
 fn bench_fem(path: &Path, frames: usize) -> anyhow::Result<()> {
-    use skinpatch::fem::integrate::LinearSolver;
+    use skinpatch::fem::simulation::LinearSolver;
     let mut setup = Setup::load(path).with_context(|| format!("scenario {}", path.display()))?;
     let mut report = format!(
         "bench fem: {} ({} tets), first {} frames\n\

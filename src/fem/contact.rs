@@ -11,7 +11,7 @@
 //!   closest probe point and slide freely or against a Coulomb slip load of
 //!   magnitude `μ·F_n` along the trial force `λ_t − c·s`, which opposes
 //!   their slip at a solution (Alart & Curnier 1991; its derivative is in
-//!   the Newton matrix, see [`super::integrate::SlipLoad`]); a sliding
+//!   the Newton matrix, see [`super::simulation::SlipLoad`]); a sliding
 //!   node's plane is re-projected at every Newton
 //!   iteration with the probe's curvature times its normal reaction (and,
 //!   under friction, the turning of that reaction) in the matrix, so Newton
@@ -207,8 +207,8 @@ impl ContactState {
 
     /// The Coulomb slip load of sliding node `v` (normal `n`, current
     /// friction force `friction`).
-    fn slip_load(&self, v: usize, n: Vec3, friction: Vec3, mu: f64) -> super::integrate::SlipLoad {
-        super::integrate::SlipLoad {
+    fn slip_load(&self, v: usize, n: Vec3, friction: Vec3, mu: f64) -> super::simulation::SlipLoad {
+        super::simulation::SlipLoad {
             node: v,
             reference: self.reference[&v],
             normal: n,
@@ -265,7 +265,7 @@ struct Frame<'a> {
 /// stick/slip state and the residual and constraint gaps are within
 /// tolerance.
 pub fn solve_with_contact(
-    sim: &mut super::integrate::Simulation,
+    sim: &mut super::simulation::Simulation,
     base: (&[super::solve::Filter], &[Vec3], &[Vec3]),
     pose: &ProbePose,
     mode: ContactMode,
@@ -363,7 +363,7 @@ pub fn solve_with_contact(
 /// skin holds has that surface on its own, within the sag of a triangle's
 /// chord. Returns how deep the point is below the surface (mm).
 fn passed_through(
-    sim: &super::integrate::Simulation,
+    sim: &super::simulation::Simulation,
     pose: &ProbePose,
     state: &ContactState,
 ) -> Option<f64> {
@@ -401,7 +401,7 @@ fn height_above(a: &Vec3, b: &Vec3, c: &Vec3, p: &Vec3) -> Option<f64> {
 
 /// Contact force on node `v`: what balances the rest (at equilibrium; at an
 /// iterate, the force the constraints exert).
-fn contact_force(sim: &super::integrate::Simulation, base_ext: &[Vec3], v: usize) -> Vec3 {
+fn contact_force(sim: &super::simulation::Simulation, base_ext: &[Vec3], v: usize) -> Vec3 {
     -(sim.internal_forces()[v] + base_ext[v])
 }
 
@@ -416,7 +416,7 @@ fn tangential(v: &Vec3, n: &Vec3) -> Vec3 {
 /// [`HYSTERESIS_AFTER`]). Returns
 /// whether any node entered or left contact or changed between stick and slip.
 fn update_active_set(
-    sim: &super::integrate::Simulation,
+    sim: &super::simulation::Simulation,
     frame: &Frame,
     state: &mut ContactState,
     iteration: usize,
@@ -572,7 +572,7 @@ fn update_active_set(
 /// force of that order and turns a Coulomb node's force out of its cone by
 /// the tilt (|f_t|/f_n off by about θ(1 + μ²)).
 fn drop_tilted_planes(
-    sim: &super::integrate::Simulation,
+    sim: &super::simulation::Simulation,
     frame: &Frame,
     state: &mut ContactState,
 ) -> bool {
@@ -599,7 +599,7 @@ fn max_tilt(mode: ContactMode) -> f64 {
 /// Sets the solver's constraints and loads for the current contact state:
 /// sticking nodes fixed at their anchors, sliding nodes held along the
 /// normal at their closest probe point with their friction force.
-fn apply_contact(sim: &mut super::integrate::Simulation, frame: &Frame, state: &mut ContactState) {
+fn apply_contact(sim: &mut super::simulation::Simulation, frame: &Frame, state: &mut ContactState) {
     sim.loads.filters.copy_from_slice(frame.base_filters);
     sim.loads.targets.copy_from_slice(frame.base_targets);
     sim.loads.f_ext.copy_from_slice(frame.base_ext);
@@ -656,7 +656,7 @@ fn apply_contact(sim: &mut super::integrate::Simulation, frame: &Frame, state: &
 }
 
 fn finish_report(
-    sim: &super::integrate::Simulation,
+    sim: &super::simulation::Simulation,
     base_ext: &[Vec3],
     pose: &ProbePose,
     state: &mut ContactState,

@@ -12,12 +12,12 @@ pub mod coarse;
 pub mod contact;
 pub mod corotation;
 pub mod hyperelastic;
-pub mod integrate;
 pub mod load_steps;
 pub mod material;
 mod newton;
 pub mod nodal_pressure;
 pub mod probe;
+pub mod simulation;
 pub mod solve;
 
 pub use corotation::{Corotation, RestElement, TangentKind};

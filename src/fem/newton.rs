@@ -2,10 +2,10 @@
 //! test, the linear solve of each iteration (conjugate gradients with the
 //! configured preconditioner, a factored matrix, or both) and the
 //! backtracking line search. The equations and the convergence rule are in
-//! [`super::integrate`]'s documentation.
+//! [`super::simulation`]'s documentation.
 
 use super::corotation::TangentKind;
-use super::integrate::{
+use super::simulation::{
     LinearSolver, NewtonStats, Simulation, MAX_REFINEMENTS, REFACTOR_AFTER, REFINE_BELOW,
 };
 use super::solve::{self, CgSettings, Filter, Preconditioner};
@@ -40,7 +40,7 @@ impl Simulation {
         let scale = reaction
             .sqrt()
             .max(external.sqrt())
-            .max(self.model.force_floor);
+            .max(self.body.force_floor);
         (free.sqrt(), scale)
     }
 
@@ -66,7 +66,7 @@ impl Simulation {
     /// The reported relative residual: 0 for a load-free state at round-off
     /// (there is no load to be relative to).
     fn relative(&self, norm: f64, scale: f64) -> f64 {
-        if scale <= self.model.force_floor && norm <= self.model.force_floor {
+        if scale <= self.body.force_floor && norm <= self.body.force_floor {
             0.0
         } else {
             norm / scale
@@ -75,7 +75,7 @@ impl Simulation {
 
     /// Whether `norm` is converged against `scale` (or at round-off).
     fn converged(&self, norm: f64, scale: f64) -> bool {
-        norm <= self.settings.rel_tol * scale || norm <= self.model.force_floor
+        norm <= self.settings.rel_tol * scale || norm <= self.body.force_floor
     }
 
     /// Solves for static equilibrium with the current constraints and loads.
@@ -142,7 +142,7 @@ impl Simulation {
             if !stats.rel_residual.is_finite() || !violation.is_finite() {
                 return Err(not_converged(context, it, stats.rel_residual));
             }
-            let settled = !changed && violation <= self.model.position_tol;
+            let settled = !changed && violation <= self.body.position_tol;
             if settled
                 && refinements < MAX_REFINEMENTS
                 && stats.rel_residual <= REFINE_BELOW * self.settings.rel_tol
@@ -153,7 +153,7 @@ impl Simulation {
                 violation = self.constraint_violation();
                 stats.rel_residual = self.relative(norm, scale);
             }
-            if settled && violation <= self.model.position_tol && self.converged(norm, scale) {
+            if settled && violation <= self.body.position_tol && self.converged(norm, scale) {
                 return Ok(stats);
             }
             if it == self.settings.max_iterations {

@@ -412,7 +412,7 @@ mod tests {
     use crate::fem::assembly::tests::cube_mesh;
     use crate::fem::corotation::TangentKind;
     use crate::fem::hyperelastic::Model;
-    use crate::fem::integrate::Simulation;
+    use crate::fem::simulation::Simulation;
     use crate::mesh::{Region, TetMesh};
 
     /// A 2×2×2-cell cube whose lower half is locking-free with Poisson's
@@ -462,10 +462,10 @@ mod tests {
     fn total_energy(sim: &mut Simulation) -> f64 {
         sim.evaluate_forces();
         let x = sim.positions().to_vec();
-        let elastic: f64 = (sim.model.tets.iter().zip(&sim.model.elements))
+        let elastic: f64 = (sim.body.tets.iter().zip(&sim.body.elements))
             .map(|(t, e)| e.energy(&t.map(|v| x[v])))
             .sum();
-        elastic + sim.model.pressure.as_ref().unwrap().energy()
+        elastic + sim.body.pressure.as_ref().unwrap().energy()
     }
 
     /// The forces are minus the gradient of the total energy, and the exact
@@ -542,7 +542,7 @@ mod tests {
         }
         sim.evaluate_forces();
         let j = a.determinant();
-        let p = sim.model.pressure.as_ref().unwrap();
+        let p = sim.body.pressure.as_ref().unwrap();
         let mut count = 0;
         for (_, r) in p.volume_ratios() {
             assert!((r - j).abs() < 1e-14, "{r} vs {j}");

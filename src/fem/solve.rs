@@ -9,7 +9,7 @@
 //! (block Jacobi). Dot products reduce over fixed-size chunks in a fixed
 //! order, so results do not depend on the thread count.
 //!
-//! The direct solver ([`crate::fem::integrate::LinearSolver::Direct`])
+//! The direct solver ([`crate::fem::simulation::LinearSolver::Direct`])
 //! solves the same filtered system with a sparse Cholesky factorisation
 //! (faer, AMD ordering); its symbolic analysis is done once for the fixed
 //! pattern and reused for every numeric factorisation.
@@ -109,7 +109,7 @@ pub struct CgWorkspace {
 /// `δλ = (K S x)_node − own (S x)_node`. A Coulomb
 /// friction force that follows the node's reaction `λ` changes by `G δλ`
 /// when the positions move, and `δλ = (K δx)_node` (see
-/// [`super::integrate::SlipLoad`]); with it the Newton matrix is the full
+/// [`super::simulation::SlipLoad`]); with it the Newton matrix is the full
 /// semi-smooth one.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Coupling {

@@ -12,12 +12,12 @@
 //! rest of the map keeps the neutral map's values, exactly what a pass over
 //! every texel would write there.
 
+use super::active_tiles::{TileMask, TilePlanner};
 use super::convolve::{ConvolveStage, Params, PassInfo};
 use super::map::GpuMap;
 use super::normals::{normal_texture, read_normals, NormalsStage};
 use super::raster::{vertices, RasterStage, RasterTargets, RasterVertex, SurfaceBuffers};
 use super::svd2::Svd2Stage;
-use super::tiles::{TileMask, TilePlanner};
 use super::{buffers, encoder, Context};
 use crate::error::Result;
 use crate::micro::{DisplacementMap, KernelModel};
@@ -133,7 +133,7 @@ impl MicroStage {
     }
 }
 
-/// How many tiles ([`super::tiles::TILE`]² texels) each stage of the last
+/// How many tiles ([`super::active_tiles::TILE`]² texels) each stage of the last
 /// frame ran on.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct FrameTiles {

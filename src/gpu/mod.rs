@@ -29,6 +29,7 @@
 //! handler and returned from the next [`Context::finish`] as [`Error::Gpu`];
 //! nothing here panics on a GPU failure.
 
+pub mod active_tiles;
 pub mod buffers;
 pub mod convolve;
 pub mod fit;
@@ -39,7 +40,6 @@ pub mod normals;
 pub mod raster;
 pub mod svd2;
 pub mod tiled;
-pub mod tiles;
 pub mod timing;
 pub mod vulkan;
 
@@ -473,7 +473,7 @@ pub(crate) fn dispatch(
 }
 
 /// Records one compute pass of `pipeline` over `tiles` tiles of a list
-/// (`tiles.rs`): one workgroup each, in rows of at most 65,535 (the
+/// (`active_tiles.rs`): one workgroup each, in rows of at most 65,535 (the
 /// per-dimension limit every adapter has); the shader finds its tile with
 /// `tile_index` (map.wgsl) and skips the indices past the list's count.
 pub(crate) fn dispatch_tiles(

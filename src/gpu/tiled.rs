@@ -6,7 +6,7 @@
 //! frame; the halo holds every texel the tile's outputs read, so a tile's
 //! result equals the untiled chain's there up to the f32 rounding of its
 //! UVs moved into the window. What a texel reads: the t pass reads the s
-//! pass's output up to the kernel's reach `R` ([`super::tiles::pass_reach`]),
+//! pass's output up to the kernel's reach `R` ([`super::active_tiles::pass_reach`]),
 //! the s pass reads the neutral map up to `R` and takes its parameters from
 //! the raster up to the dilation `d` away, and the normals read one texel
 //! around: a halo of `2R + d + 2` texels. A tile farther than `R + d + 2`
@@ -17,9 +17,9 @@
 //! Every chain runs the same incremental-frame rule as an untiled one
 //! ([`GpuMicro::set_incremental`]).
 
+use super::active_tiles::{pass_reach, triangle_tiles};
 use super::micro::{GpuMicro, UvWindow};
 use super::raster::vertices;
-use super::tiles::{pass_reach, triangle_tiles};
 use super::Context;
 use crate::error::{Error, Result};
 use crate::micro::tiled::{crop, crop_values, TiledMap};

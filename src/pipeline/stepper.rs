@@ -10,8 +10,8 @@ use crate::error::{Error, Result};
 use crate::export::FrameMetrics;
 use crate::fem::boundary::{rigid_motion_pins, Pin};
 use crate::fem::contact::{solve_with_contact, ContactState, ProbePose};
-use crate::fem::integrate::{Dynamics, Simulation};
 use crate::fem::load_steps::{load_steps, press_in, MAX_PROBE_STEP};
+use crate::fem::simulation::{Dynamics, Simulation};
 use crate::fem::solve::Filter;
 use crate::mesh::Vec3;
 use crate::scenario::Setup;
@@ -27,7 +27,7 @@ const MAX_PREDICTION_RATIO: f64 = 1.5;
 pub fn simulate(
     setup: &Setup,
     mut emit: impl FnMut(&FrameMetrics, &Stepper) -> Result<()>,
-) -> Result<crate::fem::integrate::Timings> {
+) -> Result<crate::fem::simulation::Timings> {
     let s = &setup.simulation;
     let mut stepper = Stepper::new(s, &setup.mesh);
     for _ in 0..=s.frames {

@@ -66,7 +66,7 @@ pub struct RenderSection {
     pub albedo: String,
     /// Facial region of the measured specular lobes (Graham et al. 2013 Tables 1–2):
     /// forehead, temple, cheek, nose, chin. Default `forehead`.
-    pub region: Region,
+    pub region: FacialRegion,
     /// Subject of the measured lobes, 1 or 2. Default 1.
     pub subject: usize,
     /// Explicit two-lobe microscale fit `[m1, m2, w]` in place of the region's.
@@ -113,7 +113,7 @@ impl Default for RenderSection {
             draw_probe: true,
             translucency: true,
             albedo: "procedural".into(),
-            region: Region::Forehead,
+            region: FacialRegion::Forehead,
             subject: 1,
             lobes: None,
             specular_intensity: 1.0,
@@ -129,7 +129,7 @@ impl Default for RenderSection {
 /// `render.region`: the facial region of the measured specular lobes.
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
-pub enum Region {
+pub enum FacialRegion {
     /// Forehead.
     Forehead,
     /// Temple.
@@ -142,15 +142,15 @@ pub enum Region {
     Chin,
 }
 
-impl Region {
+impl FacialRegion {
     /// The name of the lobe tables ([`region_lobes`]).
     pub fn name(self) -> &'static str {
         match self {
-            Region::Forehead => "forehead",
-            Region::Temple => "temple",
-            Region::Cheek => "cheek",
-            Region::Nose => "nose",
-            Region::Chin => "chin",
+            FacialRegion::Forehead => "forehead",
+            FacialRegion::Temple => "temple",
+            FacialRegion::Cheek => "cheek",
+            FacialRegion::Nose => "nose",
+            FacialRegion::Chin => "chin",
         }
     }
 }

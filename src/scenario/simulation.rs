@@ -14,8 +14,8 @@ use crate::error::{shown, Error, Result};
 use crate::fem::boundary::{
     BottomCondition, BoundaryConditions, Caliper, Keyframes, NodeSets, Prescribed, SideCondition,
 };
-use crate::fem::integrate::{Dynamics, LinearSolver, NewtonSettings};
 use crate::fem::probe::{ContactMode, Probe, ProbeShape};
+use crate::fem::simulation::{Dynamics, LinearSolver, NewtonSettings};
 use crate::fem::solve::CgSettings;
 use crate::fem::Material;
 use crate::mesh::TetMesh;

@@ -7,7 +7,7 @@ use skinpatch::fem::boundary::{
     BottomCondition, BoundaryConditions, Keyframes, NodeSets, SideCondition,
 };
 use skinpatch::fem::contact::{solve_with_contact, ContactMode, ContactState, Probe, ProbeShape};
-use skinpatch::fem::integrate::Simulation;
+use skinpatch::fem::simulation::Simulation;
 use skinpatch::fem::Material;
 use skinpatch::mesh::{io, TetMesh, Vec3};
 

@@ -410,3 +410,49 @@ fn crate_paths(code: &str) -> BTreeSet<String> {
     }
     out
 }
+
+/// ARCHITECTURE.md's shader table has a row for every file of `shaders/`,
+/// and each row's module file and test exist.
+#[test]
+fn the_shader_table_covers_every_shader() {
+    let arch = std::fs::read_to_string(root().join("ARCHITECTURE.md")).unwrap();
+    let rows: Vec<Vec<String>> = arch
+        .lines()
+        .filter(|l| l.starts_with("| `") && l.contains(".wgsl`"))
+        .map(|l| {
+            l.trim_matches('|')
+                .split(" | ")
+                .map(|c| c.trim().to_string())
+                .collect()
+        })
+        .collect();
+    let mut shaders: Vec<String> = std::fs::read_dir(root().join("shaders"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".wgsl"))
+        .collect();
+    shaders.sort();
+    let mut listed: Vec<String> = rows
+        .iter()
+        .map(|r| r[0].trim_matches('`').to_string())
+        .collect();
+    listed.sort();
+    assert_eq!(listed, shaders, "ARCHITECTURE.md's shader table");
+    for row in &rows {
+        // `gpu::raster` → src/gpu/raster.rs
+        let module = row[1].split('`').nth(1).unwrap();
+        let file = root().join("src").join(module.replace("::", "/") + ".rs");
+        assert!(file.exists(), "{}: no {}", row[0], file.display());
+        // `gpu::raster_matches_the_cpu_reference` → fn … in tests/main/gpu.rs
+        let test = row[3].split('`').nth(1).unwrap();
+        let (topic, name) = test.split_once("::").unwrap();
+        let source = std::fs::read_to_string(root().join(format!("tests/main/{topic}.rs")))
+            .unwrap_or_else(|e| panic!("{}: {topic}: {e}", row[0]));
+        assert!(
+            name == "*" || source.contains(&format!("fn {name}(")),
+            "{}: no test {test}",
+            row[0]
+        );
+    }
+}

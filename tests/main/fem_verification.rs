@@ -8,7 +8,7 @@ use nalgebra::{Matrix3, Rotation3, Vector3};
 use skinpatch::fem::boundary::{
     BottomCondition, BoundaryConditions, Caliper, Keyframes, NodeSets, SideCondition,
 };
-use skinpatch::fem::integrate::Simulation;
+use skinpatch::fem::simulation::Simulation;
 use skinpatch::fem::solve::Filter;
 use skinpatch::fem::{Corotation, Material, Model, TangentKind, Volumetric};
 use skinpatch::mesh::Vec3;
@@ -453,7 +453,7 @@ fn static_solves_are_deterministic() {
 /// without overshoot when heavily mass-damped.
 #[test]
 fn implicit_euler_has_inertia_and_damping() {
-    use skinpatch::fem::integrate::Dynamics;
+    use skinpatch::fem::simulation::Dynamics;
     let mesh = common::one_tet();
     let run = |alpha: f64| -> (f64, f64) {
         let mut sim = Simulation::new(&mesh, &[skin(1)]);
@@ -465,7 +465,7 @@ fn implicit_euler_has_inertia_and_damping() {
         // Period of the apex's vertical oscillation: 2π √(m/k).
         let k = sim.stiffness(TangentKind::Exact).clone();
         let kzz = nalgebra::DMatrix::from(&k)[(3 * apex + 2, 3 * apex + 2)];
-        let period = 2.0 * std::f64::consts::PI * (sim.model().mass[apex] / kzz).sqrt();
+        let period = 2.0 * std::f64::consts::PI * (sim.body().mass[apex] / kzz).sqrt();
         sim.dynamics = Some(Dynamics {
             dt: period / 100.0,
             alpha,

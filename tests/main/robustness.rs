@@ -301,8 +301,8 @@ fn physically_meaningless_values_are_refused() {
 /// purpose, through the library.
 #[test]
 fn a_load_free_state_converges_at_once_for_any_poisson_ratio() {
-    use skinpatch::fem::integrate::Simulation;
     use skinpatch::fem::material::Material;
+    use skinpatch::fem::simulation::Simulation;
     let mesh = skinpatch::mesh::io::read_tetgen(&root().join("meshes/patch_3k")).unwrap();
     for nu in [0.0, 0.45, 0.49, 0.499, 0.4999] {
         let material = Material {

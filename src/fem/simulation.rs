@@ -239,7 +239,7 @@ impl SlipLoad {
     }
 }
 
-/// The simulated patch: the model (rest data), the state, the loads and
+/// The simulated patch: the body (rest data), the state, the loads and
 /// constraints, and the solver's workspace, each a group of its own; the
 /// pipeline reads through accessors and writes through methods.
 #[derive(Clone, Debug)]
@@ -250,15 +250,15 @@ pub struct Simulation {
     pub timings: Timings,
     /// Implicit-Euler dynamics; `None` for quasi-static solves.
     pub dynamics: Option<Dynamics>,
-    pub(super) model: Model,
+    pub(super) body: Body,
     pub(super) state: State,
     pub(super) loads: Loads,
     pub(super) work: Workspace,
 }
 
-/// What the mesh and the materials fix.
+/// What the mesh and the materials fix: the discretised body.
 #[derive(Clone, Debug)]
-pub struct Model {
+pub struct Body {
     /// Tets (positively oriented at rest).
     pub tets: Vec<[usize; 4]>,
     /// Per-tet rest data.
@@ -392,7 +392,7 @@ impl Simulation {
             settings: NewtonSettings::default(),
             timings: Timings::default(),
             dynamics: None,
-            model: Model {
+            body: Body {
                 tets: mesh.tets.clone(),
                 elements,
                 mass,
@@ -444,17 +444,17 @@ impl Simulation {
     /// elements, the lumped masses and the force floor follow the new
     /// moduli, and the preconditioners are rebuilt at the next solve.
     pub fn set_materials(&mut self, mesh: &TetMesh, tet_material: &[Material]) {
-        (self.model.elements, self.model.mass, self.model.force_floor) =
+        (self.body.elements, self.body.mass, self.body.force_floor) =
             material_data(mesh, tet_material);
-        let had_pressure = self.model.pressure.is_some();
-        self.model.pressure = NodalPressure::new(
+        let had_pressure = self.body.pressure.is_some();
+        self.body.pressure = NodalPressure::new(
             &mesh.tets,
-            &self.model.elements,
+            &self.body.elements,
             tet_material,
             mesh.num_vertices(),
         );
-        if had_pressure || self.model.pressure.is_some() {
-            self.work.assembly = pattern(mesh, self.model.pressure.as_ref());
+        if had_pressure || self.body.pressure.is_some() {
+            self.work.assembly = pattern(mesh, self.body.pressure.as_ref());
             self.work.element_tangent_kind = None;
         }
         self.work.factor = Factor::default();
@@ -476,9 +476,9 @@ impl Simulation {
         &self.state.v
     }
 
-    /// The model: tets, rest elements and lumped masses.
-    pub fn model(&self) -> &Model {
-        &self.model
+    /// The discretised body: tets, rest elements and lumped masses.
+    pub fn body(&self) -> &Body {
+        &self.body
     }
 
     /// Constraints and loads.
@@ -505,7 +505,7 @@ impl Simulation {
     /// How close (mm) a constrained node must be to its target for a solve
     /// to converge: 1e-7 of the mesh diagonal.
     pub fn position_tol(&self) -> f64 {
-        self.model.position_tol
+        self.body.position_tol
     }
 
     /// Internal elastic forces at the last evaluation (N).
@@ -520,8 +520,8 @@ impl Simulation {
 
     /// Deformation gradient of tet `t` at the current positions.
     pub fn deformation_gradient(&self, t: usize) -> Matrix3<f64> {
-        let x = self.model.tets[t].map(|v| self.state.x[v]);
-        self.model.elements[t].deformation_gradient(&x)
+        let x = self.body.tets[t].map(|v| self.state.x[v]);
+        self.body.elements[t].deformation_gradient(&x)
     }
 
     /// Inverted tets at the current positions (det F ≤ 0, or not finite)
@@ -529,7 +529,7 @@ impl Simulation {
     /// position is not finite). Exact for any thread count: the count is an
     /// integer sum and the minimum does not depend on the order.
     pub fn inversion(&self) -> Inversion {
-        let (x, tets, elements) = (&self.state.x, &self.model.tets, &self.model.elements);
+        let (x, tets, elements) = (&self.state.x, &self.body.tets, &self.body.elements);
         let (inverted, worst) = (0..tets.len())
             .into_par_iter()
             .map(|t| {
@@ -553,7 +553,7 @@ impl Simulation {
     /// Evaluates rotations and internal forces at the current positions.
     pub fn evaluate_forces(&mut self) {
         let start = std::time::Instant::now();
-        let (x, tets, elements) = (&self.state.x, &self.model.tets, &self.model.elements);
+        let (x, tets, elements) = (&self.state.x, &self.body.tets, &self.body.elements);
         self.work
             .corotations
             .par_iter_mut()
@@ -565,10 +565,10 @@ impl Simulation {
                 *c = Corotation::near(&e.deformation_gradient(&xe), &c.v);
                 *f = e.forces_from(c);
             });
-        if let Some(p) = self.model.pressure.as_mut() {
+        if let Some(p) = self.body.pressure.as_mut() {
             p.add_forces(
-                &self.model.tets,
-                &self.model.elements,
+                &self.body.tets,
+                &self.body.elements,
                 &self.state.x,
                 &mut self.work.tet_forces,
             );
@@ -582,8 +582,8 @@ impl Simulation {
             self.work.f_elastic.copy_from_slice(&self.work.f_int);
             for i in 0..self.work.f_int.len() {
                 let dx = self.state.x[i] - self.state.x_n[i];
-                let inertia = (dx - self.state.v[i] * h) * (self.model.mass[i] / (h * h))
-                    + dx * (d.alpha * self.model.mass[i] / h);
+                let inertia = (dx - self.state.v[i] * h) * (self.body.mass[i] / (h * h))
+                    + dx * (d.alpha * self.body.mass[i] / h);
                 self.work.f_int[i] =
                     self.work.f_elastic[i] * (1.0 + k) - self.state.f_elastic_n[i] * k - inertia;
             }
@@ -640,7 +640,7 @@ impl Simulation {
     pub(super) fn assemble_tangent(&mut self) {
         let start = std::time::Instant::now();
         let (elements, corotations, kind) = (
-            &self.model.elements,
+            &self.body.elements,
             &self.work.corotations,
             self.work.tangent_kind,
         );
@@ -652,7 +652,7 @@ impl Simulation {
             .par_iter_mut()
             .enumerate()
             .for_each(|(t, out)| *out = elements[t].tangent(&corotations[t], kind).upper_blocks(k));
-        if let (Some(p), TangentKind::Exact) = (&self.model.pressure, kind) {
+        if let (Some(p), TangentKind::Exact) = (&self.body.pressure, kind) {
             p.add_geometric_blocks(elements, k, &mut self.work.tet_blocks);
         }
         let blocks = &self.work.tet_blocks;
@@ -663,17 +663,17 @@ impl Simulation {
                 blocks[t][UPPER[b][a]].transpose()
             }
         });
-        if let Some(p) = self.model.pressure.as_mut() {
+        if let Some(p) = self.body.pressure.as_mut() {
             p.add_coupling(
-                &self.model.tets,
-                &self.model.elements,
+                &self.body.tets,
+                &self.body.elements,
                 &mut self.work.assembly,
                 k,
             );
         }
         if let Some(d) = self.dynamics {
             let c = 1.0 / (d.dt * d.dt) + d.alpha / d.dt;
-            let diagonal: Vec<f64> = self.model.mass.iter().map(|m| m * c).collect();
+            let diagonal: Vec<f64> = self.body.mass.iter().map(|m| m * c).collect();
             self.work.assembly.add_to_diagonal(&diagonal);
         }
         self.work.element_tangent.clear();
@@ -737,7 +737,7 @@ impl Simulation {
     /// (N/mm): the force it takes to move the node alone by 1 mm.
     pub fn rest_node_stiffness(&self) -> Vec<f64> {
         let mut k = vec![0.0; self.num_nodes()];
-        for (tet, e) in self.model.tets.iter().zip(&self.model.elements) {
+        for (tet, e) in self.body.tets.iter().zip(&self.body.elements) {
             for (a, &v) in tet.iter().enumerate() {
                 k[v] += e.k0(a, a).trace() / 3.0;
             }
