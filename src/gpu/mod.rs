@@ -284,7 +284,11 @@ impl Context {
 fn select_adapter(name: Option<&str>) -> Result<wgpu::Adapter> {
     let all = pollster::block_on(instance().enumerate_adapters(wgpu::Backends::VULKAN));
     if all.is_empty() {
-        return Err(Error::Gpu(vulkan::explain(&vulkan::look())));
+        let why = vulkan::explain(&vulkan::look());
+        return Err(Error::Gpu(match name.filter(|n| !n.is_empty()) {
+            Some(wanted) => format!("{ADAPTER_VAR}={wanted:?} matches no adapter: {why}"),
+            None => why,
+        }));
     }
     let names: Vec<String> = all.iter().map(|a| a.get_info().name).collect();
     match name.filter(|n| !n.is_empty()) {
