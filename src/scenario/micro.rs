@@ -14,9 +14,10 @@ use crate::micro::{DisplacementMap, Edge, KernelModel, PiecewiseLinear};
 /// How far the default height range of a run's PNG maps reaches beyond the
 /// neutral map's, as a fraction of the neutral map's span on each side.
 /// Sharpening where the skin compresses deepens the grooves and raises the
-/// ridges: on the main job (`examples/press.toml`) the deformed maps reach
-/// 0.20 of the neutral span above its highest texel and 0.18 below its
-/// lowest.
+/// ridges: on the main job as first measured (`examples/press.toml` with the
+/// corotational element and μ = 0.8, its strongest compression) the
+/// deformed maps reached 0.20 of the neutral span above its highest texel
+/// and 0.18 below its lowest.
 pub const HEIGHT_RANGE_MARGIN: f64 = 0.25;
 
 /// `[microstructure]`.
