@@ -167,13 +167,6 @@ pub struct FitReport {
     pub device: Option<String>,
 }
 
-/// Whether the fit counts on the GPU: a hardware adapter only (a software
-/// one such as lavapipe counts slower than the CPU path), unless
-/// `SKINPATCH_REQUIRE_GPU=1` asks for the GPU.
-fn fit_on_gpu(ctx: &skinpatch::gpu::Context) -> bool {
-    ctx.info.device_type != wgpu::DeviceType::Cpu || skinpatch::gpu::gpu_required()
-}
-
 /// Smallest side (texels) of a map `fit` reads: below it a map has too
 /// few normals for a histogram.
 const MIN_FIT_SIDE: usize = 8;
@@ -222,7 +215,7 @@ pub fn fit(
                 ),
             ));
         }
-        let ctx = skinpatch::gpu::acquire()?.filter(fit_on_gpu);
+        let ctx = skinpatch::gpu::acquire()?.filter(skinpatch::gpu::worth_using);
         device = Some(match &ctx {
             Some(c) => format!("GPU: {}", c.describe()),
             None => "CPU".to_string(),

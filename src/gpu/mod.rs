@@ -379,6 +379,15 @@ fn required(e: Error) -> Error {
     Error::Gpu(format!("{REQUIRE_VAR}=1, but {reason}"))
 }
 
+/// Whether a stage that also has a CPU path should run on `ctx`: on a
+/// hardware adapter, yes; on a software one (lavapipe: shaders compiled for
+/// the same CPU cores, slower than the hand-written CPU paths — 2.8× for
+/// the microstructure chain at 1024², 3.4× for the fit's counting,
+/// docs/PERFORMANCE.md) only when `SKINPATCH_REQUIRE_GPU` asks for the GPU.
+pub fn worth_using(ctx: &Context) -> bool {
+    ctx.info.device_type != wgpu::DeviceType::Cpu || gpu_required()
+}
+
 /// Whether `SKINPATCH_REQUIRE_GPU` asks for a GPU (`1`, `true` or `yes`).
 pub fn gpu_required() -> bool {
     std::env::var(REQUIRE_VAR)

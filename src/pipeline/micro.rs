@@ -46,8 +46,11 @@ pub(crate) enum MicroEngine {
 
 impl MicroEngine {
     /// The GPU chain when an adapter is usable, else the CPU (an error
-    /// instead when `SKINPATCH_REQUIRE_GPU=1`). A tiled map needs the GPU.
-    pub(crate) fn new(micro: &MicroSetup) -> Result<MicroEngine> {
+    /// instead when `SKINPATCH_REQUIRE_GPU=1`). A tiled map needs the GPU;
+    /// so does a run that renders (`renders`: the renderer reads the
+    /// chain's normals on the device). Otherwise a software adapter gives
+    /// way to the faster CPU path ([`crate::gpu::worth_using`]).
+    pub(crate) fn new(micro: &MicroSetup, renders: bool) -> Result<MicroEngine> {
         if let NeutralMap::Tiled(map) = &micro.neutral {
             let ctx = crate::gpu::acquire()?.ok_or_else(|| {
                 Error::Gpu(format!(
@@ -70,6 +73,13 @@ impl MicroEngine {
             return Ok(MicroEngine::Cpu);
         };
         let name = ctx.describe();
+        if !renders && !crate::gpu::worth_using(&ctx) {
+            log::info!(
+                "microstructure stages on the CPU: {name} is a software adapter, slower than \
+                 the CPU path (SKINPATCH_REQUIRE_GPU=1 uses it)"
+            );
+            return Ok(MicroEngine::Cpu);
+        }
         let built = gpu_chain(ctx, micro);
         Ok(match crate::gpu::or_cpu(built)? {
             Some(chain) => {
@@ -216,7 +226,7 @@ impl MapDeformer {
             ));
         }
         Ok(MapDeformer {
-            engine: MicroEngine::new(micro)?,
+            engine: MicroEngine::new(micro, false)?,
         })
     }
 

@@ -78,7 +78,7 @@ impl<'a, R: MetricsRow + Copy> FrameOutputs<'a, R> {
         let mut engines = Vec::new();
         if let Some(micro) = spec.outputs.micro.as_ref() {
             for _ in &pieces {
-                engines.push(MicroEngine::new(micro)?);
+                engines.push(MicroEngine::new(micro, spec.outputs.render.is_some())?);
             }
         }
         let dir = spec.outputs.dir.as_path();

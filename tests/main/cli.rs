@@ -1129,12 +1129,40 @@ fn run_micro_with_env(dir: &Path, env: &[(&str, &str)]) -> (std::path::PathBuf, 
     })
 }
 
+/// A software adapter (lavapipe) is slower than the CPU path, so a run
+/// that does not render takes the CPU path there unless
+/// `SKINPATCH_REQUIRE_GPU=1`; a hardware adapter keeps the chain.
+#[test]
+fn a_software_adapter_gives_way_to_the_cpu_path() {
+    let Some(ctx) = common::context() else { return };
+    let software = ctx.info.device_type == wgpu::DeviceType::Cpu;
+    drop(ctx);
+    let dir = tempfile::tempdir().unwrap();
+    let (_, o) = run_micro_with_env(dir.path(), &[]);
+    assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    let stdout = text(&o.stdout);
+    if software {
+        assert!(
+            stdout.contains("microstructure stages: CPU reference"),
+            "{stdout}"
+        );
+    } else {
+        assert!(stdout.contains("microstructure stages: GPU: "), "{stdout}");
+    }
+    let (_, o) = run_micro_with_env(dir.path(), &[("SKINPATCH_REQUIRE_GPU", "1")]);
+    assert!(o.status.success(), "stderr: {}", text(&o.stderr));
+    let stdout = text(&o.stdout);
+    assert!(stdout.contains("microstructure stages: GPU: "), "{stdout}");
+}
+
 #[test]
 fn gpu_and_cpu_runs_write_the_same_maps_and_say_where_they_ran() {
     use skinpatch::micro::io::{read_png16, MapDefaults, TexelSize};
     let required = std::env::var("SKINPATCH_REQUIRE_GPU").is_ok_and(|v| v == "1");
     let gpu_dir = tempfile::tempdir().unwrap();
-    let (gpu_out, o) = run_micro_with_env(gpu_dir.path(), &[]);
+    // Required, the GPU runs even where it is a software adapter.
+    let require = [("SKINPATCH_REQUIRE_GPU", if required { "1" } else { "0" })];
+    let (gpu_out, o) = run_micro_with_env(gpu_dir.path(), &require);
     assert!(o.status.success(), "stderr: {}", text(&o.stderr));
     let gpu_used = text(&o.stdout).contains("microstructure stages: GPU: ");
     assert!(gpu_used || !required, "stdout: {}", text(&o.stdout));
