@@ -194,6 +194,16 @@ class Run:
 def neutral_map(scenario: Scenario) -> npt.NDArray[np.float32]:
     """The scenario's neutral microstructure map, shape (height, width), µm."""
 
+def fit(samples_path: _Path) -> dict[str, Any]:
+    """Fits kernel parameters and a kernel model to a samples file, as `skinpatch fit` does.
+
+    Returns `rows` (per sample and point: source, r, alpha, sigma_um; fitted
+    samples also axis, range, distance, alpha_valley, sigma_valley_um,
+    seconds), `model` (alpha, sigma_compression_um, sigma_stretch_um as
+    lists of (r, value) knots), `written` (the kernel file or None) and
+    `device` (where candidates were counted, or None).
+    """
+
 def read_mesh(path: _Path) -> Mesh:
     """Reads a TetGen .node, Gmsh .msh, .vtu or legacy .vtk tet mesh."""
 

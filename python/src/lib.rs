@@ -1,11 +1,12 @@
 //! The Python face of skinpatch (the extension module `skinpatch._native`,
 //! re-exported by the `skinpatch` package): scenarios, runs stepped from
-//! Python, each frame's fields as numpy arrays, the microstructure maps and
-//! mesh I/O. Long work (loading, solving, deforming maps, writing) runs
+//! Python, each frame's fields as numpy arrays, the microstructure maps,
+//! kernel fitting and mesh I/O. Long work (loading, solving, deforming maps, writing) runs
 //! without the GIL.
 
 mod arrays;
 mod errors;
+mod fit;
 mod mesh;
 mod run;
 mod scenario;
@@ -48,6 +49,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<run::Frame>()?;
     m.add_class::<mesh::Mesh>()?;
     m.add_function(wrap_pyfunction!(neutral_map, m)?)?;
+    m.add_function(wrap_pyfunction!(fit::fit, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::read_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::write_vtu, m)?)?;
     Ok(())

@@ -3,6 +3,7 @@
 import csv
 import math
 import os
+import pathlib
 import signal
 import threading
 
@@ -285,3 +286,39 @@ def test_mesh_io_round_trips(root, tmp_path):
         bad = tmp_path / "bad.vtu"
         bad.write_text("<VTKFile>")
         skinpatch.read_mesh(bad)
+
+
+def test_fit_finds_the_kernel_the_example_maps_were_made_with(root, tmp_path):
+    """`skinpatch.fit` is `skinpatch fit`: the shipped samples, made with the
+    forehead kernel at r = 1.15 and 0.85, give that kernel back (the values
+    examples/fit/samples.toml states) and the same kernel file as the binary."""
+    import shutil
+    import subprocess
+
+    from conftest import binary
+
+    for name in ["neutral.png", "stretched_115.png", "compressed_085.png"]:
+        shutil.copy(root / "examples/fit" / name, tmp_path / name)
+    text = (root / "examples/fit/samples.toml").read_text()
+    text = text.replace('output = "../../out/fit/kernel.toml"', 'output = "kernel.toml"')
+    (tmp_path / "samples.toml").write_text(text)
+    report = skinpatch.fit(tmp_path / "samples.toml")
+    rows = report["rows"]
+    assert [(r["r"], r["axis"]) for r in rows] == [(1.15, "u"), (0.85, "u")]
+    assert abs(rows[0]["alpha"] - 0.463) <= 0.011 and abs(rows[0]["sigma_um"] - 17.43) <= 0.51
+    assert abs(rows[1]["alpha"] + 0.710) <= 0.011 and abs(rows[1]["sigma_um"] - 13.03) <= 0.51
+    assert report["model"]["alpha"][0] != report["model"]["alpha"][-1]
+    written = pathlib.Path(report["written"])
+    python_kernel = written.read_text()
+    subprocess.run([str(binary()), "fit", str(tmp_path / "samples.toml")], check=True,
+                   capture_output=True)
+    assert written.read_text() == python_kernel, "the binary writes the same kernel file"
+
+
+def test_fit_errors_name_the_key(tmp_path):
+    (tmp_path / "samples.toml").write_text("[[point]]\nr = 50.0\nalpha = 0.1\nsigma_um = 3.0\n")
+    with pytest.raises(skinpatch.ScenarioError) as e:
+        skinpatch.fit(tmp_path / "samples.toml")
+    assert e.value.key == "point[0].r", e.value
+    with pytest.raises(FileNotFoundError):
+        skinpatch.fit(tmp_path / "missing.toml")

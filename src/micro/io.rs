@@ -18,6 +18,9 @@
 //!
 //! Rows are written top to bottom with v decreasing, so the image shows v up
 //! like the strain maps. Writes are atomic (temporary file, then rename).
+//!
+//! Target normal histograms for `fit` are CSV files of weights
+//! ([`read_histogram`]).
 
 use std::path::Path;
 
@@ -498,4 +501,63 @@ pub fn write_normal_exr(path: &Path, normals: &[[f32; 3]], map: &DisplacementMap
     let (key, value) = exr_metadata(map_entries(map).into_iter().chain([content]));
     attributes.other.insert(key, value);
     write_exr_channels(path, (width, height), attributes, channels)
+}
+
+/// Reads a target histogram: `bins` lines of `bins` comma-separated
+/// non-negative weights, normalised to sum 1.
+pub fn read_histogram(
+    path: &Path,
+    hist: crate::micro::fit::HistogramSettings,
+) -> Result<crate::micro::NormalHistogram> {
+    let text = crate::mesh::io::read_input_text(path)?;
+    let bad = |line: usize, message: String| Error::Parse {
+        path: path.to_path_buf(),
+        line,
+        message,
+    };
+    let rows: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
+    if rows.len() != hist.bins {
+        return Err(bad(
+            0,
+            format!(
+                "expected {} rows of weights, found {}",
+                hist.bins,
+                rows.len()
+            ),
+        ));
+    }
+    let mut cells = Vec::with_capacity(hist.bins * hist.bins);
+    for (k, row) in rows.iter().enumerate() {
+        let values: Vec<&str> = row.split(',').collect();
+        if values.len() != hist.bins {
+            return Err(bad(
+                k + 1,
+                format!("expected {} weights, found {}", hist.bins, values.len()),
+            ));
+        }
+        for v in values {
+            let w: f64 = v
+                .trim()
+                .parse()
+                .ok()
+                .filter(|w: &f64| w.is_finite() && *w >= 0.0)
+                .ok_or_else(|| {
+                    bad(
+                        k + 1,
+                        format!("{:?} is not a non-negative number", v.trim()),
+                    )
+                })?;
+            cells.push(w);
+        }
+    }
+    let total: f64 = cells.iter().sum();
+    if total <= 0.0 {
+        return Err(bad(0, "the histogram is empty (all weights 0)".into()));
+    }
+    cells.iter_mut().for_each(|c| *c /= total);
+    Ok(crate::micro::NormalHistogram {
+        bins: hist.bins,
+        range: hist.range,
+        cells,
+    })
 }

@@ -11,12 +11,15 @@
 //! * `render`: the render engine of a run (frames, differences, MP4);
 //! * [`plan`]: the output-size estimate checked before anything is written;
 //! * `vtkhdf`: all frames in one VTKHDF file (feature `vtkhdf`);
-//! * [`synth`]: `skinpatch synth`, microstructure synthesis from an exemplar.
+//! * [`synth`]: `skinpatch synth`, microstructure synthesis from an exemplar;
+//! * [`fit`](mod@fit): `skinpatch fit`, kernel parameters and a kernel model
+//!   fitted to deformed maps.
 //!
 //! The microstructure stages run on the GPU when an adapter exists and on
 //! their CPU references otherwise (see [`crate::gpu::acquire`]); both write
 //! the same files.
 
+pub mod fit;
 mod micro;
 mod outputs;
 pub mod plan;

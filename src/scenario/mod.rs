@@ -22,6 +22,7 @@ use crate::mesh::generate::PatchSpec;
 use crate::mesh::{io, TetMesh};
 
 mod arrays;
+pub mod fit;
 mod mesh;
 mod micro;
 pub mod reference;

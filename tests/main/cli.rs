@@ -9,17 +9,7 @@ use std::process::{Command, Output};
 use common::root;
 use skinpatch::mesh::io;
 
-fn skinpatch(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_skinpatch"))
-        .args(args)
-        .current_dir(root())
-        .output()
-        .expect("the skinpatch binary runs")
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
+use common::{skinpatch, text};
 
 #[test]
 fn run_writes_mesh_frames_and_metrics() {

@@ -5,6 +5,35 @@ use std::process::{Command, Output};
 
 use skinpatch::mesh::generate::{LayerSpec, PatchSpec, RefineZone, ZoneShape};
 
+/// The `skinpatch` binary as a command, started in the crate's folder.
+pub fn binary() -> Command {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_skinpatch"));
+    command.current_dir(root());
+    command
+}
+
+/// Runs the binary with `args` in the crate's folder.
+pub fn skinpatch(args: &[&str]) -> Output {
+    binary()
+        .args(args)
+        .output()
+        .expect("the skinpatch binary runs")
+}
+
+/// Runs the binary with `args` in `dir`.
+pub fn skinpatch_in(dir: &Path, args: &[&str]) -> Output {
+    binary()
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("the skinpatch binary runs")
+}
+
+/// A command's output bytes as text.
+pub fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
 /// Folder of the crate, for shipped meshes and fixtures.
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -222,7 +251,7 @@ pub fn run_press_small_configured(
     let path = dir.join("scenario.toml");
     std::fs::write(&path, scenario).unwrap();
     let out = dir.join("out");
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_skinpatch"));
+    let mut cmd = binary();
     cmd.args([
         "run",
         path.to_str().unwrap(),

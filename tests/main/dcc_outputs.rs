@@ -8,9 +8,7 @@ use crate::common;
 
 use skinpatch::micro::io::{read_map, MapDefaults, TexelSize};
 
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
+use crate::common::text;
 
 fn defaults() -> MapDefaults {
     MapDefaults {

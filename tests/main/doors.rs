@@ -180,13 +180,7 @@ fn crc32(bytes: &[u8]) -> u32 {
     !crc
 }
 
-fn skinpatch(args: &[&str]) -> std::process::Output {
-    std::process::Command::new(env!("CARGO_BIN_EXE_skinpatch"))
-        .args(args)
-        .current_dir(crate::common::root())
-        .output()
-        .expect("the skinpatch binary runs")
-}
+use crate::common::skinpatch;
 
 /// `tiles join` of an index claiming a billion texels a side, and `bench
 /// micro` at a side of 10⁸, are refused with a message instead of aborting
@@ -448,7 +442,7 @@ fn fit_refuses_points_out_of_range_and_tiny_maps() {
 fn a_render_refused_for_lack_of_a_gpu_leaves_no_folders() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_skinpatch"))
+    let o = crate::common::binary()
         .current_dir(crate::common::root())
         .args(["run", "-q", "tests/fixtures/render_small.toml", "-o"])
         .arg(&out)

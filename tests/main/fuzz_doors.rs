@@ -532,14 +532,7 @@ proptest! {
     }
 }
 
-/// Runs the binary in `dir`.
-fn skinpatch_in(dir: &Path, args: &[&str]) -> std::process::Output {
-    std::process::Command::new(env!("CARGO_BIN_EXE_skinpatch"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("the skinpatch binary runs")
-}
+use crate::common::skinpatch_in;
 
 /// Every file under `base` outside its `out` folder, with its bytes.
 fn snapshot(base: &Path) -> std::collections::BTreeMap<PathBuf, Vec<u8>> {

@@ -746,7 +746,7 @@ fn samples_at_the_alpha_clamp_are_named() {
         .collect();
     let samples = dir.path().join("samples.toml");
     std::fs::write(&samples, file).unwrap();
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_skinpatch"))
+    let o = crate::common::binary()
         .args(["fit", samples.to_str().unwrap()])
         .output()
         .unwrap();
@@ -845,7 +845,7 @@ fn the_fit_example_finds_the_kernel_it_was_made_with() {
         let entry = entry.unwrap();
         std::fs::copy(entry.path(), fit_dir.join(entry.file_name())).unwrap();
     }
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_skinpatch"))
+    let o = crate::common::binary()
         .args(["fit", "examples/fit/samples.toml"])
         .current_dir(dir.path())
         .env("XDG_RUNTIME_DIR", std::env::temp_dir())
@@ -887,7 +887,7 @@ fn the_fit_example_finds_the_kernel_it_was_made_with() {
         text.replace("height_unit_um = 120.0", "height_unit_um = -1"),
     )
     .unwrap();
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_skinpatch"))
+    let o = crate::common::binary()
         .args(["fit", "examples/fit/samples.toml"])
         .current_dir(dir.path())
         .output()

@@ -733,7 +733,7 @@ fn an_interrupted_run_leaves_only_complete_frames() {
     let scenario = dir.path().join("long.toml");
     std::fs::write(&scenario, text).unwrap();
     let out = dir.path().join("out");
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_skinpatch"))
+    let mut child = crate::common::binary()
         .args([
             "run",
             scenario.to_str().unwrap(),
@@ -838,7 +838,7 @@ fn missing_ffmpeg_is_a_clear_error() {
     let scenario = dir.path().join("mp4.toml");
     std::fs::write(&scenario, text).unwrap();
     let out = dir.path().join("out");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_skinpatch"))
+    let o = crate::common::binary()
         .args([
             "run",
             scenario.to_str().unwrap(),
@@ -866,7 +866,7 @@ fn missing_ffmpeg_is_a_clear_error() {
 #[test]
 fn bench_render_reports_timings() {
     let Some(_ctx) = context() else { return };
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_skinpatch"))
+    let o = crate::common::binary()
         .args([
             "bench",
             "render",

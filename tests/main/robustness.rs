@@ -6,13 +6,11 @@
 use crate::common;
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 use common::root;
 
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
+use crate::common::text;
 
 /// Writes `body` (with an `[output]` section pointing at `out`) to a
 /// scenario file in `dir` and runs it.
@@ -28,7 +26,7 @@ fn run_scenario_with(dir: &Path, body: &str, out: &Path, env: &[(&str, &str)]) -
         format!("{body}\n[output]\ndir = {:?}\n", out.to_str().unwrap()),
     )
     .unwrap();
-    Command::new(env!("CARGO_BIN_EXE_skinpatch"))
+    crate::common::binary()
         .args(["run", scenario.to_str().unwrap()])
         .envs(env.iter().copied())
         .current_dir(root())

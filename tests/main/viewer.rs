@@ -13,9 +13,7 @@ use std::process::Command;
 use skinpatch::render::camera::Camera;
 use skinpatch::scenario::Setup;
 
-fn skinpatch() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_skinpatch"))
-}
+use common::binary as skinpatch;
 
 fn xvfb_run() -> Option<Command> {
     let found = Command::new("xvfb-run")

@@ -1,0 +1,253 @@
+//! A `skinpatch fit` samples file ([`FitSamples`]) validated into a
+//! [`FitSetup`]: every range checked, the kernel file refused where it would
+//! land on an input, the neutral map read and each sample's target
+//! histogram made (from its deformed map, or read from its histogram file),
+//! so that the search ([`crate::pipeline::fit`]) only ever sees checked data.
+
+use std::path::{Path, PathBuf};
+
+use super::{FitPoint, FitSample, FitSamples};
+use crate::error::{shown, Error, Result};
+use crate::micro::fit::{auto_range, resample, Axis, HistogramSettings};
+use crate::micro::io::{read_histogram, read_map, MapDefaults, TexelSize};
+use crate::micro::normals::HISTOGRAM_BINS;
+use crate::micro::{DisplacementMap, Edge, NormalHistogram};
+
+/// Smallest side (texels) of a map `fit` reads: below it a map has too few
+/// normals for a histogram.
+pub const MIN_FIT_SIDE: usize = 8;
+
+/// Accepted histogram cells per side.
+pub const FIT_BINS: std::ops::RangeInclusive<usize> = 2..=1024;
+
+/// Accepted stretch ratios of a sample or point.
+pub const FIT_RATIO: std::ops::RangeInclusive<f64> = 0.1..=10.0;
+
+/// A validated samples file.
+#[derive(Clone, Debug)]
+pub struct FitSetup {
+    /// The samples file.
+    pub path: PathBuf,
+    /// The neutral map (read when the file has map samples).
+    pub neutral: Option<DisplacementMap>,
+    /// Histogram cells per side.
+    pub bins: usize,
+    /// Per `[[sample]]`, in file order.
+    pub targets: Vec<FitTarget>,
+    /// The `[[point]]`s, checked.
+    pub points: Vec<FitPoint>,
+    /// Extra knots of the fitted α(r).
+    pub alpha_breaks: Vec<f64>,
+    /// Where the kernel file goes (resolved against the samples file).
+    pub output: Option<PathBuf>,
+}
+
+/// One sample's target: the histogram the search matches.
+#[derive(Clone, Debug)]
+pub struct FitTarget {
+    /// Where it came from (the map or histogram file, as the file names it).
+    pub source: String,
+    /// Stretch ratio along `axis`.
+    pub r: f64,
+    /// The stretch axis.
+    pub axis: Axis,
+    /// The target normal histogram.
+    pub histogram: NormalHistogram,
+    /// Its half range, which the candidates share.
+    pub range: f64,
+}
+
+impl FitSetup {
+    /// Reads and validates the samples file at `path`; errors name the key
+    /// (`sample[2].r`, `bins`, …) or the file and line.
+    pub fn load(path: &Path) -> Result<FitSetup> {
+        let samples: FitSamples = super::read_toml_file(path)?;
+        FitSetup::from_samples(&samples, path)
+    }
+
+    /// Validates `samples`, read from `path` (paths resolve against its
+    /// folder).
+    pub fn from_samples(samples: &FitSamples, path: &Path) -> Result<FitSetup> {
+        let base = path.parent().unwrap_or(Path::new("."));
+        let bins = checked_bins(samples)?;
+        refuse_overwriting_inputs(path, base, samples)?;
+        let height_unit_um = samples.height_unit_um.unwrap_or(1.0);
+        if !(height_unit_um.is_finite() && height_unit_um > 0.0) {
+            return Err(Error::parameter(
+                "height_unit_um",
+                format!("must be a finite height > 0 µm, got {height_unit_um}"),
+            ));
+        }
+        let defaults = MapDefaults {
+            texel: TexelSize::Um(samples.texel_um.unwrap_or(1.0)),
+            height_unit_um,
+            edge: Edge::Clamp,
+        };
+        let mut neutral = None;
+        let mut targets = Vec::new();
+        if !samples.sample.is_empty() {
+            let neutral_path = samples
+                .neutral
+                .as_ref()
+                .ok_or_else(|| Error::parameter("neutral", "is required to fit [[sample]] maps"))?;
+            let map = read_map(&base.join(neutral_path), &defaults)?;
+            if map.width.min(map.height) < MIN_FIT_SIDE {
+                return Err(Error::parameter(
+                    "neutral",
+                    format!(
+                        "{} is {} × {} texels; a normal histogram needs at least \
+                         {MIN_FIT_SIDE} a side",
+                        neutral_path.display(),
+                        map.width,
+                        map.height
+                    ),
+                ));
+            }
+            for (k, s) in samples.sample.iter().enumerate() {
+                if !(s.r.is_finite() && FIT_RATIO.contains(&s.r)) {
+                    return Err(Error::parameter(
+                        format!("sample[{k}].r"),
+                        format!("must be in [0.1, 10], got {}", s.r),
+                    ));
+                }
+                targets.push(target(k, s, samples, base, &map, &defaults, bins)?);
+            }
+            neutral = Some(map);
+        }
+        for (k, p) in samples.point.iter().enumerate() {
+            check_point(k, p)?;
+        }
+        Ok(FitSetup {
+            path: path.to_path_buf(),
+            neutral,
+            bins,
+            targets,
+            points: samples.point.clone(),
+            alpha_breaks: samples.alpha_breaks.clone(),
+            output: samples.output.as_ref().map(|o| base.join(o)),
+        })
+    }
+}
+
+/// A `[[point]]` fitted elsewhere: r in [0.1, 10], α in the model's range
+/// [−2, 1], σ > 0.
+fn check_point(k: usize, p: &FitPoint) -> Result<()> {
+    let checks = [
+        ("r", p.r, FIT_RATIO.contains(&p.r), "[0.1, 10]"),
+        (
+            "alpha",
+            p.alpha,
+            p.alpha >= -2.0 && p.alpha <= 1.0,
+            "[-2, 1]",
+        ),
+        ("sigma_um", p.sigma_um, p.sigma_um > 0.0, "> 0"),
+    ];
+    for (key, v, ok, range) in checks {
+        if !(v.is_finite() && ok) {
+            return Err(Error::parameter(
+                format!("point[{k}].{key}"),
+                format!(
+                    "must be {}{range}, got {}",
+                    if range.starts_with('[') { "in " } else { "" },
+                    shown(v)
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The kernel file must not be the samples file or one of its maps.
+fn refuse_overwriting_inputs(path: &Path, base: &Path, samples: &FitSamples) -> Result<()> {
+    let Some(output) = &samples.output else {
+        return Ok(());
+    };
+    let mut inputs: Vec<(String, PathBuf)> = vec![("samples file".into(), path.to_path_buf())];
+    if let Some(n) = &samples.neutral {
+        inputs.push(("neutral map".into(), base.join(n)));
+    }
+    for (k, s) in samples.sample.iter().enumerate() {
+        for (what, file) in [("map", &s.map), ("histogram", &s.histogram)] {
+            if let Some(f) = file {
+                inputs.push((format!("sample[{k}].{what}"), base.join(f)));
+            }
+        }
+    }
+    let inputs: Vec<(&str, &Path)> = inputs
+        .iter()
+        .map(|(w, p)| (w.as_str(), p.as_path()))
+        .collect();
+    crate::export::outputs::refuse_input_overwrite("output", &base.join(output), &inputs)
+}
+
+/// The histogram cells per side, with `range` checked too.
+fn checked_bins(samples: &FitSamples) -> Result<usize> {
+    let bins = samples.bins.unwrap_or(HISTOGRAM_BINS);
+    if !FIT_BINS.contains(&bins) {
+        return Err(Error::parameter(
+            "bins",
+            format!("must be in 2..=1024, got {bins}"),
+        ));
+    }
+    if let Some(range) = samples.range {
+        if !(range.is_finite() && range > 0.0 && range <= 1.0) {
+            return Err(Error::parameter(
+                "range",
+                format!("must be in (0, 1] (a normal's tangent component), got {range}"),
+            ));
+        }
+    }
+    Ok(bins)
+}
+
+/// Sample `k`'s target: the histogram of its deformed map (the range from
+/// the file or the data) or its histogram file (the range from the file).
+fn target(
+    k: usize,
+    s: &FitSample,
+    samples: &FitSamples,
+    base: &Path,
+    neutral: &DisplacementMap,
+    defaults: &MapDefaults,
+    bins: usize,
+) -> Result<FitTarget> {
+    let (histogram, range, source) = match (&s.map, &s.histogram) {
+        (Some(map), None) => {
+            let deformed = read_map(&base.join(map), defaults)?;
+            let range = samples
+                .range
+                .unwrap_or_else(|| auto_range(&[&resample(neutral, s.axis, s.r), &deformed]));
+            (
+                NormalHistogram::of(&deformed, bins, range, [1.0, 1.0]),
+                range,
+                map.display().to_string(),
+            )
+        }
+        (None, Some(file)) => {
+            let range = samples.range.ok_or_else(|| {
+                Error::parameter(
+                    format!("sample[{k}].histogram"),
+                    "needs `range` in the samples file: the half range its cells cover",
+                )
+            })?;
+            (
+                read_histogram(&base.join(file), HistogramSettings { bins, range })?,
+                range,
+                file.display().to_string(),
+            )
+        }
+        _ => {
+            return Err(Error::parameter(
+                format!("sample[{k}]"),
+                "needs exactly one of map and histogram",
+            ))
+        }
+    };
+    Ok(FitTarget {
+        source,
+        r: s.r,
+        axis: s.axis,
+        histogram,
+        range,
+    })
+}
