@@ -8,7 +8,7 @@
 //! bind groups are created once and stay resident; a frame uploads only the
 //! surface's per-vertex matrices (40 bytes a vertex) and its tile lists, and
 //! records the four stages into one command buffer. The passes and normals
-//! run only on the tiles the surface can change ([`super::tiles`]): the
+//! run only on the tiles the surface can change ([`super::active_tiles`]): the
 //! rest of the map keeps the neutral map's values, exactly what a pass over
 //! every texel would write there.
 
@@ -316,7 +316,7 @@ impl GpuMicro {
     /// again only when the raster values of a vertex it depends on moved by
     /// more than `tolerance` since they were last convolved (`T − I`
     /// entries, and `Q Rᵀ` entries relative to the largest; see
-    /// [`super::tiles`]). `Some(0.0)` gives every frame's bits exactly;
+    /// [`super::active_tiles`]). `Some(0.0)` gives every frame's bits exactly;
     /// `None` (the default) convolves every tile the surface can reach in
     /// every frame. The next frame is a full one either way.
     pub fn set_incremental(&mut self, tolerance: Option<f64>) {
