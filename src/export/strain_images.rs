@@ -226,8 +226,6 @@ mod tests {
     use super::*;
     use nalgebra::{Matrix2, Vector2};
 
-    /// The data map holds the ratios and the axis of a known stretch, and
-    /// the neutral values with A = 0 outside the surface.
     /// The bar has exactly one tick row, and the ratio 1 lies within it,
     /// for odd and even heights (the default 512 among them).
     #[test]
@@ -249,6 +247,8 @@ mod tests {
         }
     }
 
+    /// The data map holds the ratios and the axis of a known stretch, and
+    /// the neutral values with A = 0 outside the surface.
     #[test]
     fn strain_data_reads_back_as_the_stretch_it_was_given() {
         let (w, h) = (6, 4);
