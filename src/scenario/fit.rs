@@ -2,7 +2,8 @@
 //! [`FitSetup`]: every range checked, the kernel file refused where it would
 //! land on an input, the neutral map read and each sample's target
 //! histogram made (from its deformed map, or read from its histogram file),
-//! so that the search ([`crate::pipeline::fit`]) only ever sees checked data.
+//! so that the search (`pipeline::fit`, a layer above) only ever sees
+//! checked data.
 
 use std::path::{Path, PathBuf};
 

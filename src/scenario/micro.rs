@@ -552,14 +552,16 @@ impl ProceduralSection {
 pub struct FitSamples {
     /// The neutral map (required with `[[sample]]`s).
     pub neutral: Option<PathBuf>,
-    /// Texel size of maps without metadata (µm).
+    /// Texel size of maps without metadata (µm). Default 1.
     pub texel_um: Option<f64>,
     /// Height (µm) of the brightest value (white) of a PNG without
     /// metadata, or of 1.0 in an EXR without it. Default 1.
     pub height_unit_um: Option<f64>,
-    /// Histogram cells per side.
+    /// Histogram cells per side, 2 … 1024. Default 64.
     pub bins: Option<usize>,
-    /// Histogram half range.
+    /// Histogram half range: the largest tangent component of a normal the
+    /// cells cover, (0, 1]. Default: from the data, the 99.5th percentile of
+    /// max(|n_x|, |n_y|) over the resampled neutral map and the sample.
     pub range: Option<f64>,
     /// Where to write the fitted model, relative to this file.
     pub output: Option<PathBuf>,
