@@ -21,22 +21,14 @@
 //! zero normal stress at the top), so every tet's largest stretch is `s`.
 
 use nalgebra::Vector3;
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 
 use super::solve::Filter;
 use crate::mesh::{TetMesh, Vec3};
 
 /// Condition on the bottom face (`boundary.bottom`: `fixed`, `rollers`).
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    serde::Deserialize,
-    serde::Serialize,
-    schemars::JsonSchema,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum BottomCondition {
     #[default]
@@ -48,17 +40,7 @@ pub enum BottomCondition {
 
 /// Condition on the four side faces (`boundary.sides`: `clamped`,
 /// `rollers`, `free`).
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    serde::Deserialize,
-    serde::Serialize,
-    schemars::JsonSchema,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum SideCondition {
     /// All components fixed.
@@ -133,9 +115,7 @@ pub struct BoundaryConditions {
 
 /// One of the geometric node sets (`top`, `bottom`, `x_min`, `x_max`,
 /// `y_min`, `y_max` in scenario files).
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum NodeSet {
     /// Nodes at z_max.

@@ -13,6 +13,8 @@
 
 use super::hyperelastic::{Law, Model};
 use crate::error::{shown, Error, Result};
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 
 /// Largest Poisson's ratio accepted. Linear tetrahedra lock as ν → 0.5:
 /// each element's one volume constraint is enforced ever more stiffly, and
@@ -34,17 +36,7 @@ pub const MAX_POISSON_LOCKING_FREE: f64 = 0.4999;
 pub const LOCKING_FREE_ELEMENT_SHARE: f64 = 2.0;
 
 /// How an element measures its change of volume.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    serde::Deserialize,
-    serde::Serialize,
-    schemars::JsonSchema,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum Volumetric {
     /// Each tet's own volume ratio (locks as ν → 0.5).

@@ -30,6 +30,8 @@
 
 use nalgebra::Matrix3;
 use rayon::prelude::*;
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 
 use super::assembly::Assembly;
 use super::coarse::Coarse;
@@ -42,17 +44,7 @@ use crate::mesh::{TetMesh, Vec3};
 
 /// Which linear solver Newton steps use (`solver.linear`: `cg`, `direct`,
 /// `factored-cg`, `two-level`).
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    serde::Deserialize,
-    serde::Serialize,
-    schemars::JsonSchema,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum LinearSolver {
     /// Block-Jacobi preconditioned conjugate gradients.

@@ -39,23 +39,15 @@ pub mod skin;
 pub mod specular;
 pub mod stage;
 
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
 pub use crate::imaging::{FrameFormat, Image};
 pub use renderer::{FrameStage, NormalMap, Renderer};
 
 /// A comparison mode (`none`, `static`, `dynamic` in scenario files).
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Hash,
-    serde::Deserialize,
-    serde::Serialize,
-    schemars::JsonSchema,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Deserialize, Serialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Mode {
     /// No microstructure: mesoscale normals and lobes.
@@ -87,9 +79,7 @@ pub enum AlbedoSource {
 }
 
 /// Specular detail in the static and dynamic modes.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Roughness {
     /// Normals of the displacement map.
@@ -101,9 +91,7 @@ pub enum Roughness {
 
 /// How the skin pass reads the microstructure in the static and dynamic
 /// modes (with `Roughness::Microgeometry`).
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum MicroFilter {
     /// The normal map looked up bilinearly at the pixel's centre: aliases

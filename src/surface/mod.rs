@@ -17,6 +17,8 @@
 //! texture (`wrap`). [`AnimatedSurface::pieces`] turns a layout into the
 //! triangles (and UV offsets) each map rasterises.
 
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -46,17 +48,7 @@ pub struct AnimatedSurface {
 
 /// How UVs outside the unit square are read (`unit`, `udim` or `wrap` in
 /// scenario files).
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    serde::Deserialize,
-    serde::Serialize,
-    schemars::JsonSchema,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum UvLayout {
     /// Every UV lies in [0, 1]² (an error otherwise).
@@ -478,9 +470,7 @@ impl Default for ReadOptions {
 
 /// The length unit of a surface file (`mm`, `cm`, `m` or `in` in
 /// scenario files).
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum LengthUnit {
     /// Millimetres.
