@@ -21,8 +21,8 @@ use serde::{Deserialize, Serialize};
 /// a mesh has too few degrees of freedom to deform at constant volume. On
 /// the Hertz block the indentation force exceeds Hertz's by 1.8% at ν = 0.3,
 /// −0.8% at 0.45, +7.7% at 0.49, +17% at 0.495 and +72% at 0.499, while the
-/// linear iterations grow tenfold (docs/PERFORMANCE.md, "Near-incompressible
-/// materials"). Above this the answers would be wrong, not just slow; a
+/// linear iterations grow tenfold (docs/VERIFICATION.md, "Standard tets
+/// near incompressibility"). Above this the answers would be wrong, not just slow; a
 /// [`Volumetric::LockingFree`] material goes further.
 pub const MAX_POISSON: f64 = 0.49;
 
