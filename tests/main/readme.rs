@@ -347,6 +347,7 @@ fn readme_commands_run() {
     let dir = scratch();
     let mut ran = 0;
     let mut no_gpu: Vec<&str> = Vec::new();
+    let gpu_required = skinpatch::gpu::gpu_required();
     for (command, how) in COMMANDS {
         let extra: &[&str] = match how {
             How::AsWritten => &[],
@@ -366,7 +367,6 @@ fn readme_commands_run() {
             .output()
             .unwrap_or_else(|e| panic!("{command}: {} does not run: {e}", exe.display()));
         let stderr = String::from_utf8_lossy(&o.stderr);
-        let gpu_required = std::env::var("SKINPATCH_REQUIRE_GPU").is_ok_and(|v| v == "1");
         if !o.status.success() && !gpu_required && stderr.contains("no Vulkan adapter") {
             // A command that renders (or lists adapters) on a machine
             // without a Vulkan driver: it stopped before any work with the
