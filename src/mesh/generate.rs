@@ -98,6 +98,12 @@ pub struct RefineZone {
     pub max_volume_mm3: f64,
 }
 
+/// Smallest radius–edge ratio bound TetGen is given: below it, its
+/// refinement may not terminate.
+pub const MIN_RADIUS_EDGE: f64 = 1.1;
+/// The dihedral-angle check's bound (degrees) lies below this.
+pub const MAX_DIHEDRAL_DEG: f64 = 60.0;
+
 /// Everything needed to generate a patch mesh. Build it from a validated
 /// scenario; [`PatchSpec::check`] repeats the geometric checks for direct use.
 #[derive(Clone, Debug, PartialEq)]
@@ -148,19 +154,22 @@ impl PatchSpec {
                 l.max_volume_mm3,
             )?;
         }
-        if !(self.radius_edge_max >= 1.1 && self.radius_edge_max.is_finite()) {
+        if !(self.radius_edge_max >= MIN_RADIUS_EDGE && self.radius_edge_max.is_finite()) {
             return Err(Error::parameter(
                 "mesh.radius_edge_max",
                 format!(
-                    "must be ≥ 1.1 (TetGen may not terminate below), got {}",
+                    "must be ≥ {MIN_RADIUS_EDGE} (TetGen may not terminate below), got {}",
                     self.radius_edge_max
                 ),
             ));
         }
-        if !(0.0..60.0).contains(&self.min_dihedral_deg) {
+        if !(0.0..MAX_DIHEDRAL_DEG).contains(&self.min_dihedral_deg) {
             return Err(Error::parameter(
                 "mesh.min_dihedral_deg",
-                format!("must be in [0, 60), got {}", self.min_dihedral_deg),
+                format!(
+                    "must be in [0, {MAX_DIHEDRAL_DEG}), got {}",
+                    self.min_dihedral_deg
+                ),
             ));
         }
         if let Some(zone) = &self.refine {

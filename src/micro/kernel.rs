@@ -94,6 +94,10 @@ pub struct KernelModel {
     pub sigma_stretch_um: PiecewiseLinear,
 }
 
+/// The sharpening/blur weight α a model may take: from −2 (the sharpest
+/// the forehead model reaches) to 1 (a full blur).
+pub const ALPHA_RANGE: (f64, f64) = (-2.0, 1.0);
+
 impl KernelModel {
     /// The forehead model of Nagano et al. 2015 eq. 8–9 (see the module docs).
     pub fn forehead() -> KernelModel {
@@ -120,9 +124,10 @@ impl KernelModel {
     /// α(1) = 0, σ > 0. `key` names the model in errors (e.g.
     /// `microstructure.kernel`).
     pub fn validate(&self, key: &str) -> Result<()> {
+        let (lo, hi) = ALPHA_RANGE;
         self.alpha.check(
             &format!("{key}.alpha"),
-            |a| (-2.0..=1.0).contains(&a),
+            |a| (lo..=hi).contains(&a),
             "α must lie in [−2, 1]",
         )?;
         let at_one = self.alpha.at(1.0);

@@ -81,6 +81,9 @@ impl Default for SkinParams {
     }
 }
 
+/// Most texels per side of a generated map.
+pub const MAX_SIZE_PX: usize = 16384;
+
 /// Range of the feature sizes — groove spacing and width, pore radius,
 /// noise scale (µm): a nanometre to a metre.
 pub const FEATURE_UM: (f64, f64) = (1e-3, 1e6);
@@ -99,10 +102,10 @@ pub const MAX_EXTENT_MM: f64 = 1e3;
 impl SkinParams {
     /// Checks every parameter; `key` prefixes the names in errors.
     pub fn validate(&self, key: &str) -> Result<()> {
-        if !(1..=16384).contains(&self.size_px) {
+        if !(1..=MAX_SIZE_PX).contains(&self.size_px) {
             return Err(Error::parameter(
                 format!("{key}.size_px"),
-                format!("must be in 1 … 16384, got {}", self.size_px),
+                format!("must be in 1 … {MAX_SIZE_PX}, got {}", self.size_px),
             ));
         }
         let positive = [

@@ -48,6 +48,7 @@ pub fn run(
     on_level: &mut dyn FnMut(&LevelReport),
 ) -> Result<SynthRun> {
     let file: SynthFile = crate::scenario::load_with(path, overrides)?;
+    crate::scenario::bounds::check(&file)?;
     let base = path.parent().unwrap_or(Path::new("."));
     let params = file.synthesis.params("synthesis")?;
     let (exr, png) = file.output.formats()?;

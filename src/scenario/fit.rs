@@ -8,7 +8,7 @@
 use std::path::{Path, PathBuf};
 
 use super::{FitPoint, FitSample, FitSamples};
-use crate::error::{shown, Error, Result};
+use crate::error::{Error, Result};
 use crate::micro::fit::{auto_range, resample, Axis, HistogramSettings};
 use crate::micro::io::{read_histogram, read_map, MapDefaults, TexelSize};
 use crate::micro::normals::HISTOGRAM_BINS;
@@ -18,11 +18,17 @@ use crate::micro::{DisplacementMap, Edge, NormalHistogram};
 /// normals for a histogram.
 pub const MIN_FIT_SIDE: usize = 8;
 
-/// Accepted histogram cells per side.
-pub const FIT_BINS: std::ops::RangeInclusive<usize> = 2..=1024;
+/// `texel_um` of a samples file that leaves it out (µm).
+pub const FIT_TEXEL_UM: f64 = 1.0;
 
-/// Accepted stretch ratios of a sample or point.
-pub const FIT_RATIO: std::ops::RangeInclusive<f64> = 0.1..=10.0;
+/// `height_unit_um` of a samples file that leaves it out (µm).
+pub const FIT_HEIGHT_UNIT_UM: f64 = 1.0;
+
+/// Accepted histogram cells per side: (fewest, most).
+pub const FIT_BINS: (usize, usize) = (2, 1024);
+
+/// Accepted stretch ratios of a sample or point: (smallest, largest).
+pub const FIT_RATIO: (f64, f64) = (0.1, 10.0);
 
 /// A validated samples file.
 #[derive(Clone, Debug)]
@@ -69,19 +75,13 @@ impl FitSetup {
     /// Validates `samples`, read from `path` (paths resolve against its
     /// folder).
     pub fn from_samples(samples: &FitSamples, path: &Path) -> Result<FitSetup> {
+        super::bounds::check(samples)?;
         let base = path.parent().unwrap_or(Path::new("."));
-        let bins = checked_bins(samples)?;
+        let bins = samples.bins.unwrap_or(HISTOGRAM_BINS);
         refuse_overwriting_inputs(path, base, samples)?;
-        let height_unit_um = samples.height_unit_um.unwrap_or(1.0);
-        if !(height_unit_um.is_finite() && height_unit_um > 0.0) {
-            return Err(Error::parameter(
-                "height_unit_um",
-                format!("must be a finite height > 0 µm, got {height_unit_um}"),
-            ));
-        }
         let defaults = MapDefaults {
-            texel: TexelSize::Um(samples.texel_um.unwrap_or(1.0)),
-            height_unit_um,
+            texel: TexelSize::Um(samples.texel_um.unwrap_or(FIT_TEXEL_UM)),
+            height_unit_um: samples.height_unit_um.unwrap_or(FIT_HEIGHT_UNIT_UM),
             edge: Edge::Clamp,
         };
         let mut neutral = None;
@@ -105,18 +105,9 @@ impl FitSetup {
                 ));
             }
             for (k, s) in samples.sample.iter().enumerate() {
-                if !(s.r.is_finite() && FIT_RATIO.contains(&s.r)) {
-                    return Err(Error::parameter(
-                        format!("sample[{k}].r"),
-                        format!("must be in [0.1, 10], got {}", s.r),
-                    ));
-                }
                 targets.push(target(k, s, samples, base, &map, &defaults, bins)?);
             }
             neutral = Some(map);
-        }
-        for (k, p) in samples.point.iter().enumerate() {
-            check_point(k, p)?;
         }
         Ok(FitSetup {
             path: path.to_path_buf(),
@@ -128,34 +119,6 @@ impl FitSetup {
             output: samples.output.as_ref().map(|o| base.join(o)),
         })
     }
-}
-
-/// A `[[point]]` fitted elsewhere: r in [0.1, 10], α in the model's range
-/// [−2, 1], σ > 0.
-fn check_point(k: usize, p: &FitPoint) -> Result<()> {
-    let checks = [
-        ("r", p.r, FIT_RATIO.contains(&p.r), "[0.1, 10]"),
-        (
-            "alpha",
-            p.alpha,
-            p.alpha >= -2.0 && p.alpha <= 1.0,
-            "[-2, 1]",
-        ),
-        ("sigma_um", p.sigma_um, p.sigma_um > 0.0, "> 0"),
-    ];
-    for (key, v, ok, range) in checks {
-        if !(v.is_finite() && ok) {
-            return Err(Error::parameter(
-                format!("point[{k}].{key}"),
-                format!(
-                    "must be {}{range}, got {}",
-                    if range.starts_with('[') { "in " } else { "" },
-                    shown(v)
-                ),
-            ));
-        }
-    }
-    Ok(())
 }
 
 /// The kernel file must not be the samples file or one of its maps.
@@ -179,26 +142,6 @@ fn refuse_overwriting_inputs(path: &Path, base: &Path, samples: &FitSamples) -> 
         .map(|(w, p)| (w.as_str(), p.as_path()))
         .collect();
     crate::export::outputs::refuse_input_overwrite("output", &base.join(output), &inputs)
-}
-
-/// The histogram cells per side, with `range` checked too.
-fn checked_bins(samples: &FitSamples) -> Result<usize> {
-    let bins = samples.bins.unwrap_or(HISTOGRAM_BINS);
-    if !FIT_BINS.contains(&bins) {
-        return Err(Error::parameter(
-            "bins",
-            format!("must be in 2..=1024, got {bins}"),
-        ));
-    }
-    if let Some(range) = samples.range {
-        if !(range.is_finite() && range > 0.0 && range <= 1.0) {
-            return Err(Error::parameter(
-                "range",
-                format!("must be in (0, 1] (a normal's tangent component), got {range}"),
-            ));
-        }
-    }
-    Ok(bins)
 }
 
 /// Sample `k`'s target: the histogram of its deformed map (the range from

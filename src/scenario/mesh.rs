@@ -4,9 +4,23 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::{non_negative, positive, MeshSource, BOTTOM_REGION_ID, TOP_REGION_ID};
+use super::{positive, MeshSource, BOTTOM_REGION_ID, TOP_REGION_ID};
 use crate::error::{Error, Result};
-use crate::mesh::generate::{LayerSpec, PatchSpec, RefineZone, ZoneShape};
+use crate::mesh::generate::{
+    LayerSpec, PatchSpec, RefineZone, ZoneShape, MAX_DIHEDRAL_DEG, MIN_RADIUS_EDGE,
+};
+
+// The design's skin patch: the defaults of the generation keys.
+const WIDTH_MM: f64 = 10.0;
+const DEPTH_MM: f64 = 10.0;
+const TOP_LAYER_MM: f64 = 1.5;
+const BOTTOM_LAYER_MM: f64 = 3.5;
+const TOP_REGION: &str = "dermis";
+const BOTTOM_REGION: &str = "hypodermis";
+const TOP_MAX_VOLUME_MM3: f64 = 0.004;
+const BOTTOM_MAX_VOLUME_MM3: f64 = 0.02;
+const TARGET_TOLERANCE: f64 = 0.05;
+const RADIUS_EDGE_MAX: f64 = 1.5;
 
 /// `[mesh]`: a layered box patch generated with TetGen, or a mesh file.
 ///
@@ -20,29 +34,42 @@ pub struct MeshSection {
     /// `.vtu`/`.vtk`, `.node`/`.ele` or a TetGen base name. Relative to the
     /// scenario file.
     pub file: Option<PathBuf>,
-    /// Patch extent in x (mm). Default 10.
+    /// Patch extent in x (mm).
+    #[schemars(extend("default" = WIDTH_MM, "exclusiveMinimum" = 0.0))]
     pub width_mm: Option<f64>,
-    /// Patch extent in y (mm). Default 10.
+    /// Patch extent in y (mm).
+    #[schemars(extend("default" = DEPTH_MM, "exclusiveMinimum" = 0.0))]
     pub depth_mm: Option<f64>,
-    /// Thickness of the top layer, epidermis + dermis (mm). Default 1.5.
+    /// Thickness of the top layer, epidermis + dermis (mm).
+    #[schemars(extend("default" = TOP_LAYER_MM, "exclusiveMinimum" = 0.0))]
     pub top_layer_mm: Option<f64>,
-    /// Thickness of the bottom layer, hypodermis (mm); 0 for a single layer. Default 3.5.
+    /// Thickness of the bottom layer, hypodermis (mm); 0 for a single layer.
+    #[schemars(extend("default" = BOTTOM_LAYER_MM), range(min = 0.0))]
     pub bottom_layer_mm: Option<f64>,
-    /// Region name of the top layer. Default `dermis`.
+    /// Region name of the top layer.
+    #[schemars(extend("default" = TOP_REGION))]
     pub top_region: Option<String>,
-    /// Region name of the bottom layer. Default `hypodermis`.
+    /// Region name of the bottom layer.
+    #[schemars(extend("default" = BOTTOM_REGION))]
     pub bottom_region: Option<String>,
-    /// Largest tet volume in the top layer (mm³). Default 0.004.
+    /// Largest tet volume in the top layer (mm³).
+    #[schemars(extend("default" = TOP_MAX_VOLUME_MM3, "exclusiveMinimum" = 0.0))]
     pub top_max_volume_mm3: Option<f64>,
-    /// Largest tet volume in the bottom layer (mm³). Default 0.02.
+    /// Largest tet volume in the bottom layer (mm³).
+    #[schemars(extend("default" = BOTTOM_MAX_VOLUME_MM3, "exclusiveMinimum" = 0.0))]
     pub bottom_max_volume_mm3: Option<f64>,
     /// Aim for this many tets by scaling all volume limits together. Default: none.
+    #[schemars(range(min = 1))]
     pub target_tets: Option<usize>,
-    /// Relative tolerance on `target_tets`. Default 0.05.
+    /// Relative tolerance on `target_tets`.
+    #[schemars(extend("default" = TARGET_TOLERANCE, "exclusiveMinimum" = 0.0))]
     pub target_tolerance: Option<f64>,
-    /// TetGen radius–edge ratio bound (`-q`), ≥ 1.1. Default 1.5.
+    /// TetGen radius–edge ratio bound (`-q`); TetGen may not terminate
+    /// below the smallest accepted.
+    #[schemars(extend("default" = RADIUS_EDGE_MAX), range(min = MIN_RADIUS_EDGE))]
     pub radius_edge_max: Option<f64>,
-    /// Smallest dihedral angle the mesh must reach (degrees); 0 = no check. Default 0.
+    /// Smallest dihedral angle the mesh must reach (degrees); 0 = no check.
+    #[schemars(extend("default" = 0.0, "exclusiveMaximum" = MAX_DIHEDRAL_DEG), range(min = 0.0))]
     pub min_dihedral_deg: Option<f64>,
     /// Optional zone of smaller tets under the top surface.
     pub refine: Option<RefineSection>,
@@ -69,11 +96,13 @@ pub struct RefineSection {
     #[serde(deserialize_with = "super::arrays::exact")]
     pub center_mm: [f64; 2],
     /// Sphere radius (mm); required for `sphere`.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub radius_mm: Option<f64>,
     /// Box extent [x, y, depth] (mm); required for `box`.
     #[serde(default, deserialize_with = "super::arrays::exact_opt")]
     pub size_mm: Option<[f64; 3]>,
     /// Largest tet volume inside the zone (mm³).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub max_volume_mm3: f64,
 }
 
@@ -122,25 +151,19 @@ impl MeshSection {
 
     /// Validates the generation keys into a [`PatchSpec`], applying defaults.
     pub fn patch_spec(&self) -> Result<PatchSpec> {
-        let width = positive("mesh.width_mm", self.width_mm.unwrap_or(10.0))?;
-        let depth = positive("mesh.depth_mm", self.depth_mm.unwrap_or(10.0))?;
-        let top = positive("mesh.top_layer_mm", self.top_layer_mm.unwrap_or(1.5))?;
-        let bottom = non_negative("mesh.bottom_layer_mm", self.bottom_layer_mm.unwrap_or(3.5))?;
-        let top_vol = positive(
-            "mesh.top_max_volume_mm3",
-            self.top_max_volume_mm3.unwrap_or(0.004),
-        )?;
-        let bottom_vol = positive(
-            "mesh.bottom_max_volume_mm3",
-            self.bottom_max_volume_mm3.unwrap_or(0.02),
-        )?;
+        let width = self.width_mm.unwrap_or(WIDTH_MM);
+        let depth = self.depth_mm.unwrap_or(DEPTH_MM);
+        let top = self.top_layer_mm.unwrap_or(TOP_LAYER_MM);
+        let bottom = self.bottom_layer_mm.unwrap_or(BOTTOM_LAYER_MM);
+        let top_vol = self.top_max_volume_mm3.unwrap_or(TOP_MAX_VOLUME_MM3);
+        let bottom_vol = self.bottom_max_volume_mm3.unwrap_or(BOTTOM_MAX_VOLUME_MM3);
         let top_name = region_name(
             "mesh.top_region",
-            self.top_region.as_deref().unwrap_or("dermis"),
+            self.top_region.as_deref().unwrap_or(TOP_REGION),
         )?;
         let bottom_name = region_name(
             "mesh.bottom_region",
-            self.bottom_region.as_deref().unwrap_or("hypodermis"),
+            self.bottom_region.as_deref().unwrap_or(BOTTOM_REGION),
         )?;
         if bottom > 0.0 && top_name == bottom_name {
             return Err(Error::parameter(
@@ -162,19 +185,13 @@ impl MeshSection {
                 max_volume_mm3: bottom_vol,
             });
         }
-        if let Some(0) = self.target_tets {
-            return Err(Error::parameter("mesh.target_tets", "must be > 0, got 0"));
-        }
-        let tolerance = positive(
-            "mesh.target_tolerance",
-            self.target_tolerance.unwrap_or(0.05),
-        )?;
+        let tolerance = self.target_tolerance.unwrap_or(TARGET_TOLERANCE);
         let spec = PatchSpec {
             width_mm: width,
             depth_mm: depth,
             layers,
             refine: self.refine.as_ref().map(RefineSection::zone).transpose()?,
-            radius_edge_max: self.radius_edge_max.unwrap_or(1.5),
+            radius_edge_max: self.radius_edge_max.unwrap_or(RADIUS_EDGE_MAX),
             min_dihedral_deg: self.min_dihedral_deg.unwrap_or(0.0),
             target_tets: self.target_tets,
             target_tolerance: tolerance,
@@ -227,7 +244,7 @@ impl RefineSection {
                 })?;
                 ZoneShape::Sphere {
                     center_mm: self.center_mm,
-                    radius_mm: positive(&format!("{key}.radius_mm"), r)?,
+                    radius_mm: r,
                 }
             }
             ZoneKind::Box => {
@@ -251,7 +268,7 @@ impl RefineSection {
         };
         Ok(RefineZone {
             shape,
-            max_volume_mm3: positive(&format!("{key}.max_volume_mm3"), self.max_volume_mm3)?,
+            max_volume_mm3: self.max_volume_mm3,
         })
     }
 }

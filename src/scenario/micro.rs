@@ -5,9 +5,14 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use super::fit::{FIT_BINS, FIT_HEIGHT_UNIT_UM, FIT_RATIO, FIT_TEXEL_UM};
 use crate::error::{Error, Result};
 use crate::micro::io::{read_map, MapDefaults, TexelSize};
-use crate::micro::procedural::{generate, SkinParams};
+use crate::micro::kernel::ALPHA_RANGE;
+use crate::micro::normals::HISTOGRAM_BINS;
+use crate::micro::procedural::{
+    generate, SkinParams, FEATURE_UM, MAX_DEPTH_UM, MAX_PORES_PER_MM2, MAX_SIZE_PX,
+};
 use crate::micro::tiled::TiledMap;
 use crate::micro::{DisplacementMap, Edge, KernelModel, PiecewiseLinear};
 
@@ -20,6 +25,9 @@ use crate::micro::{DisplacementMap, Edge, KernelModel, PiecewiseLinear};
 /// and 0.18 below its lowest.
 pub const HEIGHT_RANGE_MARGIN: f64 = 0.25;
 
+/// `microstructure.height_unit_um` when the section leaves it out.
+const HEIGHT_UNIT_UM: f64 = 1.0;
+
 /// `[microstructure]`.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
@@ -29,9 +37,11 @@ pub struct MicrostructureSection {
     pub map: Option<PathBuf>,
     /// Texel size (µm) of a map file without skinpatch metadata. Default:
     /// the patch width divided by the map width.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub texel_um: Option<f64>,
     /// Micrometres per height unit of a map file without metadata (a map
-    /// file only). Default 1.
+    /// file only).
+    #[schemars(extend("default" = HEIGHT_UNIT_UM, "exclusiveMinimum" = 0.0))]
     pub height_unit_um: Option<f64>,
     /// Edge handling of a map file without metadata: `wrap` or `clamp`. Default `wrap`.
     pub edge: Edge,
@@ -58,7 +68,8 @@ pub struct MicrostructureSection {
     pub height_range_um: Option<[f64; 2]>,
     /// Also write the normal map of each deformed map. Default true.
     pub normal_maps: bool,
-    /// Write the maps of every n-th frame (frame 0 always). Default 1.
+    /// Write the maps of every n-th frame (frame 0 always).
+    #[schemars(range(min = 1))]
     pub frame_stride: usize,
     /// Write `micro/roughness.csv`: Beckmann roughness m(r) of the neutral map
     /// under the kernel model for r = 0.70 … 1.40 (Nagano et al. 2014). Default false.
@@ -70,12 +81,14 @@ pub struct MicrostructureSection {
     /// whose inputs are bit-identical (same output as full frames). Default:
     /// none (every tile under the surface, every frame). The CPU reference
     /// always computes whole frames.
+    #[schemars(range(min = 0.0))]
     pub incremental_tolerance: Option<f64>,
-    /// Map texels per strain-raster texel along each side (1 … 64). 1
+    /// Map texels per strain-raster texel along each side. 1
     /// rasterises the surface's strain at every map texel; a larger step
     /// rasterises it at one texel per step × step map texels and reads it
     /// bilinearly, which is exact inside each surface triangle and moves
-    /// far fewer bytes per frame (on the GPU and the CPU alike). Default 1.
+    /// far fewer bytes per frame (on the GPU and the CPU alike).
+    #[schemars(range(min = 1, max = 64))]
     pub strain_raster_step: usize,
 }
 
@@ -101,33 +114,59 @@ impl Default for MicrostructureSection {
     }
 }
 
+/// `microstructure.procedural.size_px` when the section leaves it out: a
+/// quarter of the generator's texels, enough for the main job's frames.
+const SIZE_PX: usize = 1024;
+
 /// `[microstructure.procedural]`: every [`SkinParams`] field, optional.
 #[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct ProceduralSection {
-    /// Texels per side. Default 1024 here (the generator's own default is 2048).
+    /// Texels per side (the generator's own default is 2048).
+    #[schemars(extend("default" = SIZE_PX), range(min = 1, max = MAX_SIZE_PX))]
     pub size_px: Option<usize>,
-    /// Random seed. Default 1.
+    /// Random seed.
+    #[schemars(extend("default" = SkinParams::default().seed))]
     pub seed: Option<u64>,
-    /// Mean primary groove spacing (µm). Default 250.
+    /// Mean primary groove spacing (µm).
+    #[schemars(extend("default" = SkinParams::default().groove_spacing_um))]
+    #[schemars(range(min = FEATURE_UM.0, max = FEATURE_UM.1))]
     pub groove_spacing_um: Option<f64>,
-    /// Mean primary groove depth (µm). Default 30.
+    /// Mean primary groove depth (µm).
+    #[schemars(extend("default" = SkinParams::default().groove_depth_um))]
+    #[schemars(range(min = 0.0, max = MAX_DEPTH_UM))]
     pub groove_depth_um: Option<f64>,
-    /// Primary groove width (µm). Default 18.
+    /// Primary groove width (µm).
+    #[schemars(extend("default" = SkinParams::default().groove_width_um))]
+    #[schemars(range(min = FEATURE_UM.0, max = FEATURE_UM.1))]
     pub groove_width_um: Option<f64>,
-    /// Relative spread of groove depths, [0, 1]. Default 0.5.
+    /// Relative spread of groove depths.
+    #[schemars(extend("default" = SkinParams::default().depth_spread))]
+    #[schemars(range(min = 0.0, max = 1.0))]
     pub depth_spread: Option<f64>,
-    /// 1: grooves in every direction; 0: mostly along u. Default 0.6.
+    /// 1: grooves in every direction; 0: mostly along u.
+    #[schemars(extend("default" = SkinParams::default().orientation_spread))]
+    #[schemars(range(min = 0.0, max = 1.0))]
     pub orientation_spread: Option<f64>,
-    /// Pores per mm². Default 12.
+    /// Pores per mm².
+    #[schemars(extend("default" = SkinParams::default().pore_density_per_mm2))]
+    #[schemars(range(min = 0.0, max = MAX_PORES_PER_MM2))]
     pub pore_density_per_mm2: Option<f64>,
-    /// Pore radius (µm). Default 25.
+    /// Pore radius (µm).
+    #[schemars(extend("default" = SkinParams::default().pore_radius_um))]
+    #[schemars(range(min = FEATURE_UM.0, max = FEATURE_UM.1))]
     pub pore_radius_um: Option<f64>,
-    /// Pore depth (µm). Default 20.
+    /// Pore depth (µm).
+    #[schemars(extend("default" = SkinParams::default().pore_depth_um))]
+    #[schemars(range(min = 0.0, max = MAX_DEPTH_UM))]
     pub pore_depth_um: Option<f64>,
-    /// Fine noise amplitude (µm). Default 1.5.
+    /// Fine noise amplitude (µm).
+    #[schemars(extend("default" = SkinParams::default().noise_amplitude_um))]
+    #[schemars(range(min = 0.0, max = MAX_DEPTH_UM))]
     pub noise_amplitude_um: Option<f64>,
-    /// Fine noise feature size (µm). Default 40.
+    /// Fine noise feature size (µm).
+    #[schemars(extend("default" = SkinParams::default().noise_scale_um))]
+    #[schemars(range(min = FEATURE_UM.0, max = FEATURE_UM.1))]
     pub noise_scale_um: Option<f64>,
 }
 
@@ -239,7 +278,6 @@ impl MicrostructureSection {
     /// default texel size of a loaded one; `cache` is the folder for a
     /// synthesized map.
     pub fn setup(&self, base: &Path, patch_width_mm: f64, cache: &Path) -> Result<MicroSetup> {
-        self.check_frame_settings()?;
         let model = self.kernel_model(base)?;
         let neutral = self.neutral_map(base, patch_width_mm, cache)?;
         let png16 = self.formats.contains(&MapFormat::Png16);
@@ -299,42 +337,6 @@ impl MicrostructureSection {
         Ok([lo as f64 - margin, hi as f64 + margin])
     }
 
-    /// The per-frame settings: stride, incremental tolerance, raster step
-    /// and the height unit.
-    fn check_frame_settings(&self) -> Result<()> {
-        if self.frame_stride == 0 {
-            return Err(Error::parameter(
-                "microstructure.frame_stride",
-                "must be ≥ 1, got 0",
-            ));
-        }
-        if let Some(t) = self.incremental_tolerance {
-            if !(t.is_finite() && t >= 0.0) {
-                return Err(Error::parameter(
-                    "microstructure.incremental_tolerance",
-                    format!("must be finite and ≥ 0, got {}", crate::error::shown(t)),
-                ));
-            }
-        }
-        if !(1..=64).contains(&self.strain_raster_step) {
-            return Err(Error::parameter(
-                "microstructure.strain_raster_step",
-                format!(
-                    "must be an integer in 1 … 64 (map texels per strain-raster texel), got {}",
-                    self.strain_raster_step
-                ),
-            ));
-        }
-        let unit = self.height_unit_um.unwrap_or(1.0);
-        if !(unit.is_finite() && unit > 0.0) {
-            return Err(Error::parameter(
-                "microstructure.height_unit_um",
-                format!("must be finite and > 0, got {unit}"),
-            ));
-        }
-        Ok(())
-    }
-
     /// The kernel model: the table, the kernel file or the forehead's.
     fn kernel_model(&self, base: &Path) -> Result<KernelModel> {
         let (model, key) = match (&self.kernel, &self.kernel_file) {
@@ -359,7 +361,7 @@ impl MicrostructureSection {
     /// The neutral map: synthesized (and cached), a tiled or whole map
     /// file, or generated.
     fn neutral_map(&self, base: &Path, patch_width_mm: f64, cache: &Path) -> Result<NeutralMap> {
-        let (edge, unit) = (self.edge, self.height_unit_um.unwrap_or(1.0));
+        let (edge, unit) = (self.edge, self.height_unit_um.unwrap_or(HEIGHT_UNIT_UM));
         Ok(match &self.map {
             _ if self.synthesis.is_some() => {
                 if self.map.is_some() {
@@ -401,13 +403,7 @@ impl MicrostructureSection {
                     ));
                 }
                 let texel = match self.texel_um {
-                    Some(t) if t.is_finite() && t > 0.0 => TexelSize::Um(t),
-                    Some(t) => {
-                        return Err(Error::parameter(
-                            "microstructure.texel_um",
-                            format!("must be finite and > 0, got {t}"),
-                        ))
-                    }
+                    Some(t) => TexelSize::Um(t),
                     None => TexelSize::Extent(patch_width_mm),
                 };
                 let defaults = MapDefaults {
@@ -511,7 +507,7 @@ impl ProceduralSection {
     pub fn params(&self, patch_width_mm: f64) -> SkinParams {
         let d = SkinParams::default();
         SkinParams {
-            size_px: self.size_px.unwrap_or(1024),
+            size_px: self.size_px.unwrap_or(SIZE_PX),
             extent_mm: patch_width_mm,
             seed: self.seed.unwrap_or(d.seed),
             groove_spacing_um: self.groove_spacing_um.unwrap_or(d.groove_spacing_um),
@@ -552,16 +548,20 @@ impl ProceduralSection {
 pub struct FitSamples {
     /// The neutral map (required with `[[sample]]`s).
     pub neutral: Option<PathBuf>,
-    /// Texel size of maps without metadata (µm). Default 1.
+    /// Texel size of maps without metadata (µm).
+    #[schemars(extend("default" = FIT_TEXEL_UM, "exclusiveMinimum" = 0.0))]
     pub texel_um: Option<f64>,
     /// Height (µm) of the brightest value (white) of a PNG without
-    /// metadata, or of 1.0 in an EXR without it. Default 1.
+    /// metadata, or of 1.0 in an EXR without it.
+    #[schemars(extend("default" = FIT_HEIGHT_UNIT_UM, "exclusiveMinimum" = 0.0))]
     pub height_unit_um: Option<f64>,
-    /// Histogram cells per side, 2 … 1024. Default 64.
+    /// Histogram cells per side.
+    #[schemars(extend("default" = HISTOGRAM_BINS), range(min = FIT_BINS.0, max = FIT_BINS.1))]
     pub bins: Option<usize>,
     /// Histogram half range: the largest tangent component of a normal the
-    /// cells cover, (0, 1]. Default: from the data, the 99.5th percentile of
+    /// cells cover. Default: from the data, the 99.5th percentile of
     /// max(|n_x|, |n_y|) over the resampled neutral map and the sample.
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1.0))]
     pub range: Option<f64>,
     /// Where to write the fitted model, relative to this file.
     pub output: Option<PathBuf>,
@@ -587,6 +587,7 @@ pub struct FitSample {
     /// comma-separated weights (n_x ascending) over `[−range, range]²`.
     pub histogram: Option<PathBuf>,
     /// Stretch ratio along `axis`.
+    #[schemars(range(min = FIT_RATIO.0, max = FIT_RATIO.1))]
     pub r: f64,
     /// `u` or `v`.
     pub axis: crate::micro::fit::Axis,
@@ -597,10 +598,13 @@ pub struct FitSample {
 #[serde(deny_unknown_fields)]
 pub struct FitPoint {
     /// Stretch ratio.
+    #[schemars(range(min = FIT_RATIO.0, max = FIT_RATIO.1))]
     pub r: f64,
-    /// Fitted α.
+    /// Fitted α, in the kernel model's range.
+    #[schemars(range(min = ALPHA_RANGE.0, max = ALPHA_RANGE.1))]
     pub alpha: f64,
     /// Fitted σ (µm).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub sigma_um: f64,
 }
 

@@ -2,8 +2,10 @@
 //!
 //! Configuration comes in two steps: [`Scenario`] mirrors the
 //! file — serde with `deny_unknown_fields`, every field documented with unit
-//! and default — and [`Setup::from_scenario`] checks ranges, resolves paths
-//! and builds or loads the mesh. Stages only ever see a `Setup`.
+//! and default, each number's range an attribute beside it — and
+//! [`Setup::from_scenario`] checks those ranges ([`bounds`]) and the rules
+//! between keys, resolves paths and builds or loads the mesh. Stages only
+//! ever see a `Setup`.
 //!
 //! Errors name the dotted key and the reason (`mesh.top_layer_mm must be > 0,
 //! got -1`), and unknown keys get a suggestion (`unknown key mesh.widht_mm;
@@ -22,6 +24,7 @@ use crate::mesh::generate::PatchSpec;
 use crate::mesh::{io, TetMesh};
 
 mod arrays;
+pub mod bounds;
 pub mod fit;
 mod mesh;
 mod micro;
@@ -112,9 +115,11 @@ pub struct OutputSection {
     /// map's size when the scenario has a whole map, else
     /// `strain_image_px` square. Default false.
     pub strain_data: bool,
-    /// Side of the strain maps in pixels (the UV square). Default 512.
+    /// Side of the strain maps in pixels (the UV square).
+    #[schemars(range(min = 1, max = 8192))]
     pub strain_image_px: usize,
-    /// Stretch ratios `1 ± strain_image_range` saturate the colour map. Default 0.25.
+    /// Stretch ratios `1 ± strain_image_range` saturate the colour map.
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1.0))]
     pub strain_image_range: f64,
     /// Write the top surface's animation as `surface.glb` at the end of the
     /// run: one glTF morph target per frame and a step animation (Blender
@@ -272,29 +277,14 @@ impl OutputSection {
         Ok(self.frames_vtkhdf)
     }
 
-    fn strain_image_settings(&self) -> Result<Option<StrainImageSettings>> {
-        if !(1..=8192).contains(&self.strain_image_px) {
-            return Err(Error::parameter(
-                "output.strain_image_px",
-                format!("must be in 1 … 8192, got {}", self.strain_image_px),
-            ));
-        }
-        let range = self.strain_image_range;
-        if !(range > 0.0 && range <= 1.0) {
-            return Err(Error::parameter(
-                "output.strain_image_range",
-                format!("must be in (0, 1], got {range}"),
-            ));
-        }
-        let px = self.strain_image_px;
-        Ok(
-            (self.strain_images || self.strain_data).then_some(StrainImageSettings {
-                px,
-                range,
-                previews: self.strain_images,
-                data: self.strain_data.then_some([px, px]),
-            }),
-        )
+    fn strain_image_settings(&self) -> Option<StrainImageSettings> {
+        let (px, range) = (self.strain_image_px, self.strain_image_range);
+        (self.strain_images || self.strain_data).then_some(StrainImageSettings {
+            px,
+            range,
+            previews: self.strain_images,
+            data: self.strain_data.then_some([px, px]),
+        })
     }
 }
 
@@ -308,8 +298,10 @@ pub enum MeshSource {
 }
 
 impl Scenario {
-    /// Validates the simulation sections against `mesh`.
+    /// Validates the simulation sections against `mesh` (with the ranges
+    /// of every key, [`bounds::check`]).
     pub fn simulation(&self, mesh: &TetMesh) -> Result<SimulationSetup> {
+        bounds::check(self)?;
         let sets = crate::fem::boundary::NodeSets::of(mesh);
         let (frames, frame_dt, substeps) = self.time.frames()?;
         Ok(SimulationSetup {
@@ -317,14 +309,14 @@ impl Scenario {
             boundary: self.boundary.conditions(&sets)?,
             sets,
             probe: self.probe.as_ref().map(ProbeSection::probe).transpose()?,
-            newton: self.solver.settings()?,
+            newton: self.solver.settings(),
             frames,
             frame_dt,
             substeps,
             predict: self.solver.predict,
             dynamics: self.time.dynamics(frame_dt, substeps)?,
-            max_inverted_fraction: self.solver.max_inverted_fraction()?,
-            warn_volume_ratio: self.solver.warn_volume_ratio()?,
+            max_inverted_fraction: self.solver.max_inverted_fraction,
+            warn_volume_ratio: self.solver.warn_volume_ratio,
         })
     }
 
@@ -668,22 +660,11 @@ pub(crate) fn positive(key: &str, v: f64) -> Result<f64> {
     }
 }
 
-/// A finite value `≥ 0`.
-pub(crate) fn non_negative(key: &str, v: f64) -> Result<f64> {
-    if v.is_finite() && v >= 0.0 {
-        Ok(v)
-    } else {
-        Err(Error::parameter(
-            key,
-            format!("must be ≥ 0, got {}", shown(v)),
-        ))
-    }
-}
-
 impl Setup {
     /// Validates a scenario and builds or loads its mesh. `path` is the
     /// scenario file (its folder resolves `mesh.file`; its stem names the run).
     pub fn from_scenario(scenario: &Scenario, path: &Path) -> Result<Setup> {
+        bounds::check(scenario)?;
         if scenario.surface.is_some() {
             return Err(Error::parameter(
                 "surface",
@@ -698,7 +679,7 @@ impl Setup {
             .unwrap_or_else(|| "scenario".into());
         let base = path.parent().unwrap_or(Path::new("."));
         let mesh_source = scenario.mesh.source(base)?;
-        let strain_images = scenario.output.strain_image_settings()?;
+        let strain_images = scenario.output.strain_image_settings();
         let output_dir = scenario
             .output
             .dir

@@ -11,6 +11,8 @@
 
 use serde_json::{Map, Value};
 
+use super::bounds::Bounds;
+
 /// One table of keys: a TOML section and its keys.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Table {
@@ -32,6 +34,12 @@ pub struct Row {
     /// The default as TOML, `none` for an optional key without one,
     /// `required` for a key the file must give.
     pub default: String,
+    /// Whether `default` was read from the doc comment's "Default …"
+    /// sentence (a default the validation fills in that no value states).
+    pub default_from_comment: bool,
+    /// The accepted range ([`super::bounds::Bounds`]): `> 0`, `[0, 1]`,
+    /// `each ≥ 0` for an array; empty for a key without one.
+    pub range: String,
     /// What it does: the field's doc comment.
     pub meaning: String,
 }
@@ -39,31 +47,36 @@ pub struct Row {
 /// The tables of the file type `T`, from its top level down, each section
 /// before its sub-sections.
 pub fn tables<T: schemars::JsonSchema>() -> Vec<Table> {
-    let schema = schemars::schema_for!(T);
-    let root = schema.as_value();
+    let (root, defs) = schema_of::<T>();
+    let mut out = Vec::new();
+    walk(&defs, &root, "", "", &mut out);
+    out
+}
+
+/// The JSON Schema of `T` and its definitions (what `$ref`s point to).
+pub(super) fn schema_of<T: schemars::JsonSchema>() -> (Value, Map<String, Value>) {
+    let root = schemars::schema_for!(T).to_value();
     let defs = root
         .get("$defs")
         .and_then(Value::as_object)
         .cloned()
         .unwrap_or_default();
-    let mut out = Vec::new();
-    walk(&defs, root, "", "", &mut out);
-    out
+    (root, defs)
 }
 
 /// The tables as Markdown: per table a `####` heading (none for the top
-/// level) and a `key | type | default | meaning` table.
+/// level) and a `key | type | default | accepted | meaning` table.
 pub fn markdown(tables: &[Table]) -> String {
     let mut text = String::new();
     for table in tables {
         if !table.section.is_empty() {
             text += &format!("#### `{}`\n\n", table.section);
         }
-        text += "| key | type | default | meaning |\n|---|---|---|---|\n";
+        text += "| key | type | default | accepted | meaning |\n|---|---|---|---|---|\n";
         for row in &table.rows {
             text += &format!(
-                "| `{}` | {} | {} | {} |\n",
-                row.key, row.kind, row.default, row.meaning
+                "| `{}` | {} | {} | {} | {} |\n",
+                row.key, row.kind, row.default, row.range, row.meaning
             );
         }
         text += "\n";
@@ -117,6 +130,8 @@ fn walk(defs: &Map<String, Value>, schema: &Value, path: &str, header: &str, out
             continue;
         }
         let (meaning, stated) = split_default(&meaning(prop, resolve(defs, inner)));
+        let default_from_comment =
+            matches!(prop.get("default"), Some(Value::Null) | None) && stated.is_some();
         let default = match prop.get("default") {
             // A default the validation fills in (an `Option` the file may
             // leave out), as the doc comment states it.
@@ -132,10 +147,19 @@ fn walk(defs: &Map<String, Value>, schema: &Value, path: &str, header: &str, out
             }
             None => "none".to_string(),
         };
+        let range = match (Bounds::of(defs, prop), inner.get("items")) {
+            (Some(b), _) => b.text(),
+            (None, Some(items)) => Bounds::of(defs, items)
+                .map(|b| format!("each {}", b.text()))
+                .unwrap_or_default(),
+            (None, None) => String::new(),
+        };
         rows.push(Row {
             key: key.clone(),
             kind: kind(defs, inner),
             default,
+            default_from_comment,
+            range,
             meaning,
         });
     }
@@ -151,7 +175,7 @@ fn walk(defs: &Map<String, Value>, schema: &Value, path: &str, header: &str, out
 }
 
 /// `schema` with a `$ref` (alone or as the one entry of `allOf`) followed.
-fn resolve<'a>(defs: &'a Map<String, Value>, schema: &'a Value) -> &'a Value {
+pub(super) fn resolve<'a>(defs: &'a Map<String, Value>, schema: &'a Value) -> &'a Value {
     let target = schema.get("$ref").and_then(Value::as_str).or_else(|| {
         match schema.get("allOf").and_then(Value::as_array) {
             Some(all) if all.len() == 1 => all[0].get("$ref").and_then(Value::as_str),
@@ -169,7 +193,10 @@ fn resolve<'a>(defs: &'a Map<String, Value>, schema: &'a Value) -> &'a Value {
 
 /// The schema inside an `Option` and whether there was one: `anyOf` with a
 /// `null` entry, or a type list holding `"null"`.
-fn unwrap_option<'a>(defs: &'a Map<String, Value>, schema: &'a Value) -> (&'a Value, bool) {
+pub(super) fn unwrap_option<'a>(
+    defs: &'a Map<String, Value>,
+    schema: &'a Value,
+) -> (&'a Value, bool) {
     if let Some(any) = schema.get("anyOf").and_then(Value::as_array) {
         let rest: Vec<&Value> = any
             .iter()

@@ -6,7 +6,6 @@ use std::path::Path;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
-use super::non_negative;
 use crate::error::{shown, Error, Result};
 use crate::render::camera::{Camera, Projection};
 use crate::render::light::{Environment, Light, LightKind, GRACE_CATHEDRAL, MAX_LIGHTS};
@@ -17,13 +16,16 @@ use crate::render::{AlbedoSource, FrameFormat, MicroFilter, Mode, RenderSetup, R
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct RenderSection {
-    /// Image width in pixels. Default 640.
+    /// Image width in pixels.
+    #[schemars(range(min = MIN_IMAGE_PX, max = MAX_IMAGE_PX))]
     pub width_px: usize,
-    /// Image height in pixels. Default 360.
+    /// Image height in pixels.
+    #[schemars(range(min = MIN_IMAGE_PX, max = MAX_IMAGE_PX))]
     pub height_px: usize,
-    /// Supersampling factor per axis (1 … 8): shading runs at
+    /// Supersampling factor per axis: shading runs at
     /// `factor × size` and is box-filtered down. Default 1 (the moment
     /// filter antialiases the microstructure's specular; `msaa` the edges).
+    #[schemars(range(min = 1, max = 8))]
     pub supersample: usize,
     /// Multisample antialiasing of geometric edges (the patch's and the
     /// probe's silhouettes): 1 (off) or 4 samples a pixel, shading still
@@ -45,17 +47,22 @@ pub struct RenderSection {
     /// Frame files: `png8` (sRGB), `png16` (sRGB, 16 bits) or `exr` (linear
     /// 32-bit floats). Default `png8`.
     pub format: FrameFormat,
-    /// Render every n-th frame (frame 0 always). Default 1.
+    /// Render every n-th frame (frame 0 always).
+    #[schemars(range(min = 1))]
     pub frame_stride: usize,
     /// Also encode `render/<mode>.mp4` with ffmpeg (must be installed). Default false.
     pub mp4: bool,
-    /// Side of the texture-space irradiance textures (texels). Default 1024.
+    /// Side of the texture-space irradiance textures (texels).
+    #[schemars(range(min = 16, max = MAX_IMAGE_PX))]
     pub texture_px: usize,
-    /// Side of each light's shadow map (texels). Default 1024.
+    /// Side of each light's shadow map (texels).
+    #[schemars(range(min = 16, max = MAX_IMAGE_PX))]
     pub shadow_map_px: usize,
-    /// Subdivisions of each surface-triangle edge (1 … 8). Default 1.
+    /// Subdivisions of each surface-triangle edge.
+    #[schemars(range(min = 1, max = 8))]
     pub tessellate: usize,
-    /// Pre-scatter share of the albedo (Chappuis 2011 §2.2.4), [0, 1]. Default 0.5.
+    /// Pre-scatter share of the albedo (Chappuis 2011 §2.2.4).
+    #[schemars(range(min = 0.0, max = 1.0))]
     pub mix_ratio: f64,
     /// Draw the probe. Default true.
     pub draw_probe: bool,
@@ -67,12 +74,14 @@ pub struct RenderSection {
     /// Facial region of the measured specular lobes (Graham et al. 2013 Tables 1–2):
     /// forehead, temple, cheek, nose, chin. Default `forehead`.
     pub region: FacialRegion,
-    /// Subject of the measured lobes, 1 or 2. Default 1.
+    /// Subject of the measured lobes.
+    #[schemars(range(min = 1, max = 2))]
     pub subject: usize,
     /// Explicit two-lobe microscale fit `[m1, m2, w]` in place of the region's.
     #[serde(default, deserialize_with = "super::arrays::exact_opt")]
     pub lobes: Option<[f64; 3]>,
-    /// Specular intensity ρ_s multiplying the normalised BRDF, [0, 10]. Default 1.
+    /// Specular intensity ρ_s multiplying the normalised BRDF.
+    #[schemars(range(min = 0.0, max = 10.0))]
     pub specular_intensity: f64,
     /// Specular detail in `static`/`dynamic` modes: `microgeometry` (normals
     /// of the displacement map) or `anisotropic` (mesoscale normals with
@@ -200,11 +209,11 @@ pub struct CameraSection {
     /// Up direction. Default `[0, 0, 1]`.
     #[serde(deserialize_with = "super::arrays::exact")]
     pub up: [f64; 3],
-    /// Vertical field of view (degrees, perspective only), in
-    /// [0.01, 170). Default 35.
+    /// Vertical field of view (degrees, perspective only).
+    #[schemars(extend("default" = FOV_DEG, "exclusiveMaximum" = 170.0), range(min = 0.01))]
     pub fov_deg: Option<f64>,
-    /// Height of the view (mm, orthographic only), in [0.001, 10⁴].
-    /// Default 12.
+    /// Height of the view (mm, orthographic only).
+    #[schemars(extend("default" = HEIGHT_MM), range(min = 0.001, max = 1e4))]
     pub height_mm: Option<f64>,
 }
 
@@ -233,11 +242,13 @@ pub struct LightSection {
     /// Position (mm, point).
     #[serde(default, deserialize_with = "super::arrays::exact_opt")]
     pub position_mm: Option<[f64; 3]>,
-    /// Linear RGB colour, each ≥ 0. Default `[1, 1, 1]`.
+    /// Linear RGB colour.
     #[serde(default = "white")]
     #[serde(deserialize_with = "super::arrays::exact")]
+    #[schemars(inner(range(min = 0.0, max = MAX_RENDER_VALUE)))]
     pub color: [f64; 3],
-    /// Irradiance at normal incidence (at 100 mm for a point light), ≥ 0.
+    /// Irradiance at normal incidence (at 100 mm for a point light).
+    #[schemars(range(min = 0.0, max = MAX_RENDER_VALUE))]
     pub intensity: f64,
 }
 
@@ -256,7 +267,8 @@ pub struct EnvironmentSection {
     /// L20, L21, L22 (z up).
     #[serde(default, deserialize_with = "super::arrays::exact_rows_opt")]
     pub coefficients: Option<Vec<[f64; 3]>>,
-    /// Scale of the radiance, ≥ 0. Default 0.4.
+    /// Scale of the radiance.
+    #[schemars(range(min = 0.0, max = MAX_RENDER_VALUE))]
     pub intensity: f64,
 }
 
@@ -275,6 +287,16 @@ impl Default for EnvironmentSection {
 /// multiply radiances, so a value that fits f64 but not that headroom
 /// would turn the frame into infinities (a black image).
 pub const MAX_RENDER_VALUE: f64 = 1e6;
+
+/// Smallest and largest image side (px).
+const MIN_IMAGE_PX: usize = 8;
+const MAX_IMAGE_PX: usize = 8192;
+
+/// `render.camera.fov_deg` when the file leaves it out (degrees).
+const FOV_DEG: f64 = 35.0;
+
+/// `render.camera.height_mm` when the file leaves it out (mm).
+const HEIGHT_MM: f64 = 12.0;
 
 /// `v` as written in a message.
 fn triple(v: [f64; 3]) -> String {
@@ -317,32 +339,6 @@ fn unit_vec(key: &str, v: [f64; 3]) -> Result<Vec3> {
     Ok(Vec3::new(u.x as f32, u.y as f32, u.z as f32))
 }
 
-/// An intensity: ≥ 0 and within [`MAX_RENDER_VALUE`].
-fn intensity(key: &str, v: f64) -> Result<f32> {
-    let v = non_negative(key, v)?;
-    if v > MAX_RENDER_VALUE {
-        return Err(Error::parameter(
-            key,
-            format!(
-                "must be at most {MAX_RENDER_VALUE:e} (the renderer computes in f32), got {}",
-                shown(v)
-            ),
-        ));
-    }
-    Ok(v as f32)
-}
-
-fn in_range(key: &str, v: usize, lo: usize, hi: usize) -> Result<usize> {
-    if (lo..=hi).contains(&v) {
-        Ok(v)
-    } else {
-        Err(Error::parameter(
-            key,
-            format!("must be in {lo} … {hi}, got {v}"),
-        ))
-    }
-}
-
 impl CameraSection {
     fn camera(&self) -> Result<Camera> {
         let eye = finite_vec("render.camera.eye_mm", self.eye_mm)?;
@@ -375,13 +371,7 @@ impl CameraSection {
                 if self.height_mm.is_some() {
                     return Err(unused("render.camera.height_mm", "perspective"));
                 }
-                let fov = self.fov_deg.unwrap_or(35.0);
-                if !(fov.is_finite() && (0.01..170.0).contains(&fov)) {
-                    return Err(Error::parameter(
-                        "render.camera.fov_deg",
-                        format!("must be in [0.01, 170), got {}", shown(fov)),
-                    ));
-                }
+                let fov = self.fov_deg.unwrap_or(FOV_DEG);
                 Projection::Perspective {
                     fov_deg: fov as f32,
                 }
@@ -390,13 +380,7 @@ impl CameraSection {
                 if self.fov_deg.is_some() {
                     return Err(unused("render.camera.fov_deg", "orthographic"));
                 }
-                let height = self.height_mm.unwrap_or(12.0);
-                if !(height.is_finite() && (1e-3..=1e4).contains(&height)) {
-                    return Err(Error::parameter(
-                        "render.camera.height_mm",
-                        format!("must be in [0.001, 10000] mm, got {}", shown(height)),
-                    ));
-                }
+                let height = self.height_mm.unwrap_or(HEIGHT_MM);
                 Projection::Orthographic {
                     height_mm: height as f32,
                 }
@@ -439,20 +423,17 @@ impl LightSection {
                 LightKind::Point(finite_vec(&key("position_mm"), p)?)
             }
         };
-        for c in self.color {
-            non_negative(&key("color"), c)?;
-        }
         Ok(Light {
             kind,
             color: finite_vec(&key("color"), self.color)?,
-            intensity: intensity(&key("intensity"), self.intensity)?,
+            intensity: self.intensity as f32,
         })
     }
 }
 
 impl EnvironmentSection {
     fn environment(&self) -> Result<Option<Environment>> {
-        let intensity = intensity("render.environment.intensity", self.intensity)?;
+        let intensity = self.intensity as f32;
         let coefficients = match &self.coefficients {
             Some(_) if self.preset.is_some() => return Err(Error::parameter(
                 "render.environment.preset",
@@ -519,12 +500,6 @@ impl RenderSection {
     /// Microscale lobes (explicit or the region's) and mesoscale lobes.
     fn lobes(&self) -> Result<(Lobes, Lobes)> {
         let region = self.region.name();
-        if !(1..=2).contains(&self.subject) {
-            return Err(Error::parameter(
-                "render.subject",
-                format!("must be 1 or 2, got {}", self.subject),
-            ));
-        }
         let micro_lobes = match self.lobes {
             Some([m1, m2, w]) => {
                 for (name, m) in [("m1", m1), ("m2", m2)] {
@@ -597,9 +572,8 @@ impl RenderSection {
     /// Validates the section; `base` resolves an albedo file and
     /// `has_micro` says whether the scenario has a microstructure.
     pub fn setup(&self, base: &Path, has_micro: bool) -> Result<RenderSetup> {
-        let width = in_range("render.width_px", self.width_px, 8, 8192)?;
-        let height = in_range("render.height_px", self.height_px, 8, 8192)?;
-        let supersample = in_range("render.supersample", self.supersample, 1, 8)?;
+        super::bounds::check_at(self, "render")?;
+        let (width, height, supersample) = (self.width_px, self.height_px, self.supersample);
         if width * supersample > 16384 || height * supersample > 16384 {
             return Err(Error::parameter(
                 "render.supersample",
@@ -632,30 +606,10 @@ impl RenderSection {
             }
         }
         let format = self.format;
-        if self.frame_stride == 0 {
-            return Err(Error::parameter(
-                "render.frame_stride",
-                "must be ≥ 1, got 0",
-            ));
-        }
         if self.mp4 && format == FrameFormat::Exr {
             return Err(Error::parameter(
                 "render.mp4",
                 "needs PNG frames (render.format = \"png8\" or \"png16\"), not exr",
-            ));
-        }
-        let mix_ratio = self.mix_ratio;
-        if !(0.0..=1.0).contains(&mix_ratio) {
-            return Err(Error::parameter(
-                "render.mix_ratio",
-                format!("must be in [0, 1], got {mix_ratio}"),
-            ));
-        }
-        let rho_s = non_negative("render.specular_intensity", self.specular_intensity)?;
-        if rho_s > 10.0 {
-            return Err(Error::parameter(
-                "render.specular_intensity",
-                format!("must be ≤ 10, got {rho_s}"),
             ));
         }
         let (micro_lobes, meso_lobes) = self.lobes()?;
@@ -672,16 +626,16 @@ impl RenderSection {
             format,
             frame_stride: self.frame_stride,
             mp4: self.mp4,
-            texture_px: in_range("render.texture_px", self.texture_px, 16, 8192)?,
-            shadow_map_px: in_range("render.shadow_map_px", self.shadow_map_px, 16, 8192)?,
-            tessellate: in_range("render.tessellate", self.tessellate, 1, 8)?,
-            mix_ratio: mix_ratio as f32,
+            texture_px: self.texture_px,
+            shadow_map_px: self.shadow_map_px,
+            tessellate: self.tessellate,
+            mix_ratio: self.mix_ratio as f32,
             draw_probe: self.draw_probe,
             translucency: self.translucency,
             albedo,
             micro_lobes,
             meso_lobes,
-            specular_intensity: rho_s as f32,
+            specular_intensity: self.specular_intensity as f32,
             roughness: self.roughness,
             microstructure_filter: self.microstructure_filter,
             camera: self.camera.camera()?,
@@ -717,8 +671,5 @@ mod tests {
             "render.camera.eye_mm must be finite and within ±1e6 (the renderer computes in f32), \
              got [0, -1e39, 1]"
         );
-        let e = intensity("render.lights[0].intensity", 1e300).unwrap_err();
-        assert!(e.to_string().ends_with("got 1e300"), "{e}");
-        assert_eq!(intensity("i", 2.5).unwrap(), 2.5);
     }
 }

@@ -14,11 +14,18 @@ use crate::error::{shown, Error, Result};
 use crate::fem::boundary::{
     BottomCondition, BoundaryConditions, Caliper, Keyframes, NodeSets, Prescribed, SideCondition,
 };
+use crate::fem::load_steps::MAX_LOAD_STEPS;
+use crate::fem::material::{DENSITY_RANGE, MAX_POISSON_LOCKING_FREE, YOUNGS_KPA_RANGE};
 use crate::fem::probe::{ContactMode, Probe, ProbeShape};
 use crate::fem::simulation::{Dynamics, LinearSolver, NewtonSettings};
 use crate::fem::solve::CgSettings;
 use crate::fem::Material;
 use crate::mesh::TetMesh;
+
+/// `material.<region>.poisson_ratio` when the section leaves it out.
+const POISSON_RATIO: f64 = 0.45;
+/// `material.<region>.density_kg_m3` when the section leaves it out.
+const DENSITY_KG_M3: f64 = 1100.0;
 
 /// `[material.<region>]`: one region's material. Defaults: the top layer
 /// (`dermis`) 150 kPa, the bottom layer (`hypodermis`) 15 kPa, ν = 0.45,
@@ -27,11 +34,13 @@ use crate::mesh::TetMesh;
 #[serde(deny_unknown_fields)]
 pub struct MaterialSection {
     /// Young's modulus (kPa).
+    #[schemars(range(min = YOUNGS_KPA_RANGE.0, max = YOUNGS_KPA_RANGE.1))]
     pub youngs_modulus_kpa: Option<f64>,
-    /// Poisson's ratio: at most 0.49, or 0.4999 with `volumetric =
-    /// "locking-free"`. Default 0.45.
+    /// Poisson's ratio: at most 0.49 with `volumetric = "standard"`.
+    #[schemars(extend("default" = POISSON_RATIO), range(min = 0.0, max = MAX_POISSON_LOCKING_FREE))]
     pub poisson_ratio: Option<f64>,
-    /// Density (kg/m³). Default 1100.
+    /// Density (kg/m³).
+    #[schemars(extend("default" = DENSITY_KG_M3), range(min = DENSITY_RANGE.0, max = DENSITY_RANGE.1))]
     pub density_kg_m3: Option<f64>,
     /// Energy density: `corotational` (default) or `stable-neo-hookean`.
     pub model: Option<crate::fem::Model>,
@@ -133,8 +142,10 @@ pub struct ProbeSection {
     /// `sphere`, `capsule` or `punch`.
     pub shape: ProbeShapeKind,
     /// Radius (mm).
+    #[schemars(extend("exclusiveMinimum" = 0.0, "maximum" = MAX_PROBE_MM))]
     pub radius_mm: f64,
     /// Capsule length between the end centres (mm).
+    #[schemars(range(min = 0.0, max = MAX_PROBE_MM))]
     pub length_mm: Option<f64>,
     /// Rows `[time_s, x_mm, y_mm, z_mm]`: centre of the sphere or capsule,
     /// centre of the punch face.
@@ -146,6 +157,7 @@ pub struct ProbeSection {
     /// `frictionless` (default), `coulomb` or `bonded`.
     pub contact: Option<ContactKind>,
     /// Coulomb friction coefficient (with `contact = "coulomb"`).
+    #[schemars(range(min = 0.0))]
     pub friction: Option<f64>,
 }
 
@@ -158,14 +170,18 @@ pub struct SolverSection {
     /// PCG), `factored-cg` (PCG with a reused Cholesky factor) or
     /// `direct` (sparse Cholesky).
     pub linear: LinearSolver,
-    /// Relative residual at which a frame is in equilibrium. Default 1e-6.
+    /// Relative residual at which a frame is in equilibrium.
+    #[schemars(extend("exclusiveMinimum" = 0.0, "exclusiveMaximum" = 1.0))]
     pub rel_tol: f64,
-    /// Newton iterations per equilibrium solve. Default 50.
+    /// Newton iterations per equilibrium solve.
+    #[schemars(range(min = 1))]
     pub max_newton_iterations: usize,
     /// Tightest relative tolerance of a linear (CG) solve; Newton steps use
-    /// an adaptive tolerance between this and 0.1. Default 1e-4.
+    /// an adaptive tolerance between this and 0.1.
+    #[schemars(extend("exclusiveMinimum" = 0.0, "exclusiveMaximum" = 1.0))]
     pub linear_rel_tol: f64,
-    /// Iteration limit of each linear solve. Default 3000.
+    /// Iteration limit of each linear solve.
+    #[schemars(range(min = 1))]
     pub max_linear_iterations: usize,
     /// Start each solve from the last state moved on by the last increment
     /// (constant velocity) instead of the last state itself. Default true.
@@ -173,11 +189,13 @@ pub struct SolverSection {
     /// Largest fraction of tets that may be inverted (det F ≤ 0) in a
     /// solved frame; a frame with more stops the run with an error (the
     /// patch has turned inside out and its outputs would be meaningless).
-    /// 0 refuses any inverted tet, 1 never stops. Default 0.01.
+    /// 0 refuses any inverted tet, 1 never stops.
+    #[schemars(range(min = 0.0, max = 1.0))]
     pub max_inverted_fraction: f64,
     /// A tet squeezed below this volume ratio (J = det F) is counted in
     /// `volume.csv`, and the first frame in which a region has such tets
-    /// logs a warning. In (0, 1]; default 0.5.
+    /// logs a warning.
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1.0))]
     pub warn_volume_ratio: f64,
 }
 
@@ -210,16 +228,23 @@ pub struct TimeSection {
     /// `quasi-static` (default: equilibrium at every step) or
     /// `implicit-euler` (backward-Euler dynamics, one step per substep).
     pub integrator: Integrator,
-    /// Rayleigh mass-proportional damping α (1/s). Default 0.
+    /// Rayleigh mass-proportional damping α (1/s); beyond the largest
+    /// accepted it swamps the elastic and inertial terms.
+    #[schemars(range(min = 0.0, max = MAX_DAMPING_ALPHA_PER_S))]
     pub damping_alpha_per_s: f64,
-    /// Rayleigh stiffness-proportional damping β (s). Default 0.
+    /// Rayleigh stiffness-proportional damping β (s); beyond the largest
+    /// accepted it swamps the elastic and inertial terms.
+    #[schemars(range(min = 0.0, max = MAX_DAMPING_BETA_S))]
     pub damping_beta_s: f64,
-    /// Simulated time (s). Default 1.
+    /// Simulated time (s).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub duration_s: f64,
-    /// Frames per second of simulated time. Default 60.
+    /// Frames per second of simulated time.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub frame_rate_hz: f64,
-    /// Load substeps per frame (1 to 10,000); a frame whose probe would move
-    /// more than a quarter of its radius in one is split further. Default 1.
+    /// Load substeps per frame; a frame whose probe would move more than a
+    /// quarter of its radius in one is split further.
+    #[schemars(range(min = 1, max = MAX_LOAD_STEPS))]
     pub substeps: usize,
 }
 
@@ -331,8 +356,8 @@ pub fn materials(
         let m = Material::with_volumetric(
             &region.name,
             kpa,
-            s.poisson_ratio.unwrap_or(0.45),
-            s.density_kg_m3.unwrap_or(1100.0),
+            s.poisson_ratio.unwrap_or(POISSON_RATIO),
+            s.density_kg_m3.unwrap_or(DENSITY_KG_M3),
             s.volumetric.unwrap_or_default(),
         )?
         .with_model(s.model.unwrap_or_default());
@@ -393,22 +418,7 @@ pub const MAX_PROBE_MM: f64 = 1e5;
 impl ProbeSection {
     /// Validates into a [`Probe`].
     pub fn probe(&self) -> Result<Probe> {
-        let radius = positive("probe.radius_mm", self.radius_mm)?;
-        for (key, v) in [
-            ("probe.radius_mm", Some(radius)),
-            ("probe.length_mm", self.length_mm),
-        ] {
-            if v.is_some_and(|v| v > MAX_PROBE_MM) {
-                return Err(Error::parameter(
-                    key,
-                    format!(
-                        "must be at most {MAX_PROBE_MM:e} mm (distances to a larger probe lose \
-                         the precision contact needs at the patch's scale), got {}",
-                        shown(v.unwrap_or_default())
-                    ),
-                ));
-            }
-        }
+        let radius = self.radius_mm;
         let shape = match self.shape {
             ProbeShapeKind::Sphere => ProbeShape::Sphere { radius_mm: radius },
             ProbeShapeKind::Punch => ProbeShape::Punch { radius_mm: radius },
@@ -418,7 +428,7 @@ impl ProbeSection {
                 })?;
                 ProbeShape::Capsule {
                     radius_mm: radius,
-                    length_mm: super::non_negative("probe.length_mm", length)?,
+                    length_mm: length,
                 }
             }
         };
@@ -431,15 +441,7 @@ impl ProbeSection {
         let mode = match (self.contact.unwrap_or_default(), self.friction) {
             (ContactKind::Frictionless, None) => ContactMode::Frictionless,
             (ContactKind::Bonded, None) => ContactMode::Bonded,
-            (ContactKind::Coulomb, Some(mu)) => {
-                if !(mu.is_finite() && mu >= 0.0) {
-                    return Err(Error::parameter(
-                        "probe.friction",
-                        format!("must be ≥ 0, got {mu}"),
-                    ));
-                }
-                ContactMode::Coulomb(mu)
-            }
+            (ContactKind::Coulomb, Some(mu)) => ContactMode::Coulomb(mu),
             (ContactKind::Coulomb, None) => {
                 return Err(Error::parameter(
                     "probe.friction",
@@ -492,58 +494,18 @@ impl ProbeSection {
 }
 
 impl SolverSection {
-    /// `max_inverted_fraction`, checked to lie in [0, 1].
-    pub fn max_inverted_fraction(&self) -> Result<f64> {
-        let f = self.max_inverted_fraction;
-        if (0.0..=1.0).contains(&f) {
-            Ok(f)
-        } else {
-            Err(Error::parameter(
-                "solver.max_inverted_fraction",
-                format!("must be in [0, 1] (1 never stops), got {f}"),
-            ))
-        }
-    }
-
-    /// `warn_volume_ratio`, checked to lie in (0, 1].
-    pub fn warn_volume_ratio(&self) -> Result<f64> {
-        let r = self.warn_volume_ratio;
-        if r > 0.0 && r <= 1.0 {
-            Ok(r)
-        } else {
-            Err(Error::parameter(
-                "solver.warn_volume_ratio",
-                format!("must be in (0, 1] (a volume ratio J = det F), got {r}"),
-            ))
-        }
-    }
-
-    /// Validates into Newton settings.
-    pub fn settings(&self) -> Result<NewtonSettings> {
-        let check_tol = |key: &str, v: f64| {
-            if v.is_finite() && v > 0.0 && v < 1.0 {
-                Ok(v)
-            } else {
-                Err(Error::parameter(key, format!("must be in (0, 1), got {v}")))
-            }
-        };
-        let count = |key: &str, v: usize| {
-            if v > 0 {
-                Ok(v)
-            } else {
-                Err(Error::parameter(key, "must be > 0, got 0"))
-            }
-        };
-        let linear = self.linear;
-        Ok(NewtonSettings {
-            linear,
-            rel_tol: check_tol("solver.rel_tol", self.rel_tol)?,
-            max_iterations: count("solver.max_newton_iterations", self.max_newton_iterations)?,
+    /// Newton settings (their ranges checked with the file's,
+    /// [`super::bounds`]).
+    pub fn settings(&self) -> NewtonSettings {
+        NewtonSettings {
+            linear: self.linear,
+            rel_tol: self.rel_tol,
+            max_iterations: self.max_newton_iterations,
             cg: CgSettings {
-                rel_tol: check_tol("solver.linear_rel_tol", self.linear_rel_tol)?,
-                max_iterations: count("solver.max_linear_iterations", self.max_linear_iterations)?,
+                rel_tol: self.linear_rel_tol,
+                max_iterations: self.max_linear_iterations,
             },
-        })
+        }
     }
 }
 
@@ -569,42 +531,17 @@ impl TimeSection {
                 }
                 Ok(None)
             }
-            Integrator::ImplicitEuler => {
-                let a = super::non_negative("time.damping_alpha_per_s", self.damping_alpha_per_s)?;
-                let b = super::non_negative("time.damping_beta_s", self.damping_beta_s)?;
-                // Beyond these the damping swamps the elastic and inertial
-                // terms by many orders (the solve ends where it began).
-                for (key, v, most) in [
-                    ("time.damping_alpha_per_s", a, MAX_DAMPING_ALPHA_PER_S),
-                    ("time.damping_beta_s", b, MAX_DAMPING_BETA_S),
-                ] {
-                    if v > most {
-                        return Err(Error::parameter(
-                            key,
-                            format!("must be at most {most:e}, got {}", shown(v)),
-                        ));
-                    }
-                }
-                Ok(Some(Dynamics {
-                    dt: frame_dt / substeps as f64,
-                    alpha: a,
-                    beta: b,
-                }))
-            }
+            Integrator::ImplicitEuler => Ok(Some(Dynamics {
+                dt: frame_dt / substeps as f64,
+                alpha: self.damping_alpha_per_s,
+                beta: self.damping_beta_s,
+            })),
         }
     }
 
     /// (frames, frame interval, substeps).
     pub fn frames(&self) -> Result<(usize, f64, usize)> {
-        let duration = positive("time.duration_s", self.duration_s)?;
-        let rate = positive("time.frame_rate_hz", self.frame_rate_hz)?;
-        let most = crate::fem::load_steps::MAX_LOAD_STEPS;
-        if self.substeps == 0 || self.substeps > most {
-            return Err(Error::parameter(
-                "time.substeps",
-                format!("must be 1 to {most}, got {}", self.substeps),
-            ));
-        }
+        let (duration, rate) = (self.duration_s, self.frame_rate_hz);
         let frames = (duration * rate).round() as usize;
         if frames == 0 || frames > 1_000_000 {
             return Err(Error::parameter(

@@ -10,6 +10,9 @@ use super::{OutputSetup, Scenario};
 use crate::error::{Error, Result};
 use crate::surface::{AnimatedSurface, LengthUnit, ReadOptions, UvLayout, UvPiece};
 
+/// `surface.frame_rate_hz` when the file leaves it out.
+const FRAME_RATE_HZ: f64 = 30.0;
+
 /// `[surface]`: the rest mesh with UVs and its animation.
 #[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
@@ -30,7 +33,8 @@ pub struct SurfaceSection {
     /// `"m"` for glTF (the format's unit); required for OBJ.
     pub units: Option<LengthUnit>,
     /// Frames per second: the sampling of a glTF animation, the rate of an
-    /// OBJ sequence. Default 30.
+    /// OBJ sequence.
+    #[schemars(extend("default" = FRAME_RATE_HZ, "exclusiveMinimum" = 0.0))]
     pub frame_rate_hz: Option<f64>,
     /// UVs outside [0, 1]: `"unit"` (refused, default), `"udim"` (UDIM
     /// tiles, maps per tile) or `"wrap"` (one repeating texture).
@@ -58,6 +62,7 @@ impl SurfaceSetup {
     /// Validates a scenario with a `[surface]` and reads the surface.
     /// `path` is the scenario file (its folder resolves `surface.file`).
     pub fn from_scenario(scenario: &Scenario, path: &Path) -> Result<SurfaceSetup> {
+        super::bounds::check(scenario)?;
         let Some(section) = &scenario.surface else {
             return Err(Error::parameter(
                 "surface",
@@ -75,13 +80,7 @@ impl SurfaceSetup {
             .dir
             .clone()
             .unwrap_or_else(|| Path::new("out").join(&name));
-        let rate = section.frame_rate_hz.unwrap_or(30.0);
-        if !(rate.is_finite() && rate > 0.0) {
-            return Err(Error::parameter(
-                "surface.frame_rate_hz",
-                format!("must be > 0, got {rate}"),
-            ));
-        }
+        let rate = section.frame_rate_hz.unwrap_or(FRAME_RATE_HZ);
         let layout = section.uv_layout.unwrap_or_default();
         let options = ReadOptions {
             mm_per_unit: section.units.map(LengthUnit::mm),
@@ -150,7 +149,7 @@ impl SurfaceSetup {
                 vtu_format: scenario.output.vtu_format(),
                 strain_images: scenario
                     .output
-                    .strain_image_settings()?
+                    .strain_image_settings()
                     .map(|s| s.sized_to(micro.as_ref())),
                 micro,
                 render,

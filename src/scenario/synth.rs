@@ -26,7 +26,10 @@ use super::micro::{MapFormat, ProceduralSection};
 use crate::error::{shown, Error, Result};
 use crate::micro::io::{read_map, MapDefaults, TexelSize};
 use crate::micro::procedural::generate;
-use crate::micro::synth::{gauss, SynthInputs, SynthParams};
+use crate::micro::procedural::MAX_EXTENT_MM;
+use crate::micro::synth::{
+    gauss, SynthInputs, SynthParams, MAX_LEVELS, MAX_PASSES, MAX_SIDE, MAX_WINDOW,
+};
 use crate::micro::{DisplacementMap, Edge};
 
 /// A `skinpatch synth` file: `[synthesis]` and `[output]`.
@@ -54,7 +57,8 @@ pub struct SynthOutputSection {
     /// Write `preview.png`: exemplar, mesostructure, result and a render of
     /// the result side by side. Default true.
     pub preview: bool,
-    /// Side of each preview panel (px). Default 384.
+    /// Side of each preview panel (px).
+    #[schemars(range(min = 16, max = 4096))]
     pub preview_px: usize,
 }
 
@@ -81,12 +85,6 @@ impl SynthOutputSection {
                 "must name at least one of \"exr\", \"png16\"",
             ));
         }
-        if !(16..=4096).contains(&self.preview_px) {
-            return Err(Error::parameter(
-                "output.preview_px",
-                format!("must be in 16 … 4096, got {}", self.preview_px),
-            ));
-        }
         Ok((exr, png))
     }
 }
@@ -100,8 +98,10 @@ pub struct SynthesisSection {
     pub exemplar: Option<PathBuf>,
     /// Texel size (µm) of an exemplar file without skinpatch metadata
     /// (required for such files: an image editor's PNG says nothing of scale).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub exemplar_texel_um: Option<f64>,
-    /// Micrometres per height unit of an exemplar file without metadata. Default 1.
+    /// Micrometres per height unit of an exemplar file without metadata.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub exemplar_height_unit_um: f64,
     /// Edge rule of an exemplar file without metadata: `clamp` (a measured
     /// patch; default) or `wrap` (a tileable one).
@@ -115,46 +115,65 @@ pub struct SynthesisSection {
     /// synthesis of `size_px`.
     pub mesostructure: Option<PathBuf>,
     /// Texel size (µm) of a mesostructure file without metadata (required for such files).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub mesostructure_texel_um: Option<f64>,
-    /// Micrometres per height unit of a mesostructure file without metadata. Default 1.
+    /// Micrometres per height unit of a mesostructure file without metadata.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub mesostructure_height_unit_um: f64,
     /// Edge rule of a mesostructure file without metadata. Default `clamp`.
     pub mesostructure_edge: Edge,
     /// A generated mesostructure map instead of a file.
     pub mesostructure_generated: Option<GeneratedSection>,
     /// Output texel (µm). Default: the exemplar's.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub texel_um: Option<f64>,
     /// Output side in texels without a mesostructure map (square).
+    #[schemars(range(min = 1, max = MAX_SIDE))]
     pub size_px: Option<usize>,
     /// Output edge rule: `wrap` (a torus, tiles without a seam) or `clamp`.
     /// Default: the mesostructure map's, else `wrap`.
     pub edge: Option<Edge>,
     /// σ (µm) that takes the exemplar to the mesostructure's detail.
     /// Default: one mesostructure texel.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub mesostructure_sigma_um: Option<f64>,
     /// σ (µm) of the low pass kept from the mesostructure. Default 4 × the above.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub lowpass_sigma_um: Option<f64>,
-    /// Pyramid levels. Default 3.
+    /// Pyramid levels.
+    #[schemars(extend("default" = SynthParams::default().levels), range(min = 1, max = MAX_LEVELS))]
     pub levels: Option<usize>,
-    /// Window side at the coarsest level (odd). Default 5.
+    /// Window side at the coarsest level (odd, at most `window_fine`).
+    #[schemars(extend("default" = SynthParams::default().window_coarse))]
+    #[schemars(range(min = 3, max = MAX_WINDOW))]
     pub window_coarse: Option<usize>,
-    /// Window side at the finest level (odd). Default 13.
+    /// Window side at the finest level (odd).
+    #[schemars(extend("default" = SynthParams::default().window_fine))]
+    #[schemars(range(min = 3, max = MAX_WINDOW))]
     pub window_fine: Option<usize>,
-    /// Weight of the A′/B′ neighbourhoods, [0, 1]. Default 0.5.
+    /// Weight of the A′/B′ neighbourhoods.
+    #[schemars(extend("default" = SynthParams::default().alpha), range(min = 0.0, max = 1.0))]
     pub alpha: Option<f64>,
-    /// Coherence parameter κ. Default 100.
+    /// Coherence parameter κ.
+    #[schemars(extend("default" = SynthParams::default().kappa), range(min = 0.0))]
     pub kappa: Option<f64>,
-    /// Correction passes per level. Default 3.
+    /// Correction passes per level.
+    #[schemars(extend("default" = SynthParams::default().passes), range(min = 1, max = MAX_PASSES))]
     pub passes: Option<usize>,
-    /// PCA dimensions (0: no PCA). Default: the window side.
+    /// PCA dimensions (0: no PCA), at most 2 × `window_coarse`². Default:
+    /// the window side.
     pub pca_dims: Option<usize>,
-    /// k-d tree leaves visited per query (0: exact). Default 8.
+    /// k-d tree leaves visited per query (0: exact).
+    #[schemars(extend("default" = SynthParams::default().ann_leaves))]
     pub ann_leaves: Option<usize>,
-    /// Random seed. Default 1.
+    /// Random seed.
+    #[schemars(extend("default" = SynthParams::default().seed))]
     pub seed: Option<u64>,
-    /// Seam blending radius (texels; 0: plain copies). Default 1.
+    /// Seam blending radius (texels; 0: plain copies).
+    #[schemars(extend("default" = SynthParams::default().blend_radius), range(max = 8))]
     pub blend_radius: Option<usize>,
-    /// Mesostructure restoring passes. Default 2.
+    /// Mesostructure restoring passes.
+    #[schemars(extend("default" = SynthParams::default().restore_passes), range(max = 16))]
     pub restore_passes: Option<usize>,
 }
 
@@ -198,10 +217,13 @@ impl Default for SynthesisSection {
 #[serde(deny_unknown_fields)]
 pub struct GeneratedSection {
     /// Side of the map on the skin (mm).
+    #[schemars(extend("exclusiveMinimum" = 0.0, "maximum" = MAX_EXTENT_MM))]
     pub extent_mm: f64,
     /// Gaussian blur (σ, µm) after generation. Default none.
+    #[schemars(range(min = 0.0))]
     pub blur_um: Option<f64>,
     /// Resampled to this texel (µm) after the blur. Default: as generated.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub texel_um: Option<f64>,
     /// The generator's parameters (`[microstructure.procedural]` keys).
     #[serde(default)]
@@ -259,18 +281,6 @@ impl SynthesisSection {
             restore_passes: self.restore_passes.unwrap_or(d.restore_passes),
         };
         p.validate(key)?;
-        if p.blend_radius > 8 {
-            return Err(Error::parameter(
-                format!("{key}.blend_radius"),
-                format!("must be at most 8, got {}", p.blend_radius),
-            ));
-        }
-        if p.restore_passes > 16 {
-            return Err(Error::parameter(
-                format!("{key}.restore_passes"),
-                format!("must be at most 16, got {}", p.restore_passes),
-            ));
-        }
         Ok(p)
     }
 
@@ -338,14 +348,6 @@ impl SynthesisSection {
                 Some(img)
             }
         };
-        if let Some(t) = self.texel_um {
-            if !(t.is_finite() && t > 0.0) {
-                return Err(Error::parameter(
-                    format!("{key}.texel_um"),
-                    format!("must be finite and > 0, got {}", shown(t)),
-                ));
-            }
-        }
         let size = match (self.size_px, &mesostructure) {
             (Some(_), Some(_)) => {
                 return Err(Error::parameter(
@@ -353,15 +355,7 @@ impl SynthesisSection {
                     "has no effect with a mesostructure map: the output covers the map",
                 ))
             }
-            (Some(n), None) => {
-                if !(1..=crate::micro::synth::MAX_SIDE).contains(&n) {
-                    return Err(Error::parameter(
-                        format!("{key}.size_px"),
-                        format!("must be in 1 … {}, got {n}", crate::micro::synth::MAX_SIDE),
-                    ));
-                }
-                Some((n, n))
-            }
+            (Some(n), None) => Some((n, n)),
             (None, None) => {
                 return Err(Error::parameter(
                     format!("{key}.size_px"),
@@ -394,12 +388,6 @@ impl SynthesisSection {
         unit: f64,
         edge: Edge,
     ) -> Result<Option<DisplacementMap>> {
-        if !(unit.is_finite() && unit > 0.0) {
-            return Err(Error::parameter(
-                format!("{key}.{name}_height_unit_um"),
-                format!("must be finite and > 0, got {}", shown(unit)),
-            ));
-        }
         match (file, generated) {
             (Some(_), Some(_)) => Err(Error::parameter(
                 format!("{key}.{name}"),
@@ -407,13 +395,7 @@ impl SynthesisSection {
             )),
             (Some(f), None) => {
                 let texel = match texel_um {
-                    Some(t) if t.is_finite() && t > 0.0 => TexelSize::Um(t),
-                    Some(t) => {
-                        return Err(Error::parameter(
-                            format!("{key}.{name}_texel_um"),
-                            format!("must be finite and > 0, got {}", shown(t)),
-                        ))
-                    }
+                    Some(t) => TexelSize::Um(t),
                     None => TexelSize::Required(match name {
                         "exemplar" => "exemplar_texel_um",
                         _ => "mesostructure_texel_um",
@@ -528,22 +510,10 @@ impl GeneratedSection {
     /// The generated, blurred and resampled map; `key` names the table.
     pub fn generate(&self, key: &str) -> Result<DisplacementMap> {
         let extent = self.extent_mm;
-        if !(extent.is_finite() && extent > 0.0) {
-            return Err(Error::parameter(
-                format!("{key}.extent_mm"),
-                format!("must be finite and > 0, got {}", shown(extent)),
-            ));
-        }
         let params = self.skin.params(extent);
         params.validate(&format!("{key}.skin"))?;
         let mut map = generate(&params)?;
         if let Some(b) = self.blur_um {
-            if !(b.is_finite() && b >= 0.0) {
-                return Err(Error::parameter(
-                    format!("{key}.blur_um"),
-                    format!("must be finite and ≥ 0, got {}", shown(b)),
-                ));
-            }
             map = gauss(&map, b / map.texel_um);
         }
         if let Some(t) = self.texel_um {

@@ -35,11 +35,14 @@ fn wrong_type_names_key() {
 #[test]
 fn range_errors_name_key_and_value() {
     let s = parse("[mesh]\ntop_layer_mm = -1\n").unwrap();
-    let err = s.mesh.patch_spec().unwrap_err().to_string();
+    let err = bounds::check(&s).unwrap_err().to_string();
     assert_eq!(err, "mesh.top_layer_mm must be > 0, got -1");
     let s = parse("[mesh]\nwidth_mm = nan\n").unwrap();
-    let err = s.mesh.patch_spec().unwrap_err().to_string();
+    let err = bounds::check(&s).unwrap_err().to_string();
     assert_eq!(err, "mesh.width_mm must be > 0, got NaN");
+    // Setup checks them before anything else.
+    let err = Setup::from_scenario(&s, Path::new("test.toml")).unwrap_err();
+    assert_eq!(err.to_string(), "mesh.width_mm must be > 0, got NaN");
 }
 
 #[test]
@@ -138,7 +141,10 @@ fn unknown_values_name_the_key_the_values_and_the_closest() {
 
 #[test]
 fn strain_image_options_are_checked() {
-    let settings = |text: &str| parse(text).unwrap().output.strain_image_settings();
+    let settings = |text: &str| {
+        let scenario = parse(text).unwrap();
+        bounds::check(&scenario).map(|()| scenario.output.strain_image_settings())
+    };
     assert_eq!(settings("").unwrap(), None);
     let on = settings("[output]\nstrain_images = true\nstrain_image_px = 128\n").unwrap();
     assert_eq!(

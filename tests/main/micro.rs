@@ -894,7 +894,7 @@ fn the_fit_example_finds_the_kernel_it_was_made_with() {
         .unwrap();
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(
-        !o.status.success() && stderr.contains("height_unit_um must be a finite height > 0"),
+        !o.status.success() && stderr.contains("height_unit_um must be > 0, got -1"),
         "{stderr}"
     );
 }

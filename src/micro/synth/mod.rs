@@ -131,6 +131,8 @@ impl Default for SynthParams {
 pub const MAX_LEVELS: usize = 8;
 /// Widest window.
 pub const MAX_WINDOW: usize = 31;
+/// Most correction passes per level.
+pub const MAX_PASSES: usize = 16;
 
 impl SynthParams {
     /// Checks every parameter; `key` prefixes the names in errors.
@@ -182,8 +184,11 @@ impl SynthParams {
                 format!("must be finite and ≥ 0, got {}", shown(self.kappa)),
             );
         }
-        if !(1..=16).contains(&self.passes) {
-            return bad("passes", format!("must be in 1 … 16, got {}", self.passes));
+        if !(1..=MAX_PASSES).contains(&self.passes) {
+            return bad(
+                "passes",
+                format!("must be in 1 … {MAX_PASSES}, got {}", self.passes),
+            );
         }
         if let Some(d) = self.pca_dims {
             let most = 2 * self.window_coarse * self.window_coarse;
