@@ -598,3 +598,127 @@ print("written")
         }
     }
 }
+
+/// A compressed VTU whose header lies about its binary data — the byte
+/// order, the header width, a compressor on plain data, a block table of
+/// 1e9 blocks, a block of 2³¹ bytes — made vtkio panic (its slices trust
+/// those sizes). Each is now an error naming the file, and nothing is
+/// printed as a panic.
+#[test]
+fn vtu_headers_that_lie_are_errors_not_panics() {
+    use base64::Engine;
+    let b64 = &base64::engine::general_purpose::STANDARD;
+    let mesh = generate(&small_patch(None)).unwrap();
+    let grid = io::Grid::from_mesh(&mesh);
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, compress: bool| {
+        let path = dir.path().join(name);
+        io::write_vtu_as(
+            &path,
+            &grid,
+            io::VtuFormat {
+                compress,
+                f32: false,
+            },
+        )
+        .unwrap();
+        std::fs::read_to_string(&path).unwrap()
+    };
+    let zlib = write("zlib.vtu", true);
+    let plain = write("plain.vtu", false);
+    // The first compressed array's header: [blocks, block size, last
+    // block size, compressed sizes…] as UInt64, base64 on its own.
+    let start = zlib.find("format=\"binary\"").unwrap();
+    let start = start + zlib[start..].find('>').unwrap() + 1;
+    let start = start + zlib[start..].len() - zlib[start..].trim_start().len();
+    let lead = b64.decode(&zlib[start..start + 32]).unwrap();
+    let blocks = u64::from_le_bytes(lead[..8].try_into().unwrap()) as usize;
+    let header_chars = (8 * (3 + blocks)).div_ceil(3) * 4;
+    let header = b64.decode(&zlib[start..start + header_chars]).unwrap();
+    let with_header = |word: usize, value: u64| {
+        let mut h = header.clone();
+        h[8 * word..8 * word + 8].copy_from_slice(&value.to_le_bytes());
+        format!(
+            "{}{}{}",
+            &zlib[..start],
+            b64.encode(&h),
+            &zlib[start + header_chars..]
+        )
+    };
+    let cases = [
+        (
+            "big_endian.vtu",
+            zlib.replacen("LittleEndian", "BigEndian", 1),
+        ),
+        (
+            "uint32_header.vtu",
+            zlib.replacen("header_type=\"UInt64\"", "header_type=\"UInt32\"", 1),
+        ),
+        (
+            "compressor_on_plain.vtu",
+            plain.replacen(
+                "header_type=\"UInt64\"",
+                "header_type=\"UInt64\" compressor=\"vtkZLibDataCompressor\"",
+                1,
+            ),
+        ),
+        ("a_billion_blocks.vtu", with_header(0, 1_000_000_000)),
+        ("a_huge_block.vtu", with_header(3, 1 << 31)),
+    ];
+    for (name, text) in cases {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        let err = io::read_mesh(&path).expect_err(name).to_string();
+        assert!(err.contains(name), "{name}: {err}");
+    }
+}
+
+/// meshio's ASCII VTU edited the way a careless hand or script does: a
+/// region array that vtkio cannot parse (a value beyond Int32, a value
+/// short) was taken for "no region array" and the run went on with one
+/// material; a tetrahedron typed as a triangle was dropped, leaving a hole.
+/// Each is now an error naming the file and the array or cell.
+#[test]
+fn vtu_cells_and_region_arrays_that_contradict_themselves_are_refused() {
+    let fixture =
+        std::fs::read_to_string(root().join("tests/fixtures/meshio_two_tets.vtu")).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let read = |name: &str, text: &str| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        io::read_mesh(&path).map_err(|e| e.to_string())
+    };
+    let mesh = read("as_written.vtu", &fixture).unwrap();
+    assert_eq!((mesh.num_tets(), mesh.tet_region.clone()), (2, vec![1, 2]));
+    let region = fixture.find("Name=\"gmsh:physical\"").unwrap();
+    let types = fixture.find("Name=\"types\"").unwrap();
+    let edit = |at: usize, from: &str, to: &str| {
+        let end = at + fixture[at..].find("</DataArray>").unwrap();
+        format!(
+            "{}{}{}",
+            &fixture[..at],
+            fixture[at..end].replacen(from, to, 1),
+            &fixture[end..]
+        )
+    };
+    for (name, text, says) in [
+        (
+            "big_id.vtu",
+            edit(region, "\n2\n", "\n3000000000\n"),
+            "cell array 'gmsh:physical'",
+        ),
+        (
+            "short.vtu",
+            edit(region, "\n2\n", "\n"),
+            "cell array 'gmsh:physical'",
+        ),
+        (
+            "typed_triangle.vtu",
+            edit(types, "\n10\n", "\n5\n"),
+            "cell 0 is typed Triangle (3 points) but lists 4",
+        ),
+    ] {
+        let err = read(name, &text).expect_err(name);
+        assert!(err.contains(name) && err.contains(says), "{name}: {err}");
+    }
+}

@@ -1,8 +1,10 @@
 //! Tetrahedral meshes from VTK unstructured grids (`.vtu`, legacy `.vtk`).
 //!
 //! The tets are the grid's linear tetrahedra; vertices, lines and surface
-//! cells are skipped (meshers and meshio often keep the boundary triangles
-//! beside the volume) and other volume cells refused. The region of each tet
+//! cells are skipped with a warning that counts them (meshers and meshio
+//! often keep the boundary triangles beside the volume), a cell whose
+//! point count contradicts its type (a tetrahedron typed as a triangle) and
+//! other volume cells refused. The region of each tet
 //! comes from the first integer-valued cell array among [`REGION_ARRAYS`]
 //! (the name this project writes, then those of Gmsh via meshio, VTK's
 //! `CellEntityIds`, Medit and TetGen); without one the mesh is one region,
@@ -27,6 +29,20 @@ pub const REGION_ARRAYS: [&str; 6] = [
     "tetgen:ref",
     "RegionId",
 ];
+
+/// The point count a cell type fixes; `None` for the variable ones
+/// (poly-vertex, poly-line, strip, polygon).
+fn fixed_points(kind: CellType) -> Option<usize> {
+    match kind {
+        CellType::Vertex => Some(1),
+        CellType::Line => Some(2),
+        CellType::Triangle | CellType::QuadraticEdge => Some(3),
+        CellType::Pixel | CellType::Quad => Some(4),
+        CellType::QuadraticTriangle => Some(6),
+        CellType::QuadraticQuad => Some(8),
+        _ => None,
+    }
+}
 
 /// Reads a tetrahedral mesh from a `.vtu` or legacy `.vtk` file.
 pub fn read_vtk_mesh(path: &Path) -> Result<TetMesh> {
@@ -60,6 +76,18 @@ pub fn read_vtk_mesh(path: &Path) -> Result<TetMesh> {
             | CellType::QuadraticEdge
             | CellType::QuadraticTriangle
             | CellType::QuadraticQuad => {
+                if let Some(n) = fixed_points(cell.kind).filter(|&n| n != nodes.len()) {
+                    return Err(bad(format!(
+                        "cell {k} is typed {:?} ({n} points) but lists {} points{}",
+                        cell.kind,
+                        nodes.len(),
+                        if nodes.len() == 4 {
+                            "; a tetrahedron is type 10"
+                        } else {
+                            ""
+                        }
+                    )));
+                }
                 *skipped.entry(format!("{:?}", cell.kind)).or_default() += 1;
             }
             CellType::QuadraticTetra => {
@@ -78,10 +106,25 @@ pub fn read_vtk_mesh(path: &Path) -> Result<TetMesh> {
         return Err(bad("the grid has no tetrahedra".into()));
     }
     if !skipped.is_empty() {
-        log::debug!(
-            "{}: skipped lower-dimensional cells {skipped:?}",
-            path.display()
+        let counts: Vec<String> = skipped.iter().map(|(t, n)| format!("{n} {t}")).collect();
+        log::warn!(
+            "{}: read {} tetrahedra; skipped {} (not volume cells)",
+            path.display(),
+            tets.len(),
+            counts.join(", ")
         );
+    }
+    // vtkio leaves out an array whose values it cannot parse (a value
+    // beyond its type, too few values): a region array the file declares
+    // must not silently become "no region array".
+    if let Some(name) = grid.declared_cell_arrays.iter().find(|n| {
+        REGION_ARRAYS.contains(&n.as_str()) && !grid.cell_data.iter().any(|f| &f.name == *n)
+    }) {
+        return Err(bad(format!(
+            "cell array '{name}' (region ids) cannot be read: its values must be one integer \
+             per cell ({} cells) within its declared type",
+            grid.cells.len()
+        )));
     }
     let tet_region = match REGION_ARRAYS
         .iter()

@@ -423,6 +423,8 @@ pub(super) struct Unstructured {
     pub cells: Vec<Cell>,
     pub point_data: Vec<Field>,
     pub cell_data: Vec<Field>,
+    /// The names of the cell arrays the file declares, read or not.
+    pub declared_cell_arrays: Vec<String>,
 }
 
 impl Unstructured {
@@ -438,12 +440,26 @@ impl Unstructured {
 pub(super) fn load_unstructured(path: &Path) -> Result<Unstructured> {
     let bad = |message: String| Error::malformed(path, message);
     super::regular_file(path)?;
-    let legacy = path.extension().is_some_and(|e| e == "vtk");
+    let legacy = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("vtk"));
+    let bytes = super::read_input(path)?;
+    // The header text (binary payloads are not UTF-8; only the tags matter).
+    let text_of = String::from_utf8_lossy(&bytes).into_owned();
+    // vtkio trusts the sizes a file states (zlib block tables, header
+    // widths): a file that lies about them would panic inside it.
+    let inconsistent = || {
+        bad(
+            "its binary data is inconsistent with its header (byte order, header type, \
+             compressor or block sizes): the file is damaged or was edited"
+                .into(),
+        )
+    };
     let vtk = if legacy {
-        let bytes = legacy_type_names(super::read_input(path)?);
-        Vtk::parse_legacy_be(&bytes[..])
+        let bytes = legacy_type_names(bytes);
+        super::without_panics(|| Vtk::parse_legacy_be(&bytes[..])).ok_or_else(inconsistent)?
     } else {
-        Vtk::import(path)
+        super::without_panics(|| Vtk::parse_xml(&bytes[..])).ok_or_else(inconsistent)?
     }
     .map_err(|e| bad(format!("not a readable VTK file: {e}")))?;
     let DataSet::UnstructuredGrid { pieces, .. } = vtk.data else {
@@ -452,8 +468,8 @@ pub(super) fn load_unstructured(path: &Path) -> Result<Unstructured> {
     let [piece] = &pieces[..] else {
         return Err(bad(format!("expected one piece, found {}", pieces.len())));
     };
-    let piece = piece
-        .load_piece_data(None)
+    let piece = super::without_panics(|| piece.load_piece_data(None))
+        .ok_or_else(inconsistent)?
         .map_err(|e| bad(format!("cannot load piece: {e}")))?;
     let coords: Vec<f64> = piece
         .points
@@ -587,5 +603,53 @@ pub(super) fn load_unstructured(path: &Path) -> Result<Unstructured> {
         cells,
         point_data: fields(&piece.data.point)?,
         cell_data: fields(&piece.data.cell)?,
+        declared_cell_arrays: declared_cell_arrays(&text_of, legacy),
     })
+}
+
+/// The names of the cell arrays a VTK file declares, from its text: in XML
+/// the `Name` of each `DataArray` inside `<CellData>`; in legacy files the
+/// `SCALARS` names and `FIELD` array names after `CELL_DATA`.
+fn declared_cell_arrays(text: &str, legacy: bool) -> Vec<String> {
+    let mut names = Vec::new();
+    if legacy {
+        let Some(start) = text.find("\nCELL_DATA") else {
+            return names;
+        };
+        let end = text[start..]
+            .find("\nPOINT_DATA")
+            .map_or(text.len(), |e| start + e);
+        let mut in_field = 0usize;
+        for line in text[start..end].lines() {
+            let words: Vec<&str> = line.split_whitespace().collect();
+            match words.as_slice() {
+                ["SCALARS", name, ..] => names.push(name.to_string()),
+                ["FIELD", _, n] => in_field = n.parse().unwrap_or(0),
+                [name, _, _, kind]
+                    if in_field > 0
+                        && kind.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+                        && !kind.chars().all(|c| c.is_ascii_digit()) =>
+                {
+                    names.push(name.to_string());
+                    in_field -= 1;
+                }
+                _ => {}
+            }
+        }
+    } else {
+        let mut rest = text;
+        while let Some(start) = rest.find("<CellData") {
+            let block = &rest[start..];
+            let end = block.find("</CellData>").unwrap_or(block.len());
+            for tag in block[..end].split("<DataArray").skip(1) {
+                let tag = &tag[..tag.find('>').unwrap_or(tag.len())];
+                if let Some(i) = tag.find("Name=\"") {
+                    let name = &tag[i + 6..];
+                    names.push(name[..name.find('"').unwrap_or(name.len())].to_string());
+                }
+            }
+            rest = &block[end..];
+        }
+    }
+    names
 }
