@@ -75,6 +75,7 @@ impl<'a, R: MetricsRow + Copy> FrameOutputs<'a, R> {
     /// from the folder. The run writes its own rest files next, then calls
     /// [`FrameOutputs::start`].
     pub fn open(spec: OutputSpec<'a>, pieces: Vec<MapPiece<'a>>) -> Result<FrameOutputs<'a, R>> {
+        refuse_inputs_in_outputs(spec.outputs)?;
         let mut engines = Vec::new();
         if let Some(micro) = spec.outputs.micro.as_ref() {
             for _ in &pieces {
@@ -255,6 +256,30 @@ pub(super) struct Finished<R> {
     pub rows: Vec<R>,
     /// Where the microstructure stages ran.
     pub micro_device: Option<String>,
+}
+
+/// Refuses a run one of whose inputs is a file the run owns in its output
+/// folder (`out/x/micro/height_0000.png` as the neutral map of a run
+/// writing `out/x`, a scenario file named `metrics.csv` there): the run
+/// clears and rewrites those, so the input would be lost. Files are
+/// compared by device and inode, so links and symlinks count.
+fn refuse_inputs_in_outputs(outputs: &OutputSetup) -> Result<()> {
+    let owned = export::outputs::run_files(&outputs.dir);
+    for (key, input) in &outputs.inputs {
+        if let Some(out) = owned.iter().find(|o| export::outputs::same_file(o, input)) {
+            return Err(Error::parameter(
+                key.as_str(),
+                format!(
+                    "{} is a file the run writes in its output folder ({}): the run clears \
+                     and rewrites it, and the input would be lost; move it out of the folder \
+                     or choose another output.dir",
+                    input.display(),
+                    out.display()
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Removes an earlier run's files from the output folder (and says so).

@@ -219,7 +219,6 @@ impl<'a> Run<'a> {
     /// It writes at most the scenario's frames (the size that was checked).
     pub fn writing(setup: &'a Setup) -> Result<Run<'a>> {
         plan::check(setup, setup.outputs.force_large_output)?;
-        refuse_mesh_in_outputs(setup)?;
         let whole = MapPiece {
             tag: String::new(),
             triangles: None,
@@ -612,35 +611,6 @@ fn output_spec(setup: &Setup) -> OutputSpec<'_> {
         ),
         frame_rate_hz: 1.0 / setup.simulation.frame_dt,
     }
-}
-
-/// Refuses a run whose mesh file is one of the files a run owns in its
-/// output folder (`out/x/mesh.node` read by a run writing `out/x`): the
-/// run clears and rewrites those, so the input would be lost.
-fn refuse_mesh_in_outputs(setup: &Setup) -> Result<()> {
-    let crate::scenario::MeshSource::File(file) = &setup.mesh_source else {
-        return Ok(());
-    };
-    let mut inputs = vec![file.clone()];
-    if file.extension().is_some_and(|e| e == "node") {
-        inputs.extend(["ele", "face"].map(|e| file.with_extension(e)));
-    }
-    let owned = export::outputs::run_files(&setup.outputs.dir);
-    for input in &inputs {
-        if let Some(out) = owned.iter().find(|o| export::outputs::same_file(o, input)) {
-            return Err(Error::parameter(
-                "mesh.file",
-                format!(
-                    "{} is a file the run writes in its output folder ({}): the run \
-                     clears and rewrites it, and the mesh would be lost; move the mesh out \
-                     of the folder or choose another output.dir",
-                    input.display(),
-                    out.display()
-                ),
-            ));
-        }
-    }
-    Ok(())
 }
 
 /// The rest mesh as VTU and TetGen files, as asked for.

@@ -226,6 +226,11 @@ pub struct OutputSetup {
     /// Run even when the planned output exceeds
     /// the pipeline's planned-output limit (`skinpatch run --force`).
     pub force_large_output: bool,
+    /// Every file the scenario reads, as (key, path): the scenario file, its
+    /// mesh, maps, kernel tables, albedo and surface. A run refuses to start
+    /// when one of them is a file it would clear or write
+    /// ([`Scenario::input_files`]).
+    pub inputs: Vec<(String, PathBuf)>,
 }
 
 /// The per-frame strain maps: coloured previews and float data.
@@ -298,6 +303,54 @@ pub enum MeshSource {
 }
 
 impl Scenario {
+    /// Every file this scenario (read from `path`) names as an input, as
+    /// (key, path) with relative paths resolved as the setup resolves them:
+    /// the scenario file itself, the mesh (all three TetGen files), the
+    /// neutral map, the kernel file, the synthesis inputs, the albedo image
+    /// and the animated surface.
+    pub fn input_files(&self, path: &Path) -> Vec<(String, PathBuf)> {
+        let base = path.parent().unwrap_or(Path::new("."));
+        let mut inputs = vec![("scenario file".to_string(), path.to_path_buf())];
+        if let Some(file) = &self.mesh.file {
+            let file = base.join(file);
+            let tetgen = match file.extension().and_then(|e| e.to_str()) {
+                Some("node" | "ele" | "face") => Some(file.with_extension("")),
+                None => Some(file.clone()),
+                Some(_) => None,
+            };
+            match tetgen {
+                Some(stem) => {
+                    inputs.extend(io::tetgen_paths(&stem).map(|p| ("mesh.file".to_string(), p)))
+                }
+                None => inputs.push(("mesh.file".to_string(), file)),
+            }
+        }
+        if let Some(m) = &self.microstructure {
+            let mut add = |key: &str, file: &Option<PathBuf>| {
+                if let Some(f) = file {
+                    inputs.push((key.to_string(), base.join(f)));
+                }
+            };
+            add("microstructure.map", &m.map);
+            add("microstructure.kernel_file", &m.kernel_file);
+            if let Some(synthesis) = &m.synthesis {
+                for f in synthesis.files(base) {
+                    inputs.push(("microstructure.synthesis".to_string(), f));
+                }
+            }
+        }
+        if let Some(r) = self.render.as_ref().filter(|r| r.albedo != "procedural") {
+            inputs.push(("render.albedo".to_string(), base.join(&r.albedo)));
+        }
+        if let Some(surface) = &self.surface {
+            inputs.push(("surface.file".to_string(), base.join(&surface.file)));
+            if let Some(rest) = &surface.rest {
+                inputs.push(("surface.rest".to_string(), base.join(rest)));
+            }
+        }
+        inputs
+    }
+
     /// Validates the simulation sections against `mesh` (with the ranges
     /// of every key, [`bounds::check`]).
     pub fn simulation(&self, mesh: &TetMesh) -> Result<SimulationSetup> {
@@ -751,6 +804,7 @@ impl Setup {
                 micro,
                 render,
                 force_large_output: false,
+                inputs: scenario.input_files(path),
             },
             write_mesh_vtu: scenario.output.mesh_vtu,
             write_mesh_tetgen: scenario.output.mesh_tetgen,

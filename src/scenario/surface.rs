@@ -154,6 +154,7 @@ impl SurfaceSetup {
                 micro,
                 render,
                 force_large_output: false,
+                inputs: scenario.input_files(path),
             },
             write_surface_vtu: scenario.output.mesh_vtu,
         })

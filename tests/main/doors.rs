@@ -360,6 +360,46 @@ fn run_never_clears_its_own_mesh_input() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
 
+/// Any input inside the output folder under a name the run writes is
+/// refused before the folder is touched: a neutral map that is an earlier
+/// run's frame 0 (it was replaced by this run's frame 0) and the scenario
+/// file itself named `metrics.csv` (it was overwritten).
+#[test]
+fn run_never_clears_any_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    std::fs::create_dir_all(out.join("micro")).unwrap();
+    let map = out.join("micro/height_0000.png");
+    std::fs::copy(crate::common::root().join("examples/fit/neutral.png"), &map).unwrap();
+    let before = std::fs::read(&map).unwrap();
+    let mesh = crate::common::root().join("meshes/patch_3k.node");
+    let text = format!(
+        "[mesh]\nfile = {:?}\n[time]\nduration_s = 0.1\nframe_rate_hz = 10\n",
+        mesh.to_str().unwrap()
+    );
+    let with_map = dir.path().join("with_map.toml");
+    std::fs::write(
+        &with_map,
+        format!("{text}[microstructure]\nmap = \"out/micro/height_0000.png\"\n"),
+    )
+    .unwrap();
+    let own = out.join("metrics.csv");
+    std::fs::write(&own, &text).unwrap();
+    for (file, key, kept) in [
+        (&with_map, "microstructure.map", &map),
+        (&own, "scenario file", &own),
+    ] {
+        let kept_before = std::fs::read(kept).unwrap();
+        let o = skinpatch(&["run", file.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{e}");
+        assert!(e.contains(key) && e.contains("output.dir"), "{e}");
+        assert_eq!(std::fs::read(kept).unwrap(), kept_before);
+    }
+    assert_eq!(std::fs::read(&map).unwrap(), before);
+    assert!(!out.join("volume.csv").exists());
+}
+
 /// An override that spans lines (whose later lines were dropped without a
 /// word) and `--output` beside `--set output.dir` (one of which was
 /// ignored) are refused, for `run` and `synth` alike.
