@@ -50,9 +50,14 @@ pub const MAX_PROBE_STEP: f64 = 0.25;
 /// Most load steps a frame may be split into (configured or automatic).
 pub const MAX_LOAD_STEPS: usize = 10_000;
 
-/// Load steps for the frame from `t0` to `t1`: `configured`, or the
-/// smallest multiple of it in which no step moves the probe more than
-/// [`MAX_PROBE_STEP`] of its radius. An error when that takes more than
+/// The end times of the load steps of the frame from `t0` to `t1`:
+/// `configured` equal steps, or the smallest multiple of it in which no
+/// step moves the probe more than [`MAX_PROBE_STEP`] of its radius. When
+/// the motion is concentrated in a small part of a long frame (a slow frame
+/// rate, a path that moves only at its start), equal steps would need far
+/// too many: the steps then follow the path, each stretch between the
+/// configured steps and the path's keyframes split by the distance the
+/// probe covers in it. An error when even that takes more than
 /// [`MAX_LOAD_STEPS`].
 pub fn load_steps(
     probe: Option<&Probe>,
@@ -60,9 +65,14 @@ pub fn load_steps(
     t0: f64,
     t1: f64,
     frame: usize,
-) -> Result<usize> {
+) -> Result<Vec<f64>> {
+    let equal = |n: usize| -> Vec<f64> {
+        (1..=n)
+            .map(|k| t0 + (t1 - t0) * k as f64 / n as f64)
+            .collect()
+    };
     let Some(probe) = probe else {
-        return Ok(configured);
+        return Ok(equal(configured));
     };
     let limit = MAX_PROBE_STEP * probe.radius_mm();
     let mut n = configured;
@@ -72,18 +82,37 @@ pub fn load_steps(
             .map(|k| probe.travel(at(k), at(k + 1)))
             .fold(0.0, f64::max);
         if worst <= limit {
-            return Ok(n);
+            return Ok(equal(n));
         }
         let next = n.saturating_mul((worst / limit).ceil().max(2.0) as usize);
         if next > MAX_LOAD_STEPS {
+            break;
+        }
+        n = next;
+    }
+    // Along the path: between consecutive breaks (the configured steps and
+    // the keyframes) the probe moves evenly, so equal parts of each stretch
+    // move it equally.
+    let mut breaks = equal(configured);
+    breaks.extend(probe.keyframe_times().filter(|&t| t > t0 && t < t1));
+    breaks.sort_by(f64::total_cmp);
+    breaks.dedup();
+    let mut times = Vec::new();
+    let mut from = t0;
+    for to in breaks {
+        let parts = ((probe.travel(from, to) / limit).ceil() as usize).max(1);
+        times.extend((1..=parts).map(|k| from + (to - from) * k as f64 / parts as f64));
+        if times.len() > MAX_LOAD_STEPS {
             return Err(Error::Solver(format!(
-                "frame {frame} (t = {t1:.4} s): the probe moves {:.4} mm, {:.1} times its radius; \
-                 more than {MAX_LOAD_STEPS} load steps of {MAX_PROBE_STEP} radius would be needed \
-                 for contact to follow it. Slow the probe path or raise time.frame_rate_hz",
+                "frame {frame} (t = {t1:.4} s): the probe moves {:.4} mm, {:.1} times its \
+                 radius; more than {MAX_LOAD_STEPS} load steps of {MAX_PROBE_STEP} radius would \
+                 be needed for contact to follow it. Slow the probe path or raise \
+                 time.frame_rate_hz",
                 probe.travel(t0, t1),
                 probe.travel(t0, t1) / probe.radius_mm()
             )));
         }
-        n = next;
+        from = to;
     }
+    Ok(times)
 }

@@ -99,6 +99,12 @@ impl Probe {
         }
     }
 
+    /// The times of the path's and the axis's keyframes, in no order.
+    pub fn keyframe_times(&self) -> impl Iterator<Item = f64> + '_ {
+        let path = self.path.points.iter().map(|p| p.0);
+        path.chain(self.axis.points.iter().map(|p| p.0))
+    }
+
     /// How far the probe's points move between `t0` and `t1` at most (mm):
     /// the length of the centre's path plus, for a capsule, its half length
     /// times the angle its axis turns through (both piecewise between the

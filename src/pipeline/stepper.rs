@@ -147,12 +147,13 @@ impl Stepper {
         // A probe that starts inside the skin is pressed in from just above
         // it during frame 0, in steps like any other motion.
         let mut lift = 0.0;
-        let substeps = if frame == 0 {
+        let times = if frame == 0 {
             let (height, n) = press_in(probe, mesh, sim.position_tol());
             lift = height;
-            n
+            vec![t; n]
         } else {
-            let n = load_steps(probe, s.substeps, t_prev, t, frame)?;
+            let times = load_steps(probe, s.substeps, t_prev, t, frame)?;
+            let n = times.len();
             if n > s.substeps {
                 if !self.split_before {
                     log::warn!(
@@ -173,10 +174,20 @@ impl Stepper {
                 };
                 sim.dynamics = Some(Dynamics { dt, ..d });
             }
-            n
+            times
         };
+        let substeps = times.len();
+        let equal = times.len() == s.substeps || frame == 0;
         for k in 1..=substeps {
-            let ts = t_prev + (t - t_prev) * k as f64 / substeps as f64;
+            let ts = times[k - 1];
+            let t_solved = if k == 1 { t_prev } else { times[k - 2] };
+            if let (Some(d), false) = (sim.dynamics, equal) {
+                // Steps that follow the path are of unequal length.
+                sim.dynamics = Some(Dynamics {
+                    dt: ts - t_solved,
+                    ..d
+                });
+            }
             let context = format!("frame {frame} (t = {ts:.4} s)");
             let (mut filters, targets) = s.boundary.constraints(&s.sets, &mesh.positions, ts);
             for pin in &self.pins {
@@ -186,7 +197,6 @@ impl Stepper {
                 sim.begin_step();
             }
             let pose = probe.map(|p| p.pose(ts).lifted(lift * (1.0 - k as f64 / substeps as f64)));
-            let t_solved = t_prev + (t - t_prev) * (k - 1) as f64 / substeps as f64;
             self.prediction.start(
                 sim,
                 s.predict,

@@ -686,8 +686,9 @@ fn capsule_contact_follows_its_axis() {
 /// Load steps follow the probe's motion, not the frame's length: a 0.5 mm
 /// press of a 1.5 mm sphere takes 2 steps of at most a quarter radius
 /// whether the frame lasts 1 ms, 1000 s or 10⁶ s (the slow frames once
-/// needed 2048 steps, and failed beyond 10000), and a probe at rest takes
-/// the configured count.
+/// needed 2048 steps, and failed beyond 10000), also when the press takes
+/// only the first second of a 10⁶ s frame, and a probe at rest takes the
+/// configured count.
 #[test]
 fn load_steps_follow_the_probe_not_the_clock() {
     use skinpatch::fem::load_steps::load_steps;
@@ -699,14 +700,34 @@ fn load_steps_follow_the_probe_not_the_clock() {
             ],
             ContactMode::Coulomb(0.8),
         );
-        assert_eq!(load_steps(Some(&probe), 1, 0.0, seconds, 1).unwrap(), 2);
-        assert_eq!(load_steps(Some(&probe), 3, 0.0, seconds, 1).unwrap(), 3);
+        assert_eq!(
+            load_steps(Some(&probe), 1, 0.0, seconds, 1).unwrap().len(),
+            2
+        );
+        assert_eq!(
+            load_steps(Some(&probe), 3, 0.0, seconds, 1).unwrap().len(),
+            3
+        );
+        // The same press in the first second of a long frame (a frame rate
+        // of 1e-6 Hz): equal steps would need millions; steps that follow
+        // the path need the press's 2 and one for the rest.
+        let early = sphere(
+            vec![
+                (0.0, Vector3::new(0.0, 0.0, 1.5)),
+                (1.0, Vector3::new(0.0, 0.0, 1.05)),
+            ],
+            ContactMode::Coulomb(0.8),
+        );
+        let t = load_steps(Some(&early), 1, 0.0, 1e6, 1).unwrap();
+        assert_eq!(t, vec![0.5, 1.0, 1e6]);
         let resting = sphere(
             vec![(0.0, Vector3::new(0.0, 0.0, 1.5))],
             ContactMode::Coulomb(0.8),
         );
         assert_eq!(
-            load_steps(Some(&resting), 1, seconds, 2.0 * seconds, 2).unwrap(),
+            load_steps(Some(&resting), 1, seconds, 2.0 * seconds, 2)
+                .unwrap()
+                .len(),
             1
         );
     }
