@@ -25,7 +25,7 @@ pub fn fit<'py>(py: Python<'py>, samples_path: PathBuf) -> PyResult<Bound<'py, P
     let report = py
         .detach(|| fit_file(&samples_path, |_, _, _| {}))
         .map_err(|e| {
-            let text = std::fs::read_to_string(&samples_path).unwrap_or_default();
+            let text = skinpatch::mesh::io::read_input_text(&samples_path).unwrap_or_default();
             let source = Source {
                 path: &samples_path,
                 text: &text,

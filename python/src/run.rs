@@ -35,6 +35,14 @@ self_cell::self_cell!(
 /// its frames.
 type Deformer = Arc<Mutex<Option<MapDeformer>>>;
 
+/// The run behind `inner`, reached through `&mut` (so never locked, never
+/// poisoned: a panic cannot happen while it is held).
+fn exclusive(inner: &mut Mutex<OwnedRun>) -> &mut OwnedRun {
+    inner
+        .get_mut()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 /// A FEM run stepped frame by frame. `Run(scenario)` keeps everything in
 /// memory; `Run(scenario, outputs=True)` also writes the scenario's files
 /// (VTU frames, metrics.csv, maps, renders — what `skinpatch run` writes)
@@ -44,12 +52,16 @@ type Deformer = Arc<Mutex<Option<MapDeformer>>>;
 /// `run.step(probe_target=(x, y, z))` moves the probe's centre there
 /// instead (from then on the path is no longer followed). Iterating
 /// (`for frame in run`) steps to the scenario's last frame. The solve runs
-/// without the GIL; Ctrl-C stops the run between frames. A run belongs to
-/// the thread that made it (another thread's call raises); frames may go
-/// anywhere.
-#[pyclass(module = "skinpatch", unsendable)]
+/// without the GIL; Ctrl-C stops the run between frames. A run and its
+/// frames may be used from any thread, one call at a time: a call while
+/// another thread's step is running raises `RuntimeError` ("Already
+/// borrowed").
+#[pyclass(module = "skinpatch")]
 pub struct Run {
-    inner: OwnedRun,
+    /// Behind a mutex only to be `Sync` (a library run holds `OnceCell`s):
+    /// every method takes `&mut self`, which Python's borrow flag makes
+    /// exclusive, and reaches it with `get_mut`, never locking.
+    inner: Mutex<OwnedRun>,
     setup: Arc<Setup>,
     writing: bool,
     deformer: Deformer,
@@ -81,7 +93,7 @@ impl Run {
             OwnedRun::new(setup.clone(), |s| RunOf::new(s))
         };
         Ok(Run {
-            inner,
+            inner: Mutex::new(inner),
             setup,
             writing: outputs,
             deformer: Arc::new(Mutex::new(None)),
@@ -106,7 +118,7 @@ impl Run {
         }
         let setup = self.setup.clone();
         let deformer = self.deformer.clone();
-        let inner = &mut self.inner;
+        let inner = exclusive(&mut self.inner);
         let solved = py.detach(move || {
             inner.with_dependent_mut(|_, run| {
                 match (probe_target, probe_axis) {
@@ -145,20 +157,19 @@ impl Run {
     /// The frame `step` solves next (0: the rest frame).
     #[getter]
     fn next_frame(&mut self) -> usize {
-        self.inner.with_dependent_mut(|_, run| run.next_frame())
+        exclusive(&mut self.inner).with_dependent_mut(|_, run| run.next_frame())
     }
 
     /// Frames in the scenario, the rest frame included.
     #[getter]
     fn scenario_frames(&mut self) -> usize {
-        self.inner
-            .with_dependent_mut(|_, run| run.scenario_frames())
+        exclusive(&mut self.inner).with_dependent_mut(|_, run| run.scenario_frames())
     }
 
     /// Time between frames (s).
     #[getter]
     fn frame_dt(&mut self) -> f64 {
-        self.inner.with_dependent_mut(|_, run| run.frame_dt())
+        exclusive(&mut self.inner).with_dependent_mut(|_, run| run.frame_dt())
     }
 
     /// Ends the run; a run with outputs closes its files (the VTKHDF file,
@@ -169,7 +180,7 @@ impl Run {
         if let Some(w) = &self.written {
             return Ok(w.clone());
         }
-        let inner = &mut self.inner;
+        let inner = exclusive(&mut self.inner);
         let summary = py.detach(move || inner.with_dependent_mut(|_, run| run.close()));
         let written = summary.map_err(|e| to_py(py, e, None))?.written;
         self.written = Some(written.clone());
@@ -208,7 +219,7 @@ impl Drop for Run {
     fn drop(&mut self) {
         // A run with outputs left unfinished still closes its files.
         if self.writing && self.written.is_none() {
-            if let Err(e) = self.inner.with_dependent_mut(|_, run| run.close()) {
+            if let Err(e) = exclusive(&mut self.inner).with_dependent_mut(|_, run| run.close()) {
                 log::warn!("closing the run's files: {e}");
             }
         }

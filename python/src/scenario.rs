@@ -59,7 +59,9 @@ impl Scenario {
                 overridden.push(key);
             }
         }
-        let text = std::fs::read_to_string(&path).unwrap_or_default();
+        // For error messages only; a FIFO or device is not read here (it
+        // would block), the load below refuses it by name.
+        let text = skinpatch::mesh::io::read_input_text(&path).unwrap_or_default();
         let source = Source {
             path: &path,
             text: &text,

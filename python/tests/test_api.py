@@ -220,6 +220,56 @@ def test_ctrl_c_stops_between_frames_and_the_run_goes_on(root):
     assert run.step().index == run.next_frame - 1
 
 
+def test_a_run_moves_between_threads_and_refuses_a_second_caller(root, tmp_path):
+    # A run made here and stepped and finished in another thread raised
+    # pyo3's PanicException ("Run is unsendable"); it now simply runs there.
+    run = skinpatch.Run(press_small(root), outputs=True, output_dir=tmp_path / "out")
+    first = run.step()
+    seen = {}
+
+    def elsewhere():
+        try:
+            seen["index"] = run.step().index
+            seen["written"] = run.finish()
+        except BaseException as e:
+            seen["error"] = f"{type(e).__name__}: {e}"
+
+    worker = threading.Thread(target=elsewhere)
+    worker.start()
+    worker.join()
+    assert "error" not in seen, seen["error"]
+    assert first.index == 0 and seen["index"] == 1
+    assert any(str(p).endswith("metrics.csv") for p in seen["written"])
+    # Two threads at once: the second is refused with a RuntimeError, never
+    # a panic (whichever thread loses the race).
+    run = skinpatch.Run(press_small(root))
+    errors = []
+
+    def busy():
+        try:
+            for _ in range(20):
+                run.step()
+        except BaseException as e:  # a PanicException is a BaseException
+            errors.append(f"{type(e).__name__}: {e}")
+
+    threads = [threading.Thread(target=busy) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert all(e.startswith("RuntimeError") and "borrowed" in e for e in errors), errors
+
+
+def test_files_that_are_not_regular_are_refused_not_read(tmp_path):
+    # A FIFO blocked Scenario.load and fit forever (their error-message text
+    # was read before the checks that refuse it).
+    fifo = tmp_path / "scenario.toml"
+    os.mkfifo(fifo)
+    for call in (lambda: skinpatch.Scenario.load(fifo), lambda: skinpatch.fit(fifo)):
+        with pytest.raises(OSError, match="not a regular file"):
+            call()
+
+
 def test_a_failed_frame_keeps_the_run_at_its_last_good_state(root):
     run = skinpatch.Run(press_small(root))
     run.step()
