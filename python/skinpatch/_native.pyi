@@ -213,4 +213,8 @@ def write_vtu(
     point_data: Optional[Mapping[str, npt.ArrayLike]] = None,
     cell_data: Optional[Mapping[str, npt.ArrayLike]] = None,
 ) -> None:
-    """Writes `mesh` as VTU with extra point/cell arrays (1-D or 2-D, one row per point/tet)."""
+    """Writes `mesh` as VTU with extra point/cell arrays (1-D or 2-D, one row per point/tet).
+
+    The file is replaced atomically; a `path` that is a symbolic link, FIFO,
+    device or folder raises OSError and is left as it was.
+    """

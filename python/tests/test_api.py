@@ -270,6 +270,22 @@ def test_files_that_are_not_regular_are_refused_not_read(tmp_path):
             call()
 
 
+def test_write_vtu_never_replaces_a_link_or_a_pipe(root, tmp_path):
+    # Each was replaced by a regular file and reported success.
+    mesh = skinpatch.read_mesh(root / "meshes/patch_3k.node")
+    target = tmp_path / "target.vtu"
+    target.write_bytes(b"kept")
+    link = tmp_path / "link.vtu"
+    link.symlink_to(target)
+    fifo = tmp_path / "fifo.vtu"
+    os.mkfifo(fifo)
+    for path, what in ((link, "symbolic link"), (fifo, "not a regular file")):
+        with pytest.raises(OSError, match=what):
+            skinpatch.write_vtu(path, mesh)
+    assert link.is_symlink() and target.read_bytes() == b"kept"
+    assert fifo.is_fifo()
+
+
 def test_a_failed_frame_keeps_the_run_at_its_last_good_state(root):
     run = skinpatch.Run(press_small(root))
     run.step()

@@ -115,8 +115,33 @@ pub fn read_input_text(path: &Path) -> Result<String> {
 }
 
 /// Writes `bytes` to `path` through a temporary file in the same folder and
-/// a rename, so readers never see a partial file.
+/// a rename, so readers never see a partial file. A `path` that exists and
+/// is not a regular file — a symlink, FIFO, device or folder — is refused:
+/// the rename would replace it with a regular file (the link and what it
+/// points to, the pipe, the device, all lost or bypassed).
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
+    if let Ok(meta) = std::fs::symlink_metadata(path) {
+        let kind = meta.file_type();
+        if !kind.is_file() {
+            let what = if kind.is_symlink() {
+                "a symbolic link"
+            } else if kind.is_dir() {
+                "a folder"
+            } else {
+                "not a regular file (a FIFO, socket or device)"
+            };
+            return Err(Error::io(
+                path,
+                std::io::Error::new(
+                    std::io::ErrorKind::InvalidInput,
+                    format!(
+                        "is {what}; a file is written by replacing its target, which would \
+                         lose it: write to a plain file path"
+                    ),
+                ),
+            ));
+        }
+    }
     let dir = path.parent().filter(|d| !d.as_os_str().is_empty());
     let mut tmp_name = path.file_name().unwrap_or_default().to_os_string();
     tmp_name.push(format!(".tmp{}", std::process::id()));
@@ -131,4 +156,47 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
         let _ = std::fs::remove_file(&tmp);
         Error::io(path, e)
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Replacing a symlink, FIFO or folder by a regular file lost what was
+    /// there and reported success; each is refused and left as it was, and
+    /// a regular file is still replaced whole.
+    #[cfg(unix)]
+    #[test]
+    fn only_regular_files_are_replaced() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("target.vtu");
+        std::fs::write(&target, b"kept").unwrap();
+        let link = dir.path().join("link.vtu");
+        std::os::unix::fs::symlink(&target, &link).unwrap();
+        let fifo = dir.path().join("fifo.vtu");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        let folder = dir.path().join("folder.vtu");
+        std::fs::create_dir(&folder).unwrap();
+        let mut refused = vec![
+            (link.clone(), "a symbolic link"),
+            (folder.clone(), "a folder"),
+        ];
+        if made.is_ok_and(|s| s.success()) {
+            refused.push((fifo.clone(), "not a regular file"));
+        }
+        for (path, what) in refused {
+            let e = write_atomically(&path, b"new").unwrap_err().to_string();
+            assert!(
+                e.contains(&path.display().to_string()) && e.contains(what),
+                "{e}"
+            );
+        }
+        assert!(std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        assert_eq!(std::fs::read(&target).unwrap(), b"kept");
+        write_atomically(&target, b"new").unwrap();
+        assert_eq!(std::fs::read(&target).unwrap(), b"new");
+    }
 }
