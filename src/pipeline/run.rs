@@ -396,7 +396,12 @@ impl<'a> Run<'a> {
         m.folded_vertices = folded;
         let threshold = self.simulation.warn_volume_ratio;
         let volumes = region_volumes(mesh, x, threshold);
-        warn_compressed(&mut self.volume_warned, threshold, &m, &volumes);
+        let model_of = |region: usize| {
+            let id = mesh.regions[region].id;
+            let tet = mesh.tet_region.iter().position(|&r| r == id);
+            tet.map(|t| self.simulation.tet_material[t].model)
+        };
+        warn_compressed(&mut self.volume_warned, threshold, &m, &volumes, model_of);
         let last = LastFrame {
             metrics: m,
             field,
@@ -548,27 +553,39 @@ impl Writer<'_> {
 }
 
 /// Warns, once per region and run, of the first frame in which a
-/// region has tets below the warning ratio.
+/// region has tets below the warning ratio, with the remedy that fits the
+/// region's model (`model_of` gives it by region index).
 fn warn_compressed(
     warned: &mut [bool],
     threshold: f64,
     m: &FrameMetrics,
     volumes: &[RegionVolume],
+    model_of: impl Fn(usize) -> Option<crate::fem::Model>,
 ) {
-    for (v, warned) in volumes.iter().zip(warned) {
+    for (k, (v, warned)) in volumes.iter().zip(warned).enumerate() {
         if v.tets_below > 0 && !*warned {
             *warned = true;
+            let remedy = match model_of(k) {
+                Some(crate::fem::Model::StableNeoHookean) => format!(
+                    "a Poisson's ratio closer to 0.5 in [material.{}] resists this \
+                     (poisson_ratio, with volumetric = \"locking-free\" above 0.49), as does a \
+                     gentler press",
+                    v.name
+                ),
+                _ => format!(
+                    "model = \"stable-neo-hookean\" in [material.{}] resists this \
+                     (docs/SCENARIO.md, `model`)",
+                    v.name
+                ),
+            };
             log::warn!(
                 "frame {}: {} tets of region '{}' are squeezed below volume ratio {threshold} \
-                 (smallest {:.3}, region volume {:+.2}%), which no skin or fat does; \
-                 model = \"stable-neo-hookean\" in \
-                 [material.{}] resists this (docs/SCENARIO.md, `model`)",
+                 (smallest {:.3}, region volume {:+.2}%), which no skin or fat does; {remedy}",
                 m.frame,
                 v.tets_below,
                 v.name,
                 v.min_volume_ratio,
                 100.0 * v.change(),
-                v.name
             );
         }
     }

@@ -581,3 +581,37 @@ fn a_map_the_gpu_cannot_hold_is_refused_before_it_is_generated() {
         assert!(!out.exists());
     }
 }
+
+/// The warning of over-compressed tets names the remedy that fits each
+/// region: a region that already uses the stable Neo-Hookean model was told
+/// to use it; it is now told of ν, and a corotational region of the model.
+#[test]
+fn the_compression_warning_fits_the_region_model() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let o = crate::common::skinpatch(&[
+        "run",
+        root().join("tests/fixtures/press_small.toml").to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "-q",
+        "--set",
+        "solver.warn_volume_ratio=0.9999",
+        "--set",
+        "material.dermis.model=\"stable-neo-hookean\"",
+        "--set",
+        "time.duration_s=0.5",
+    ]);
+    let stderr = text(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("tets of region 'dermis'")
+            && stderr.contains("Poisson's ratio closer to 0.5 in [material.dermis]")
+            && !stderr.contains("model = \"stable-neo-hookean\" in [material.dermis]"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("model = \"stable-neo-hookean\" in [material.hypodermis]"),
+        "{stderr}"
+    );
+}
