@@ -192,6 +192,30 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
     )
 }
 
+/// Creates the output folder `dir` (and its parents). Where `dir` or a
+/// folder above it is a file, the error says so and names that file,
+/// rather than the system's "File exists".
+pub fn create_output_dir(dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| {
+        let blocking = dir
+            .ancestors()
+            .filter(|a| !a.as_os_str().is_empty())
+            .find(|a| std::fs::metadata(a).is_ok_and(|m| !m.is_dir()));
+        match blocking {
+            Some(file) => Error::parameter(
+                "output.dir",
+                format!(
+                    "{} cannot be created: {} is a file, not a folder; choose another output \
+                     folder (output.dir, or -o)",
+                    dir.display(),
+                    file.display()
+                ),
+            ),
+            None => Error::io(dir, e),
+        }
+    })
+}
+
 /// The rule every command follows: an output file is never one of the
 /// run's inputs. `key` names the output's setting; `inputs` are (what,
 /// path) pairs. The error names both.

@@ -95,7 +95,7 @@ impl<'a, R: MetricsRow + Copy> FrameOutputs<'a, R> {
             )?),
             None => None,
         };
-        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+        export::outputs::create_output_dir(dir)?;
         // Then the previous run's files go, so the folder holds one run.
         clear_previous_run(dir)?;
         for (folder, wanted) in [

@@ -62,7 +62,7 @@ pub fn run(
         .or(file.output.dir.clone())
         .unwrap_or_else(|| Path::new("out").join(stem));
     refuse_overwriting_inputs(path, base, &file, &dir, (exr, png))?;
-    std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+    crate::export::outputs::create_output_dir(&dir)?;
 
     let synthesis = synthesize(&sources.inputs(), &params, on_level)?;
     crate::error::check_finite(

@@ -591,7 +591,10 @@ fn the_compression_warning_fits_the_region_model() {
     let out = dir.path().join("out");
     let o = crate::common::skinpatch(&[
         "run",
-        root().join("tests/fixtures/press_small.toml").to_str().unwrap(),
+        root()
+            .join("tests/fixtures/press_small.toml")
+            .to_str()
+            .unwrap(),
         "-o",
         out.to_str().unwrap(),
         "-q",
@@ -614,4 +617,34 @@ fn the_compression_warning_fits_the_region_model() {
         stderr.contains("model = \"stable-neo-hookean\" in [material.hypodermis]"),
         "{stderr}"
     );
+}
+
+/// `--output` onto a file (or below one) said only "File exists (os error
+/// 17)"; it now names the file that is in the way and the setting.
+#[test]
+fn an_output_folder_that_is_a_file_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("taken");
+    std::fs::write(&file, "mine").unwrap();
+    for out in [file.clone(), file.join("below")] {
+        let o = crate::common::skinpatch(&[
+            "run",
+            root()
+                .join("tests/fixtures/press_small.toml")
+                .to_str()
+                .unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--set",
+            "time.duration_s=0.2",
+        ]);
+        let stderr = text(&o.stderr);
+        assert!(!o.status.success());
+        assert!(
+            stderr.contains("output.dir")
+                && stderr.contains(&format!("{} is a file, not a folder", file.display())),
+            "{stderr}"
+        );
+        assert_eq!(std::fs::read_to_string(&file).unwrap(), "mine");
+    }
 }
