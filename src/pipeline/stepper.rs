@@ -177,7 +177,13 @@ impl Stepper {
             times
         };
         let substeps = times.len();
-        let equal = times.len() == s.substeps || frame == 0;
+        // Equal steps (the usual case) keep the frame's one step length;
+        // steps that follow the path each take their own.
+        let equal = frame == 0
+            || times
+                .iter()
+                .copied()
+                .eq((1..=substeps).map(|k| t_prev + (t - t_prev) * k as f64 / substeps as f64));
         for k in 1..=substeps {
             let ts = times[k - 1];
             let t_solved = if k == 1 { t_prev } else { times[k - 2] };
