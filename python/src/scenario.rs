@@ -178,7 +178,12 @@ fn toml_value(v: &Bound<'_, PyAny>) -> Result<toml::Value, String> {
         }
         return Ok(toml::Value::Table(table));
     }
-    // numpy scalars and other numbers.
+    // numpy integers (not `int` subclasses) and other integer-like objects:
+    // `__index__` says they are whole (a usize key refuses a float).
+    if let Ok(i) = v.call_method0("__index__").and_then(|i| i.extract::<i64>()) {
+        return Ok(toml::Value::Integer(i));
+    }
+    // numpy floats and other numbers.
     if let Ok(x) = v.extract::<f64>() {
         return Ok(toml::Value::Float(x));
     }

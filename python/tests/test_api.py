@@ -190,6 +190,14 @@ def test_scenario_errors_carry_file_line_and_key(root, tmp_path):
         skinpatch.Scenario.load(bad)
 
 
+def test_numpy_integers_override_integer_keys(root):
+    # A numpy.int64 was passed on as the float 2.0, which an integer key
+    # refuses ("invalid type: floating point").
+    scenario = press_small(root, **{"time.substeps": np.int64(2), "time.duration_s": np.float64(0.5)})
+    run = skinpatch.Run(scenario)
+    assert run.scenario_frames == 4
+
+
 def test_overrides_change_the_run(root):
     soft = list(skinpatch.Run(press_small(root)))[3]
     stiff_scenario = press_small(root, **{"material.dermis.youngs_modulus_kpa": 600.0})
