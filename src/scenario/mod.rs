@@ -355,6 +355,11 @@ impl Scenario {
     /// of every key, [`bounds::check`]).
     pub fn simulation(&self, mesh: &TetMesh) -> Result<SimulationSetup> {
         bounds::check(self)?;
+        self.simulation_in_range(mesh)
+    }
+
+    /// [`Scenario::simulation`] once [`bounds::check`] has passed.
+    fn simulation_in_range(&self, mesh: &TetMesh) -> Result<SimulationSetup> {
         let sets = crate::fem::boundary::NodeSets::of(mesh);
         let (frames, frame_dt, substeps) = self.time.frames()?;
         Ok(SimulationSetup {
@@ -775,7 +780,7 @@ impl Setup {
                 });
             }
         }
-        let simulation = scenario.simulation(&mesh)?;
+        let simulation = scenario.simulation_in_range(&mesh)?;
         let micro = match &scenario.microstructure {
             Some(m) => {
                 let (lo, hi) = mesh.bounds();
@@ -786,7 +791,7 @@ impl Setup {
         let render = scenario
             .render
             .as_ref()
-            .map(|r| r.setup(base, micro.is_some()))
+            .map(|r| r.setup_in_range(base, micro.is_some()))
             .transpose()?;
         if let (Some(m), Some(_)) = (&micro, &render) {
             // The renderer samples the deformed map's normals as one texture.

@@ -573,6 +573,12 @@ impl RenderSection {
     /// `has_micro` says whether the scenario has a microstructure.
     pub fn setup(&self, base: &Path, has_micro: bool) -> Result<RenderSetup> {
         super::bounds::check_at(self, "render")?;
+        self.setup_in_range(base, has_micro)
+    }
+
+    /// [`RenderSection::setup`] for a section whose ranges the whole
+    /// file's check ([`super::bounds::check`]) has already held.
+    pub(super) fn setup_in_range(&self, base: &Path, has_micro: bool) -> Result<RenderSetup> {
         let (width, height, supersample) = (self.width_px, self.height_px, self.supersample);
         if width * supersample > 16384 || height * supersample > 16384 {
             return Err(Error::parameter(

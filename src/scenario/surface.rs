@@ -126,7 +126,7 @@ impl SurfaceSetup {
         let render = scenario
             .render
             .as_ref()
-            .map(|r| r.setup(base, micro.is_some()))
+            .map(|r| r.setup_in_range(base, micro.is_some()))
             .transpose()?;
         if render.is_some() && layout != UvLayout::Unit {
             return Err(Error::parameter(

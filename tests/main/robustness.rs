@@ -18,6 +18,20 @@ fn run_scenario(dir: &Path, body: &str, out: &Path) -> Output {
     run_scenario_with(dir, body, out, &[])
 }
 
+/// `skinpatch run tests/fixtures/press_small.toml -o out` with `extra`
+/// arguments.
+fn run_press_small(out: &Path, extra: &[&str]) -> Output {
+    let fixture = root().join("tests/fixtures/press_small.toml");
+    let mut args = vec![
+        "run",
+        fixture.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ];
+    args.extend(extra);
+    crate::common::skinpatch(&args)
+}
+
 /// [`run_scenario`] with environment variables set.
 fn run_scenario_with(dir: &Path, body: &str, out: &Path, env: &[(&str, &str)]) -> Output {
     let scenario = dir.join("scenario.toml");
@@ -589,22 +603,18 @@ fn a_map_the_gpu_cannot_hold_is_refused_before_it_is_generated() {
 fn the_compression_warning_fits_the_region_model() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
-    let o = crate::common::skinpatch(&[
-        "run",
-        root()
-            .join("tests/fixtures/press_small.toml")
-            .to_str()
-            .unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "-q",
-        "--set",
-        "solver.warn_volume_ratio=0.9999",
-        "--set",
-        "material.dermis.model=\"stable-neo-hookean\"",
-        "--set",
-        "time.duration_s=0.5",
-    ]);
+    let o = run_press_small(
+        &out,
+        &[
+            "-q",
+            "--set",
+            "solver.warn_volume_ratio=0.9999",
+            "--set",
+            "material.dermis.model=\"stable-neo-hookean\"",
+            "--set",
+            "time.duration_s=0.5",
+        ],
+    );
     let stderr = text(&o.stderr);
     assert!(o.status.success(), "{stderr}");
     assert!(
@@ -627,17 +637,7 @@ fn an_output_folder_that_is_a_file_is_named() {
     let file = dir.path().join("taken");
     std::fs::write(&file, "mine").unwrap();
     for out in [file.clone(), file.join("below")] {
-        let o = crate::common::skinpatch(&[
-            "run",
-            root()
-                .join("tests/fixtures/press_small.toml")
-                .to_str()
-                .unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-            "--set",
-            "time.duration_s=0.2",
-        ]);
+        let o = run_press_small(&out, &["--set", "time.duration_s=0.2"]);
         let stderr = text(&o.stderr);
         assert!(!o.status.success());
         assert!(

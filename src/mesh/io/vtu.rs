@@ -444,8 +444,8 @@ pub(super) fn load_unstructured(path: &Path) -> Result<Unstructured> {
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("vtk"));
     let bytes = super::read_input(path)?;
-    // The header text (binary payloads are not UTF-8; only the tags matter).
-    let text_of = String::from_utf8_lossy(&bytes).into_owned();
+    // From the text (binary payloads are not UTF-8; only the tags matter).
+    let declared = declared_cell_arrays(&String::from_utf8_lossy(&bytes), legacy);
     // vtkio trusts the sizes a file states (zlib block tables, header
     // widths): a file that lies about them would panic inside it.
     let inconsistent = || {
@@ -603,7 +603,7 @@ pub(super) fn load_unstructured(path: &Path) -> Result<Unstructured> {
         cells,
         point_data: fields(&piece.data.point)?,
         cell_data: fields(&piece.data.cell)?,
-        declared_cell_arrays: declared_cell_arrays(&text_of, legacy),
+        declared_cell_arrays: declared,
     })
 }
 
