@@ -19,6 +19,7 @@ mod gpu;
 mod mesh_generation;
 mod mesh_invariants;
 mod mesh_io;
+mod mesh_tools;
 mod micro;
 mod readme;
 mod render;

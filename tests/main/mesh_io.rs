@@ -601,9 +601,9 @@ print("written")
 
 /// A compressed VTU whose header lies about its binary data — the byte
 /// order, the header width, a compressor on plain data, a block table of
-/// 1e9 blocks, a block of 2³¹ bytes — made vtkio panic (its slices trust
-/// those sizes). Each is now an error naming the file, and nothing is
-/// printed as a panic.
+/// 1e9 blocks, a block of 2³¹ bytes — once made the reader panic (its
+/// slices trusted those sizes). Each is an error naming the file and the
+/// array.
 #[test]
 fn vtu_headers_that_lie_are_errors_not_panics() {
     use base64::Engine;
@@ -669,14 +669,17 @@ fn vtu_headers_that_lie_are_errors_not_panics() {
         let path = dir.path().join(name);
         std::fs::write(&path, text).unwrap();
         let err = io::read_mesh(&path).expect_err(name).to_string();
-        assert!(err.contains(name), "{name}: {err}");
+        assert!(
+            err.contains(name) && err.contains("DataArray '"),
+            "{name}: {err}"
+        );
     }
 }
 
 /// meshio's ASCII VTU edited the way a careless hand or script does: a
-/// region array that vtkio cannot parse (a value beyond Int32, a value
-/// short) was taken for "no region array" and the run went on with one
-/// material; a tetrahedron typed as a triangle was dropped, leaving a hole.
+/// region array with a value beyond Int32 or a value short was once taken
+/// for "no region array" and the run went on with one material; a
+/// tetrahedron typed as a triangle was dropped, leaving a hole.
 /// Each is now an error naming the file and the array or cell.
 #[test]
 fn vtu_cells_and_region_arrays_that_contradict_themselves_are_refused() {
@@ -710,12 +713,12 @@ fn vtu_cells_and_region_arrays_that_contradict_themselves_are_refused() {
         (
             "short.vtu",
             edit(region, "\n2\n", "\n"),
-            "cell array 'gmsh:physical'",
+            "DataArray 'gmsh:physical': 1 entries of 1 values; expected 2",
         ),
         (
             "typed_triangle.vtu",
             edit(types, "\n10\n", "\n5\n"),
-            "cell 0 is typed Triangle (3 points) but lists 4",
+            "cell 0 is typed triangle (VTK type 5), which has 3 points, but lists 4",
         ),
     ] {
         let err = read(name, &text).expect_err(name);

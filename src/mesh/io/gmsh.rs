@@ -21,8 +21,8 @@
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
-use std::str::FromStr;
 
+use super::text::{Binary, Cursor};
 use crate::error::{Error, Result};
 use crate::mesh::{RawMesh, TetMesh, Vec3};
 
@@ -56,7 +56,10 @@ pub fn read_gmsh(path: &Path) -> Result<TetMesh> {
         };
         match (name, version) {
             ("PhysicalNames", _) => read_physical_names(&mut c, &mut state)?,
-            ("Entities", Version::V41) => read_entities(&mut c, &mut state)?,
+            ("Entities", Version::V41) => {
+                read_entities(&mut c, &mut state)?;
+                state.entities = true;
+            }
             ("Nodes", Version::V41) => read_nodes_41(&mut c, &mut state)?,
             ("Elements", Version::V41) => read_elements_41(&mut c, &mut state)?,
             ("Nodes", Version::V22) => read_nodes_22(&mut c, &mut state)?,
@@ -68,6 +71,21 @@ pub fn read_gmsh(path: &Path) -> Result<TetMesh> {
             }
         }
         c.expect_end(name)?;
+    }
+    if version == Version::V41 && !state.entities && !state.names.is_empty() {
+        // meshio's 4.1 writer keeps $PhysicalNames but not the $Entities
+        // that tie physical groups to elements: the element blocks' entity
+        // tags are all the file says.
+        let names: Vec<&str> = state.names.values().map(String::as_str).collect();
+        log::warn!(
+            "{}: the file has no $Entities section, so its physical groups ({}) cannot be \
+             tied to elements; regions are the element blocks' entity tags, named \
+             region_<tag>. To keep the groups, save as MSH 2.2 (meshio: \
+             file_format=\"gmsh22\"), as Gmsh itself writes 4.1, or as VTU",
+            path.display(),
+            names.join(", ")
+        );
+        state.names.clear();
     }
     state.finish(&c)
 }
@@ -164,6 +182,8 @@ fn check_volume_type(kind: i32) -> std::result::Result<(), String> {
 
 #[derive(Default)]
 struct State {
+    /// Whether a 4.1 file had `$Entities`.
+    entities: bool,
     /// 3-D physical names by tag.
     names: BTreeMap<i32, String>,
     /// Volume entity tag → region id (4.1).
@@ -441,145 +461,7 @@ fn read_elements_22(c: &mut Cursor, state: &mut State) -> Result<()> {
     Ok(())
 }
 
-#[derive(Clone, Copy)]
-struct Binary {
-    big_endian: bool,
-}
-
-/// A read position in the file's bytes: text tokens, or binary numbers
-/// once `$MeshFormat` said the file is binary.
-struct Cursor<'a> {
-    path: &'a Path,
-    data: &'a [u8],
-    pos: usize,
-    binary: Option<Binary>,
-}
-
-impl<'a> Cursor<'a> {
-    fn line_at(&self, pos: usize) -> usize {
-        1 + self.data[..pos.min(self.data.len())]
-            .iter()
-            .filter(|&&b| b == b'\n')
-            .count()
-    }
-
-    /// An error at byte `pos`: by line in text files, by byte offset in
-    /// binary ones (past the format line, lines mean nothing there).
-    fn error_at(&self, pos: usize, message: impl Into<String>) -> Error {
-        if self.binary.is_some() {
-            self.binary_error(pos, message)
-        } else {
-            Error::Parse {
-                path: self.path.to_path_buf(),
-                line: self.line_at(pos),
-                message: message.into(),
-            }
-        }
-    }
-
-    fn binary_error(&self, pos: usize, message: impl Into<String>) -> Error {
-        Error::Parse {
-            path: self.path.to_path_buf(),
-            line: 0,
-            message: format!("byte {pos}: {}", message.into()),
-        }
-    }
-
-    fn ends_early(&self, what: &str) -> Error {
-        self.error_at(self.data.len(), format!("file ends early: expected {what}"))
-    }
-
-    /// Room to reserve for `n` announced entries: at most one per two bytes
-    /// left, so a header claiming 4e9 entries cannot make the reader
-    /// allocate for them.
-    fn capacity(&self, n: u64) -> usize {
-        let left = (self.data.len() - self.pos) / 2;
-        usize::try_from(n).unwrap_or(usize::MAX).min(left)
-    }
-
-    /// The offset of the next item: in text, past the whitespace before
-    /// it, so that errors name the line where it stands.
-    fn mark(&mut self) -> usize {
-        if self.binary.is_none() {
-            while self.pos < self.data.len() && self.data[self.pos].is_ascii_whitespace() {
-                self.pos += 1;
-            }
-        }
-        self.pos
-    }
-
-    /// The next whitespace-separated text token and its offset.
-    fn token_opt(&mut self) -> Result<Option<(usize, &'a str)>> {
-        while self.pos < self.data.len() && self.data[self.pos].is_ascii_whitespace() {
-            self.pos += 1;
-        }
-        let start = self.pos;
-        if start == self.data.len() {
-            return Ok(None);
-        }
-        while self.pos < self.data.len() && !self.data[self.pos].is_ascii_whitespace() {
-            self.pos += 1;
-        }
-        std::str::from_utf8(&self.data[start..self.pos])
-            .map(|t| Some((start, t)))
-            .map_err(|_| Error::Parse {
-                path: self.path.to_path_buf(),
-                line: self.line_at(start),
-                message: "not a text file (invalid UTF-8)".into(),
-            })
-    }
-
-    fn token(&mut self, what: &str) -> Result<(usize, &'a str)> {
-        self.token_opt()?.ok_or_else(|| self.ends_early(what))
-    }
-
-    /// A text token parsed as `T`.
-    fn parse<T: FromStr>(&mut self, what: &str) -> Result<T> {
-        let (at, token) = self.token(what)?;
-        token
-            .parse()
-            .map_err(|_| self.error_at(at, format!("{what}: cannot parse '{token}'")))
-    }
-
-    /// The rest of the current line (for quoted names).
-    fn rest_of_line(&mut self) -> (usize, &'a str) {
-        let start = self.pos;
-        while self.pos < self.data.len() && self.data[self.pos] != b'\n' {
-            self.pos += 1;
-        }
-        (
-            start,
-            std::str::from_utf8(&self.data[start..self.pos]).unwrap_or(""),
-        )
-    }
-
-    /// Skips to just past the end of the current line: binary data starts
-    /// on the byte after a header line's newline.
-    fn end_of_line(&mut self) {
-        self.rest_of_line();
-        self.pos = (self.pos + 1).min(self.data.len());
-    }
-
-    /// In a binary file, moves past the section header's newline.
-    fn start_binary_block(&mut self) {
-        if self.binary.is_some() {
-            self.end_of_line();
-        }
-    }
-
-    fn bytes<const N: usize>(&mut self, what: &str) -> Result<[u8; N]> {
-        let end = self.pos + N;
-        let Some(b) = self.data.get(self.pos..end) else {
-            return Err(self.ends_early(what));
-        };
-        self.pos = end;
-        Ok(b.try_into().expect("slice of N bytes"))
-    }
-
-    fn big_endian(&self) -> bool {
-        self.binary.is_some_and(|b| b.big_endian)
-    }
-
+impl Cursor<'_> {
     /// A 4-byte integer in binary files, a text token otherwise.
     fn int(&mut self, what: &str) -> Result<i32> {
         if self.binary.is_none() {

@@ -10,7 +10,10 @@
 mod gmsh;
 mod tetgen;
 pub(crate) mod text;
+mod vtk_data;
+mod vtk_legacy;
 mod vtk_mesh;
+mod vtk_xml;
 pub mod vtu;
 
 use std::io::Write;
@@ -45,33 +48,6 @@ pub fn read_mesh(path: &Path) -> Result<TetMesh> {
             ),
         )),
     }
-}
-
-thread_local! {
-    /// Whether a panic on this thread is one [`without_panics`] turns into
-    /// an error (and so must not print the panic message).
-    static CONTAINED: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
-}
-
-/// Runs `parse` — a dependency's parser given bytes from a file — and turns
-/// a panic inside it (an index it did not check) into `None`, without the
-/// panic message: the caller reports the file as malformed in its own
-/// words. A hook installed once keeps every other thread's panics as they
-/// were.
-pub(crate) fn without_panics<T>(parse: impl FnOnce() -> T) -> Option<T> {
-    static HOOK: std::sync::Once = std::sync::Once::new();
-    HOOK.call_once(|| {
-        let previous = std::panic::take_hook();
-        std::panic::set_hook(Box::new(move |info| {
-            if !CONTAINED.with(|c| c.get()) {
-                previous(info);
-            }
-        }));
-    });
-    let was = CONTAINED.with(|c| c.replace(true));
-    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(parse));
-    CONTAINED.with(|c| c.set(was));
-    result.ok()
 }
 
 /// Checks that `path` is a regular file before it is opened: a FIFO would

@@ -14,8 +14,7 @@
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
-use vtkio::model::CellType;
-
+use super::vtk_data::cell;
 use super::vtu::{load_unstructured, Values};
 use crate::error::{Error, Result};
 use crate::mesh::{RawMesh, TetMesh};
@@ -30,20 +29,6 @@ pub const REGION_ARRAYS: [&str; 6] = [
     "RegionId",
 ];
 
-/// The point count a cell type fixes; `None` for the variable ones
-/// (poly-vertex, poly-line, strip, polygon).
-fn fixed_points(kind: CellType) -> Option<usize> {
-    match kind {
-        CellType::Vertex => Some(1),
-        CellType::Line => Some(2),
-        CellType::Triangle | CellType::QuadraticEdge => Some(3),
-        CellType::Pixel | CellType::Quad => Some(4),
-        CellType::QuadraticTriangle => Some(6),
-        CellType::QuadraticQuad => Some(8),
-        _ => None,
-    }
-}
-
 /// Reads a tetrahedral mesh from a `.vtu` or legacy `.vtk` file.
 pub fn read_vtk_mesh(path: &Path) -> Result<TetMesh> {
     let bad = |message: String| Error::malformed(path, message);
@@ -53,51 +38,34 @@ pub fn read_vtk_mesh(path: &Path) -> Result<TetMesh> {
     let mut skipped: BTreeMap<String, usize> = BTreeMap::new();
     for (k, cell) in grid.cells.iter().enumerate() {
         let nodes = grid.nodes(cell);
-        match cell.kind {
-            CellType::Tetra if nodes.len() == 4 => {
+        let kind = cell.kind;
+        if let Some(n) = cell::fixed_points(kind).filter(|&n| n != nodes.len()) {
+            return Err(bad(format!(
+                "cell {k} is typed {}, which has {n} points, but lists {} points{}",
+                cell::name(kind),
+                nodes.len(),
+                if nodes.len() == 4 && kind != cell::TETRA {
+                    "; a tetrahedron is type 10"
+                } else {
+                    ""
+                }
+            )));
+        }
+        match kind {
+            cell::TETRA => {
                 tets.push([nodes[0], nodes[1], nodes[2], nodes[3]]);
                 tet_cells.push(k);
             }
-            CellType::Tetra => {
-                return Err(bad(format!(
-                    "cell {k} is a tetrahedron with {} points",
-                    nodes.len()
-                )))
-            }
-            CellType::Vertex
-            | CellType::PolyVertex
-            | CellType::Line
-            | CellType::PolyLine
-            | CellType::Triangle
-            | CellType::TriangleStrip
-            | CellType::Polygon
-            | CellType::Pixel
-            | CellType::Quad
-            | CellType::QuadraticEdge
-            | CellType::QuadraticTriangle
-            | CellType::QuadraticQuad => {
-                if let Some(n) = fixed_points(cell.kind).filter(|&n| n != nodes.len()) {
-                    return Err(bad(format!(
-                        "cell {k} is typed {:?} ({n} points) but lists {} points{}",
-                        cell.kind,
-                        nodes.len(),
-                        if nodes.len() == 4 {
-                            "; a tetrahedron is type 10"
-                        } else {
-                            ""
-                        }
-                    )));
-                }
-                *skipped.entry(format!("{:?}", cell.kind)).or_default() += 1;
-            }
-            CellType::QuadraticTetra => {
+            _ if cell::below_volume(kind) => *skipped.entry(cell::name(kind)).or_default() += 1,
+            cell::QUADRATIC_TETRA => {
                 return Err(bad(format!(
                     "cell {k} is a quadratic tetrahedron; only linear tetrahedra are supported"
                 )))
             }
             other => {
                 return Err(bad(format!(
-                    "cell {k} is a {other:?}; only linear tetrahedra are supported as volume cells"
+                    "cell {k} is a {}; only linear tetrahedra are supported as volume cells",
+                    cell::name(other)
                 )))
             }
         }
@@ -113,18 +81,6 @@ pub fn read_vtk_mesh(path: &Path) -> Result<TetMesh> {
             tets.len(),
             counts.join(", ")
         );
-    }
-    // vtkio leaves out an array whose values it cannot parse (a value
-    // beyond its type, too few values): a region array the file declares
-    // must not silently become "no region array".
-    if let Some(name) = grid.declared_cell_arrays.iter().find(|n| {
-        REGION_ARRAYS.contains(&n.as_str()) && !grid.cell_data.iter().any(|f| &f.name == *n)
-    }) {
-        return Err(bad(format!(
-            "cell array '{name}' (region ids) cannot be read: its values must be one integer \
-             per cell ({} cells) within its declared type",
-            grid.cells.len()
-        )));
     }
     let tet_region = match REGION_ARRAYS
         .iter()
@@ -149,7 +105,8 @@ pub fn read_vtk_mesh(path: &Path) -> Result<TetMesh> {
                             Ok(x as i32)
                         } else {
                             Err(bad(format!(
-                                "cell array '{}' holds {x} at cell {k}; region ids are integers",
+                                "cell array '{}' holds {x} at cell {k}; region ids are \
+                                 integers within ±2147483647",
                                 field.name
                             )))
                         }

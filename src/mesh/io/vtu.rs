@@ -1,4 +1,5 @@
-//! VTK XML unstructured grids (`.vtu`): written here, read through `vtkio`.
+//! VTK XML unstructured grids (`.vtu`): written here; read by
+//! [`super::vtk_xml`] (and legacy `.vtk` by [`super::vtk_legacy`]).
 //!
 //! Files are written with inline base64 ("binary") arrays, zlib-compressed
 //! by default ([`VtuFormat`]), which ParaView and the Python package meshio
@@ -9,8 +10,7 @@
 
 use std::path::Path;
 
-use vtkio::model::{Attribute, CellType, DataSet, IOBuffer, VertexNumbers, Vtk};
-
+use super::vtk_data::cell;
 use super::write_atomically;
 use crate::error::{Error, Result};
 use crate::mesh::{TetMesh, Vec3};
@@ -345,7 +345,7 @@ pub fn read_vtu(path: &Path) -> Result<Grid> {
     for (k, cell) in loaded.cells.iter().enumerate() {
         let nodes = loaded.nodes(cell);
         match (cell.kind, nodes.len()) {
-            (CellType::Tetra, 4) => {
+            (cell::TETRA, 4) => {
                 if !triangles.is_empty() {
                     return Err(bad(format!(
                         "cell {k}: tetrahedra after triangles are not supported"
@@ -353,13 +353,14 @@ pub fn read_vtu(path: &Path) -> Result<Grid> {
                 }
                 tets.push(std::array::from_fn(|i| nodes[i]));
             }
-            (CellType::Triangle, 3) => triangles.push(std::array::from_fn(|i| nodes[i])),
-            (CellType::Tetra | CellType::Triangle, n) => {
+            (cell::TRIANGLE, 3) => triangles.push(std::array::from_fn(|i| nodes[i])),
+            (cell::TETRA | cell::TRIANGLE, n) => {
                 return Err(bad(format!("cell {k} has {n} nodes, not as its type says")))
             }
             (other, _) => {
                 return Err(bad(format!(
-                    "cell {k} is a {other:?}; only tetrahedra and triangles are supported"
+                    "cell {k} is a {}; only tetrahedra and triangles are supported",
+                    cell::name(other)
                 )))
             }
         }
@@ -373,46 +374,10 @@ pub fn read_vtu(path: &Path) -> Result<Grid> {
     })
 }
 
-/// Legacy VTK 5.1 names 64-bit array types `vtktypeint64` and
-/// `vtktypeuint64` (meshio writes them for integer cell data); the legacy
-/// parser knows them only in the `OFFSETS`/`CONNECTIVITY` headers, so array
-/// headers elsewhere get the older names `long` and `unsigned_long`, which
-/// mean the same 8-byte integers.
-fn legacy_type_names(bytes: Vec<u8>) -> Vec<u8> {
-    const NAMES: [(&[u8], &[u8]); 2] = [
-        (b" vtktypeint64", b" long"),
-        (b" vtktypeuint64", b" unsigned_long"),
-    ];
-    if !bytes.starts_with(b"# vtk DataFile Version 5") {
-        return bytes;
-    }
-    let mut out = Vec::with_capacity(bytes.len());
-    let mut line_start = 0;
-    let mut i = 0;
-    while i < bytes.len() {
-        if bytes[i] == b'\n' {
-            line_start = i + 1;
-        }
-        let topology = bytes[line_start..].starts_with(b"OFFSETS")
-            || bytes[line_start..].starts_with(b"CONNECTIVITY");
-        let hit = (!topology)
-            .then(|| NAMES.iter().find(|(from, _)| bytes[i..].starts_with(from)))
-            .flatten();
-        if let Some((from, to)) = hit {
-            out.extend_from_slice(to);
-            i += from.len();
-        } else {
-            out.push(bytes[i]);
-            i += 1;
-        }
-    }
-    out
-}
-
 /// One cell of a loaded grid: its VTK type and its range in the
 /// connectivity.
 pub(super) struct Cell {
-    pub kind: CellType,
+    pub kind: u8,
     pub range: std::ops::Range<usize>,
 }
 
@@ -423,8 +388,6 @@ pub(super) struct Unstructured {
     pub cells: Vec<Cell>,
     pub point_data: Vec<Field>,
     pub cell_data: Vec<Field>,
-    /// The names of the cell arrays the file declares, read or not.
-    pub declared_cell_arrays: Vec<String>,
 }
 
 impl Unstructured {
@@ -439,217 +402,71 @@ impl Unstructured {
 /// point indices. Legacy field data (`FIELD`) arrays become ordinary arrays.
 pub(super) fn load_unstructured(path: &Path) -> Result<Unstructured> {
     let bad = |message: String| Error::malformed(path, message);
-    super::regular_file(path)?;
+    let bytes = super::read_input(path)?;
     let legacy = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("vtk"));
-    let bytes = super::read_input(path)?;
-    // From the text (binary payloads are not UTF-8; only the tags matter).
-    let declared = declared_cell_arrays(&String::from_utf8_lossy(&bytes), legacy);
-    // vtkio trusts the sizes a file states (zlib block tables, header
-    // widths): a file that lies about them would panic inside it.
-    let inconsistent = || {
-        bad(
-            "its binary data is inconsistent with its header (byte order, header type, \
-             compressor or block sizes): the file is damaged or was edited"
-                .into(),
-        )
-    };
-    let vtk = if legacy {
-        let bytes = legacy_type_names(bytes);
-        super::without_panics(|| Vtk::parse_legacy_be(&bytes[..])).ok_or_else(inconsistent)?
+    let raw = if legacy {
+        super::vtk_legacy::read_legacy(path, &bytes)?
     } else {
-        super::without_panics(|| Vtk::parse_xml(&bytes[..])).ok_or_else(inconsistent)?
-    }
-    .map_err(|e| bad(format!("not a readable VTK file: {e}")))?;
-    let DataSet::UnstructuredGrid { pieces, .. } = vtk.data else {
-        return Err(bad("not an unstructured grid".into()));
+        super::vtk_xml::read_xml(path, &bytes)?
     };
-    let [piece] = &pieces[..] else {
-        return Err(bad(format!("expected one piece, found {}", pieces.len())));
-    };
-    let piece = super::without_panics(|| piece.load_piece_data(None))
-        .ok_or_else(inconsistent)?
-        .map_err(|e| bad(format!("cannot load piece: {e}")))?;
-    let coords: Vec<f64> = piece
-        .points
-        .cast_into()
-        .ok_or_else(|| bad("points are not numeric".into()))?;
-    if !coords.len().is_multiple_of(3) {
+    if !raw.coords.len().is_multiple_of(3) {
         return Err(bad(format!(
             "{} point coordinates, not a multiple of 3",
-            coords.len()
+            raw.coords.len()
         )));
     }
-    let points: Vec<Vec3> = coords
+    if let Some(i) = raw.coords.iter().position(|x| !x.is_finite()) {
+        return Err(bad(format!(
+            "point {} has a non-finite coordinate ({})",
+            i / 3,
+            raw.coords[i]
+        )));
+    }
+    let points: Vec<Vec3> = raw
+        .coords
         .chunks_exact(3)
         .map(|c| Vec3::new(c[0], c[1], c[2]))
         .collect();
-    let index = |v: u64, k: usize| -> Result<usize> {
-        usize::try_from(v)
-            .ok()
-            .filter(|&i| i < points.len())
-            .ok_or_else(|| {
+    if raw.types.len() != raw.ends.len() {
+        return Err(bad(format!(
+            "{} cell types for {} cells",
+            raw.types.len(),
+            raw.ends.len()
+        )));
+    }
+    let mut connectivity = Vec::with_capacity(raw.connectivity.len());
+    let mut cells = Vec::with_capacity(raw.types.len());
+    let mut start = 0usize;
+    for (k, (&end, &kind)) in raw.ends.iter().zip(&raw.types).enumerate() {
+        let end = usize::try_from(end).unwrap_or(usize::MAX);
+        if end < start || end > raw.connectivity.len() {
+            return Err(bad(format!(
+                "cell {k}: offset {end} is out of order or beyond the {} point ids",
+                raw.connectivity.len()
+            )));
+        }
+        for &v in &raw.connectivity[start..end] {
+            let index = usize::try_from(v).ok().filter(|&i| i < points.len());
+            connectivity.push(index.ok_or_else(|| {
                 bad(format!(
                     "cell {k} refers to point {v}; there are {}",
                     points.len()
                 ))
-            })
-    };
-    let types = &piece.cells.types;
-    let mut connectivity = Vec::new();
-    let mut cells = Vec::with_capacity(types.len());
-    match &piece.cells.cell_verts {
-        VertexNumbers::XML {
-            connectivity: conn,
-            offsets,
-        } => {
-            // Legacy 5.1 files list n + 1 offsets, the first 0; XML lists
-            // the n ends.
-            let offsets = match &offsets[..] {
-                [0, ends @ ..] if legacy && ends.len() == types.len() => ends,
-                all => all,
-            };
-            if types.len() != offsets.len() {
-                return Err(bad(format!(
-                    "{} cell types for {} cells",
-                    types.len(),
-                    offsets.len()
-                )));
-            }
-            connectivity.reserve(conn.len());
-            let mut start = 0usize;
-            for (k, (&end, &kind)) in offsets.iter().zip(types).enumerate() {
-                let end = usize::try_from(end).unwrap_or(usize::MAX);
-                if end < start || end > conn.len() {
-                    return Err(bad(format!(
-                        "cell {k}: offset {end} is out of order or range"
-                    )));
-                }
-                for &v in &conn[start..end] {
-                    connectivity.push(index(v, k)?);
-                }
-                cells.push(Cell {
-                    kind,
-                    range: start..end,
-                });
-                start = end;
-            }
+            })?);
         }
-        VertexNumbers::Legacy {
-            num_cells,
-            vertices,
-        } => {
-            if types.len() != *num_cells as usize {
-                return Err(bad(format!(
-                    "{} cell types for {num_cells} cells",
-                    types.len()
-                )));
-            }
-            let mut at = 0usize;
-            for (k, &kind) in types.iter().enumerate() {
-                let n = *vertices
-                    .get(at)
-                    .ok_or_else(|| bad(format!("cell {k}: the cell list ends early")))?
-                    as usize;
-                let ids = vertices
-                    .get(at + 1..at + 1 + n)
-                    .ok_or_else(|| bad(format!("cell {k}: the cell list ends early")))?;
-                let start = connectivity.len();
-                for &v in ids {
-                    connectivity.push(index(u64::from(v), k)?);
-                }
-                cells.push(Cell {
-                    kind,
-                    range: start..connectivity.len(),
-                });
-                at += 1 + n;
-            }
-        }
+        cells.push(Cell {
+            kind,
+            range: start..end,
+        });
+        start = end;
     }
-    let fields = |attrs: &[Attribute]| -> Result<Vec<Field>> {
-        let mut out = Vec::new();
-        for a in attrs {
-            let arrays: Vec<(&str, usize, &IOBuffer)> = match a {
-                Attribute::DataArray(d) => vec![(&d.name, d.elem.num_comp() as usize, &d.data)],
-                Attribute::Field { data_array, .. } => data_array
-                    .iter()
-                    .map(|f| (f.name.as_str(), f.elem as usize, &f.data))
-                    .collect(),
-            };
-            for (name, components, data) in arrays {
-                let values = match data {
-                    IOBuffer::I32(v) => Values::I32(v.clone()),
-                    other => Values::F64(
-                        other
-                            .clone()
-                            .cast_into()
-                            .ok_or_else(|| bad(format!("array {name} is not numeric")))?,
-                    ),
-                };
-                out.push(Field {
-                    name: name.to_string(),
-                    components,
-                    values,
-                    component_names: Vec::new(),
-                });
-            }
-        }
-        Ok(out)
-    };
     Ok(Unstructured {
         points,
         connectivity,
         cells,
-        point_data: fields(&piece.data.point)?,
-        cell_data: fields(&piece.data.cell)?,
-        declared_cell_arrays: declared,
+        point_data: raw.point_data,
+        cell_data: raw.cell_data,
     })
-}
-
-/// The names of the cell arrays a VTK file declares, from its text: in XML
-/// the `Name` of each `DataArray` inside `<CellData>`; in legacy files the
-/// `SCALARS` names and `FIELD` array names after `CELL_DATA`.
-fn declared_cell_arrays(text: &str, legacy: bool) -> Vec<String> {
-    let mut names = Vec::new();
-    if legacy {
-        let Some(start) = text.find("\nCELL_DATA") else {
-            return names;
-        };
-        let end = text[start..]
-            .find("\nPOINT_DATA")
-            .map_or(text.len(), |e| start + e);
-        let mut in_field = 0usize;
-        for line in text[start..end].lines() {
-            let words: Vec<&str> = line.split_whitespace().collect();
-            match words.as_slice() {
-                ["SCALARS", name, ..] => names.push(name.to_string()),
-                ["FIELD", _, n] => in_field = n.parse().unwrap_or(0),
-                [name, _, _, kind]
-                    if in_field > 0
-                        && kind.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
-                        && !kind.chars().all(|c| c.is_ascii_digit()) =>
-                {
-                    names.push(name.to_string());
-                    in_field -= 1;
-                }
-                _ => {}
-            }
-        }
-    } else {
-        let mut rest = text;
-        while let Some(start) = rest.find("<CellData") {
-            let block = &rest[start..];
-            let end = block.find("</CellData>").unwrap_or(block.len());
-            for tag in block[..end].split("<DataArray").skip(1) {
-                let tag = &tag[..tag.find('>').unwrap_or(tag.len())];
-                if let Some(i) = tag.find("Name=\"") {
-                    let name = &tag[i + 6..];
-                    names.push(name[..name.find('"').unwrap_or(name.len())].to_string());
-                }
-            }
-            rest = &block[end..];
-        }
-    }
-    names
 }
