@@ -2,7 +2,9 @@
 
 use std::path::Path;
 
-use pyo3::exceptions::{PyException, PyFileNotFoundError, PyOSError, PyValueError};
+use std::sync::atomic::{AtomicU32, Ordering};
+
+use pyo3::exceptions::{PyException, PyFileNotFoundError, PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use skinpatch::Error;
 
@@ -39,6 +41,31 @@ pyo3::create_exception!(
     SkinpatchError,
     "A GPU stage that failed (or, with SKINPATCH_REQUIRE_GPU=1, no GPU adapter)."
 );
+
+/// The process whose skinpatch calls started the worker threads (0: none
+/// has yet).
+static WORKERS_PID: AtomicU32 = AtomicU32::new(0);
+
+/// Called before any work that may use the worker threads (rayon's pool,
+/// which the solver, strains and maps share). A process forked after they
+/// started has none of them — only the thread that called `fork` is
+/// copied — so work handed to them would wait forever: such a child gets
+/// a `RuntimeError` that says what to do instead.
+pub fn this_process() -> PyResult<()> {
+    let pid = std::process::id();
+    match WORKERS_PID.compare_exchange(0, pid, Ordering::SeqCst, Ordering::SeqCst) {
+        Ok(_) => Ok(()),
+        Err(owner) if owner == pid => Ok(()),
+        Err(owner) => Err(PyRuntimeError::new_err(format!(
+            "skinpatch's worker threads were started in process {owner}, and this process \
+             ({pid}) was forked from it after that: a forked child has none of those threads, \
+             so the work would wait forever. Start worker processes with the 'spawn' or \
+             'forkserver' method (multiprocessing.get_context(\"spawn\"), or \
+             concurrent.futures.ProcessPoolExecutor(mp_context=...)), or fork before the \
+             first skinpatch call"
+        ))),
+    }
+}
 
 /// The scenario file an error came from, with its text (to find a key's
 /// line) and the keys overrides set (whose values are not in the text).

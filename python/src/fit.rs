@@ -7,7 +7,7 @@ use pyo3::types::{PyDict, PyList};
 use skinpatch::micro::PiecewiseLinear;
 use skinpatch::pipeline::fit::{fit_file, FitReport};
 
-use crate::errors::{to_py, Source};
+use crate::errors::{this_process, to_py, Source};
 
 /// Fits kernel parameters (α, σ) to the deformed maps of a samples file and
 /// a kernel model to them, as `skinpatch fit <samples.toml>` does (the same
@@ -22,6 +22,7 @@ use crate::errors::{to_py, Source};
 /// value out of range, `FileNotFoundError` for a missing file.
 #[pyfunction]
 pub fn fit<'py>(py: Python<'py>, samples_path: PathBuf) -> PyResult<Bound<'py, PyDict>> {
+    this_process()?;
     let report = py
         .detach(|| fit_file(&samples_path, |_, _, _| {}))
         .map_err(|e| {

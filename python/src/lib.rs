@@ -22,6 +22,7 @@ fn neutral_map<'py>(
     py: Python<'py>,
     scenario: &scenario::Scenario,
 ) -> PyResult<Bound<'py, numpy::PyArray2<f32>>> {
+    errors::this_process()?;
     let micro = scenario
         .setup
         .outputs

@@ -11,7 +11,7 @@ use skinpatch::mesh::io::vtu::{Field, Grid};
 use skinpatch::mesh::TetMesh;
 
 use crate::arrays;
-use crate::errors::to_py;
+use crate::errors::{this_process, to_py};
 
 /// A tetrahedral mesh in millimetres: rest positions, tets, their regions
 /// and the top surface the microstructure maps onto.
@@ -123,6 +123,7 @@ impl Mesh {
 /// `[mesh] file` accepts. Raises `MeshError` naming the file and line.
 #[pyfunction]
 pub fn read_mesh(py: Python<'_>, path: PathBuf) -> PyResult<Mesh> {
+    this_process()?;
     let mesh = py
         .detach(|| skinpatch::mesh::io::read_mesh(&path))
         .map_err(|e| to_py(py, e, None))?;
@@ -161,6 +162,7 @@ pub fn write_vtu(
             out.push(field(&name, &value, rows, kind)?);
         }
     }
+    this_process()?;
     py.detach(|| skinpatch::mesh::io::vtu::write_vtu(&path, &grid))
         .map_err(|e| to_py(py, e, None))
 }

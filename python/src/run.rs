@@ -17,7 +17,7 @@ use skinpatch::strain::volume::RegionVolume;
 use skinpatch::strain::{element_stresses, ElementStrains, SurfaceField, TetStress};
 
 use crate::arrays;
-use crate::errors::{to_py, SkinpatchError};
+use crate::errors::{this_process, to_py, SkinpatchError};
 use crate::scenario::Scenario;
 
 type RunOf<'a> = skinpatch::pipeline::Run<'a>;
@@ -86,6 +86,7 @@ impl Run {
             }
             None => scenario.setup.clone(),
         };
+        this_process()?;
         let inner = if outputs {
             let made = py.detach(|| OwnedRun::try_new(setup.clone(), |s| RunOf::writing(s)));
             made.map_err(|e| to_py(py, e, Some(&scenario.source())))?
@@ -111,6 +112,7 @@ impl Run {
         probe_axis: Option<[f64; 3]>,
     ) -> PyResult<Frame> {
         py.check_signals()?;
+        this_process()?;
         if self.written.is_some() {
             return Err(SkinpatchError::new_err(
                 "the run is finished; start a new Run to go on",
@@ -180,6 +182,7 @@ impl Run {
         if let Some(w) = &self.written {
             return Ok(w.clone());
         }
+        this_process()?;
         let inner = exclusive(&mut self.inner);
         let summary = py.detach(move || inner.with_dependent_mut(|_, run| run.close()));
         let written = summary.map_err(|e| to_py(py, e, None))?.written;
@@ -259,19 +262,23 @@ impl Frame {
         }
     }
 
-    fn strain_data(&self) -> &ElementStrains {
-        self.strains
-            .get_or_init(|| ElementStrains::compute(&self.setup.mesh, &self.positions))
+    fn strain_data(&self) -> PyResult<&ElementStrains> {
+        this_process()?;
+        Ok(self
+            .strains
+            .get_or_init(|| ElementStrains::compute(&self.setup.mesh, &self.positions)))
     }
 
-    fn stress_data(&self) -> &[TetStress] {
-        self.stresses
+    fn stress_data(&self) -> PyResult<&[TetStress]> {
+        this_process()?;
+        Ok(self
+            .stresses
             // A Python run keeps the scenario's materials (it has no
             // set_materials), so the setup's are the frame's.
             .get_or_init(|| {
                 let materials = &self.setup.simulation.tet_material;
                 element_stresses(&self.setup.mesh, &self.positions, materials)
-            })
+            }))
     }
 }
 
@@ -339,7 +346,7 @@ impl Frame {
     #[getter]
     fn principal_stretches<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let flat = self
-            .strain_data()
+            .strain_data()?
             .tets
             .iter()
             .flat_map(|s| s.stretch.iter().copied().collect::<Vec<_>>())
@@ -352,7 +359,7 @@ impl Frame {
     #[getter]
     fn principal_strains<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let flat = self
-            .strain_data()
+            .strain_data()?
             .tets
             .iter()
             .flat_map(|s| s.biot().iter().copied().collect::<Vec<_>>())
@@ -362,15 +369,15 @@ impl Frame {
 
     /// Volume ratio J = det F of every tet, `(n_tets,)` float64.
     #[getter]
-    fn volume_ratio<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_vec(
+    fn volume_ratio<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        Ok(PyArray1::from_vec(
             py,
-            self.strain_data()
+            self.strain_data()?
                 .tets
                 .iter()
                 .map(|s| s.volume_ratio())
                 .collect(),
-        )
+        ))
     }
 
     /// Surface stretch ratios (r_s, r_t) at every vertex, `(n_vertices, 2)`
@@ -424,17 +431,17 @@ impl Frame {
     /// Cauchy stress of every tet, `(n_tets, 3, 3)` float64, N/mm² (MPa).
     #[getter]
     fn stresses<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray3<f64>>> {
-        let m: Vec<_> = self.stress_data().iter().map(|s| s.cauchy).collect();
+        let m: Vec<_> = self.stress_data()?.iter().map(|s| s.cauchy).collect();
         arrays::mat3s(py, &m)
     }
 
     /// Von Mises stress of every tet, `(n_tets,)` float64, N/mm² (MPa).
     #[getter]
-    fn von_mises<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_vec(
+    fn von_mises<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        Ok(PyArray1::from_vec(
             py,
-            self.stress_data().iter().map(|s| s.von_mises()).collect(),
-        )
+            self.stress_data()?.iter().map(|s| s.von_mises()).collect(),
+        ))
     }
 
     /// Each region's volume: `{region: {"rest_mm3", "deformed_mm3",
@@ -465,6 +472,7 @@ impl Frame {
         let micro = self.setup.outputs.micro.as_ref().ok_or_else(|| {
             SkinpatchError::new_err("the scenario has no [microstructure] to deform")
         })?;
+        this_process()?;
         let deformer = self.deformer.clone();
         let frame = self.metrics.frame;
         let map = py.detach(|| {
@@ -486,8 +494,8 @@ impl Frame {
         let grid = skinpatch::export::frame_grid(
             &self.setup.mesh,
             &self.positions,
-            self.strain_data(),
-            self.stress_data(),
+            self.strain_data()?,
+            self.stress_data()?,
             &self.contact,
             &self.field,
         );

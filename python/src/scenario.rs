@@ -8,7 +8,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
 use skinpatch::scenario::Setup;
 
-use crate::errors::{to_py, Source};
+use crate::errors::{this_process, to_py, Source};
 use crate::mesh::Mesh;
 
 /// A validated scenario with its mesh, ready to run.
@@ -67,6 +67,7 @@ impl Scenario {
             text: &text,
             overridden: &overridden,
         };
+        this_process()?;
         let loaded = py.detach(|| {
             let scenario = skinpatch::scenario::Scenario::load_with(&path, &sets)?;
             Setup::from_scenario(&scenario, &path)

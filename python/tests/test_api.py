@@ -6,6 +6,7 @@ import os
 import pathlib
 import signal
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -266,6 +267,37 @@ def test_a_run_moves_between_threads_and_refuses_a_second_caller(root, tmp_path)
     for t in threads:
         t.join()
     assert all(e.startswith("RuntimeError") and "borrowed" in e for e in errors), errors
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="os.fork is POSIX only")
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")  # fork with threads
+def test_a_child_forked_after_work_raises_instead_of_hanging(root):
+    # step() in a child forked after the parent had stepped never returned:
+    # the child has none of the worker threads the solve hands work to.
+    run = skinpatch.Run(press_small(root))
+    run.step()
+    pid = os.fork()
+    if pid == 0:
+        code = 3
+        try:
+            run.step()
+        except RuntimeError as e:
+            code = 0 if "forked" in str(e) and "spawn" in str(e) else 4
+        except BaseException:
+            code = 5
+        os._exit(code)
+    for _ in range(600):
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            break
+        time.sleep(0.1)
+    else:
+        os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+        pytest.fail("the forked child's step() did not return within 60 s")
+    assert os.waitstatus_to_exitcode(status) == 0
+    # The parent goes on as before.
+    assert run.step().index == 1
 
 
 def test_files_that_are_not_regular_are_refused_not_read(tmp_path):

@@ -4,8 +4,10 @@
 //! ParaView collection, per map the strain images and the deformed
 //! microstructure (NaN-checked, normals too), the rendered frames — and then
 //! the frame's `metrics.csv` row through [`MetricsWriter`] (whole rows only,
-//! even on a full disk). A row in `metrics.csv` therefore means that the
-//! frame's files are complete.
+//! even on a full disk), and last the frame's entry in `frames.pvd`. A row
+//! in `metrics.csv` therefore means that the frame's files (and its
+//! `volume.csv` row) are complete, and an entry in `frames.pvd` that its row
+//! is there too.
 //!
 //! Setting up is ordered so that everything that can fail before the first
 //! frame (the adapters, ffmpeg) is checked before an earlier run's files are
@@ -65,6 +67,8 @@ pub(super) struct FrameOutputs<'a, R: MetricsRow> {
     renderer: Option<RenderEngine>,
     metrics: Option<MetricsWriter<R>>,
     collection: Vec<(f64, PathBuf)>,
+    /// The frame written but not yet listed in `frames.pvd`.
+    unlisted: Option<(f64, PathBuf)>,
     /// Every frame's row, in order.
     pub rows: Vec<R>,
 }
@@ -114,6 +118,7 @@ impl<'a, R: MetricsRow + Copy> FrameOutputs<'a, R> {
             renderer,
             metrics: None,
             collection: Vec::new(),
+            unlisted: None,
             rows: Vec::new(),
         })
     }
@@ -143,10 +148,8 @@ impl<'a, R: MetricsRow + Copy> FrameOutputs<'a, R> {
         let (dir, f) = (self.spec.outputs.dir.as_path(), input.frame);
         if let (true, Some(grid)) = (self.spec.outputs.write_frames, input.grid) {
             let path = export::write_frame(dir, f, grid, self.spec.outputs.vtu_format)?;
-            self.collection.push((input.time_s, path));
-            // Rewritten (atomically) after every frame, so a killed run's
-            // frames open in ParaView too.
-            export::write_collection(dir, &self.collection)?;
+            // Listed in frames.pvd by `row`, once the frame is whole.
+            self.unlisted = Some((input.time_s, path));
         }
         let mut fresh_normals = false;
         for (k, piece) in self.pieces.iter().enumerate() {
@@ -195,13 +198,20 @@ impl<'a, R: MetricsRow + Copy> FrameOutputs<'a, R> {
         Ok(())
     }
 
-    /// Appends the frame's row to `metrics.csv` (after its files).
+    /// Commits the frame: its row in `metrics.csv` (after its files and
+    /// any other row of the run's), then its entry in `frames.pvd`
+    /// (rewritten atomically, so a killed run's frames open in ParaView
+    /// too). After a kill, a listed frame has every file and row.
     pub fn row(&mut self, row: R) -> Result<()> {
         self.metrics
             .as_mut()
             .expect("FrameOutputs::start opens metrics.csv before the frames")
             .push(&row)?;
         self.rows.push(row);
+        if let Some(entry) = self.unlisted.take() {
+            self.collection.push(entry);
+            export::write_collection(self.spec.outputs.dir.as_path(), &self.collection)?;
+        }
         Ok(())
     }
 

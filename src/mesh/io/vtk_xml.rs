@@ -182,17 +182,18 @@ fn split_appended<'a>(path: &Path, bytes: &'a [u8]) -> Result<(String, Option<Ap
         let tag_text = String::from_utf8_lossy(&bytes[tag..close]);
         attribute_in(&tag_text, "encoding").unwrap_or_default()
     };
-    let raw =
-        match encoding.as_str() {
-            "raw" => true,
-            "base64" => false,
-            other => return Err(Error::malformed(
+    let raw = match encoding.as_str() {
+        "raw" => true,
+        "base64" => false,
+        other => {
+            return Err(Error::malformed(
                 path,
                 format!(
                     "byte {tag}: AppendedData encoding {other:?} is neither \"raw\" nor \"base64\""
                 ),
-            )),
-        };
+            ))
+        }
+    };
     Ok((
         head,
         Some(Appended {
