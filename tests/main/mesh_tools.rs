@@ -235,7 +235,7 @@ fn clear(text: &str, name: &str) -> bool {
     (line || place) && !debug
 }
 
-/// Mutations per seed file (21 seeds: Gmsh 4.1/2.2 text and binary from
+/// Mutations per seed file (22 seeds: Gmsh 4.1/2.2 text and binary from
 /// Gmsh and meshio, VTU appended raw/base64, inline, ASCII, zlib or not,
 /// UInt32/UInt64 headers, legacy VTK 4.2/5.1 ASCII and binary).
 const CASES_PER_SEED: usize = 60;

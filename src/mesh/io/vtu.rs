@@ -1,5 +1,5 @@
 //! VTK XML unstructured grids (`.vtu`): written here; read by
-//! [`super::vtk_xml`] (and legacy `.vtk` by [`super::vtk_legacy`]).
+//! `vtk_xml.rs` (and legacy `.vtk` by `vtk_legacy.rs`).
 //!
 //! Files are written with inline base64 ("binary") arrays, zlib-compressed
 //! by default ([`VtuFormat`]), which ParaView and the Python package meshio
