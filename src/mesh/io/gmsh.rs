@@ -80,8 +80,8 @@ pub fn read_gmsh(path: &Path) -> Result<TetMesh> {
         log::warn!(
             "{}: the file has no $Entities section, so its physical groups ({}) cannot be \
              tied to elements; regions are the element blocks' entity tags, named \
-             region_<tag>. To keep the groups, save as MSH 2.2 (meshio: \
-             file_format=\"gmsh22\"), as Gmsh itself writes 4.1, or as VTU",
+             region_<tag>. To keep the groups, save the mesh from Gmsh itself, from \
+             meshio as MSH 2.2 (file_format=\"gmsh22\"), or as VTU",
             path.display(),
             names.join(", ")
         );

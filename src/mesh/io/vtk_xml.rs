@@ -74,7 +74,10 @@ pub(super) fn read_xml(path: &Path, bytes: &[u8]) -> Result<RawGrid> {
         values.into_i64().ok_or_else(|| {
             r.error(
                 node,
-                "holds floats or values beyond 64 bits; expected integers",
+                format!(
+                    "DataArray '{}' holds floats or values beyond 64 bits; expected integers",
+                    node.attribute("Name").unwrap_or("")
+                ),
             )
         })
     };
@@ -98,7 +101,12 @@ pub(super) fn read_xml(path: &Path, bytes: &[u8]) -> Result<RawGrid> {
         .into_iter()
         .map(|t| u8::try_from(t).ok())
         .collect::<Option<Vec<u8>>>()
-        .ok_or_else(|| r.error(types_node, "holds a cell type beyond 0 … 255"))?;
+        .ok_or_else(|| {
+            r.error(
+                types_node,
+                "DataArray 'types' holds a cell type beyond 0 … 255",
+            )
+        })?;
 
     let fields = |section: &str, count: usize| -> Result<Vec<_>> {
         let Some(node) = piece.children().find(|n| n.has_tag_name(section)) else {
