@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use crate::common::root;
+use crate::common::{root, Rng};
 use skinpatch::mesh::io;
 
 fn tools_dir() -> PathBuf {
@@ -78,24 +78,6 @@ fn tool_files_read_with_the_mesher_counts() {
             let names: Vec<&str> = mesh.regions.iter().map(|r| r.name.as_str()).collect();
             assert_eq!(names, ["dermis", "hypodermis"], "{name}");
         }
-    }
-}
-
-/// A deterministic generator (SplitMix64): the corpus is the same on every
-/// run and machine.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
     }
 }
 

@@ -695,15 +695,8 @@ fn a_killed_run_lists_only_whole_frames() {
             .spawn()
             .unwrap()
     };
-    // SplitMix64 from a fixed seed: the same kill moments on every run.
-    let mut state = 0x5eed_0058_u64;
-    let mut next = move || {
-        state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = state;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    };
+    // The same kill moments on every run.
+    let mut rng = crate::common::Rng(0x5eed_0058);
     let mut killed_mid_run = 0;
     for kill in 0..10 {
         let mut child = run();
@@ -716,7 +709,7 @@ fn a_killed_run_lists_only_whole_frames() {
             }
             std::thread::sleep(std::time::Duration::from_millis(5));
         }
-        std::thread::sleep(std::time::Duration::from_millis(next() % 400));
+        std::thread::sleep(std::time::Duration::from_millis(rng.next() % 400));
         killed_mid_run += usize::from(child.try_wait().unwrap().is_none());
         child.kill().unwrap();
         child.wait().unwrap();

@@ -224,21 +224,32 @@ impl Scalar {
         }
     }
 
-    /// Parses one text value (ASCII data).
-    pub fn parse(self, token: &str) -> Option<NumValue> {
+    /// Parses text values (ASCII data) of this type; `Err(k)`: value k
+    /// does not parse.
+    pub fn parse_text<'t>(self, tokens: impl IntoIterator<Item = &'t str>) -> Result<Num, usize> {
+        let tokens = tokens.into_iter().enumerate();
         if self.is_float() {
             // VTK writes non-finite values as `nan`, `inf`, `-inf`.
-            token.parse::<f64>().ok().map(NumValue::Float)
+            tokens
+                .map(|(k, t)| t.parse::<f64>().map_err(|_| k))
+                .collect::<Result<_, _>>()
+                .map(Num::Floats)
         } else {
-            token.parse::<i128>().ok().map(NumValue::Int)
+            tokens
+                .map(|(k, t)| t.parse::<i128>().map_err(|_| k))
+                .collect::<Result<_, _>>()
+                .map(Num::Ints)
         }
     }
-}
 
-/// One parsed text value.
-pub(super) enum NumValue {
-    Int(i128),
-    Float(f64),
+    /// "an Int32 integer", "a Float64 number" (in messages).
+    pub fn describe(self) -> String {
+        if self.is_float() {
+            format!("a {} number", self.name())
+        } else {
+            format!("an {} integer", self.name())
+        }
+    }
 }
 
 /// Decoded values: integers exactly (any width), floats as f64.
@@ -252,31 +263,6 @@ impl Num {
         match self {
             Num::Ints(v) => v.len(),
             Num::Floats(v) => v.len(),
-        }
-    }
-
-    /// Values from parsed text tokens of one type.
-    pub fn from_values(scalar: Scalar, values: Vec<NumValue>) -> Num {
-        if scalar.is_float() {
-            Num::Floats(
-                values
-                    .into_iter()
-                    .map(|v| match v {
-                        NumValue::Float(x) => x,
-                        NumValue::Int(i) => i as f64,
-                    })
-                    .collect(),
-            )
-        } else {
-            Num::Ints(
-                values
-                    .into_iter()
-                    .map(|v| match v {
-                        NumValue::Int(i) => i,
-                        NumValue::Float(x) => x as i128,
-                    })
-                    .collect(),
-            )
         }
     }
 

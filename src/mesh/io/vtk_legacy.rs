@@ -24,12 +24,11 @@ pub(super) fn read_legacy(path: &Path, bytes: &[u8]) -> Result<RawGrid> {
         },
         binary: false,
         version: (0, 0),
+        section: None,
     };
     r.header()?;
     let mut grid = RawGrid::default();
     let mut have_points = false;
-    // The section attribute blocks belong to, with its entry count.
-    let mut section: Option<(bool, usize)> = None;
     while let Some((at, words)) = r.keyword_line()? {
         let keyword = words[0].to_ascii_uppercase();
         let here = r.c.site(at);
@@ -52,11 +51,7 @@ pub(super) fn read_legacy(path: &Path, bytes: &[u8]) -> Result<RawGrid> {
         match keyword.as_str() {
             "POINTS" => {
                 let (n, t) = (count(1, "the point count")?, scalar(2)?);
-                let what = "point coordinates";
-                let total = n
-                    .checked_mul(3)
-                    .ok_or_else(|| here.error("too many points"))?;
-                grid.coords = r.data(total, t, what)?.into_f64();
+                grid.coords = r.values(at, n, 3, t, "point coordinates")?.into_f64();
                 have_points = true;
             }
             "CELLS" => {
@@ -87,8 +82,8 @@ pub(super) fn read_legacy(path: &Path, bytes: &[u8]) -> Result<RawGrid> {
                     .collect::<Option<_>>()
                     .ok_or_else(|| here.error("CELL_TYPES holds a type beyond 0 … 255"))?;
             }
-            "CELL_DATA" => section = Some((false, count(1, "the cell count")?)),
-            "POINT_DATA" => section = Some((true, count(1, "the point count")?)),
+            "CELL_DATA" => r.section = Some((false, count(1, "the cell count")?)),
+            "POINT_DATA" => r.section = Some((true, count(1, "the point count")?)),
             "METADATA" => r.skip_metadata(),
             "FIELD" => {
                 let n = count(2, "the array count")?;
@@ -118,13 +113,9 @@ pub(super) fn read_legacy(path: &Path, bytes: &[u8]) -> Result<RawGrid> {
                             w[3]
                         ))
                     })?;
-                    let total = comps
-                        .checked_mul(tuples)
-                        .ok_or_else(|| here.error("too many values"))?;
-                    let values = r.data(total, t, &format!("array '{name}'"))?;
+                    let values = r.values(at, tuples, comps, t, &format!("array '{name}'"))?;
                     r.attach(
                         &mut grid,
-                        section,
                         at,
                         values.into_field(&name, comps.max(1)),
                         tuples,
@@ -158,14 +149,10 @@ pub(super) fn read_legacy(path: &Path, bytes: &[u8]) -> Result<RawGrid> {
                 if keyword == "SCALARS" {
                     r.lookup_table_line();
                 }
-                let entries = r.entries(section, at, &keyword)?;
-                let total = entries
-                    .checked_mul(comps)
-                    .ok_or_else(|| here.error("too many values"))?;
-                let values = r.data(total, t, &format!("array '{name}'"))?;
+                let entries = r.entries(at, &keyword)?;
+                let values = r.values(at, entries, comps, t, &format!("array '{name}'"))?;
                 r.attach(
                     &mut grid,
-                    section,
                     at,
                     values.into_field(&name, comps.max(1)),
                     entries,
@@ -177,14 +164,11 @@ pub(super) fn read_legacy(path: &Path, bytes: &[u8]) -> Result<RawGrid> {
                 let entries = if keyword == "LOOKUP_TABLE" {
                     per
                 } else {
-                    r.entries(section, at, &keyword)?
+                    r.entries(at, &keyword)?
                 };
                 let comps = if keyword == "LOOKUP_TABLE" { 4 } else { per };
                 let t = if r.binary { Scalar::U8 } else { Scalar::F32 };
-                let total = entries
-                    .checked_mul(comps)
-                    .ok_or_else(|| here.error("too many values"))?;
-                r.data(total, t, &keyword)?;
+                r.values(at, entries, comps, t, &keyword)?;
             }
             _ => {
                 return Err(here.error(format!(
@@ -255,6 +239,9 @@ struct Legacy<'a> {
     c: Cursor<'a>,
     binary: bool,
     version: (u32, u32),
+    /// The section attribute blocks belong to (points or not) with its
+    /// entry count.
+    section: Option<(bool, usize)>,
 }
 
 impl<'a> Legacy<'a> {
@@ -381,24 +368,32 @@ impl<'a> Legacy<'a> {
     }
 
     /// The entry count of the current section.
-    fn entries(&self, section: Option<(bool, usize)>, at: usize, keyword: &str) -> Result<usize> {
-        section.map(|(_, n)| n).ok_or_else(|| {
+    fn entries(&self, at: usize, keyword: &str) -> Result<usize> {
+        self.section.map(|(_, n)| n).ok_or_else(|| {
             self.c
                 .error_at(at, format!("{keyword} before CELL_DATA or POINT_DATA"))
         })
     }
 
+    /// `entries × comps` values of type `t` (the block announced at `at`).
+    fn values(
+        &mut self,
+        at: usize,
+        entries: usize,
+        comps: usize,
+        t: Scalar,
+        what: &str,
+    ) -> Result<Num> {
+        let total = entries
+            .checked_mul(comps)
+            .ok_or_else(|| self.c.error_at(at, format!("{what}: too many values")))?;
+        self.data(total, t, what)
+    }
+
     /// Adds an array to the current section after checking its length;
     /// field data outside a section (the data set's own) is dropped.
-    fn attach(
-        &self,
-        grid: &mut RawGrid,
-        section: Option<(bool, usize)>,
-        at: usize,
-        field: Field,
-        tuples: usize,
-    ) -> Result<()> {
-        let Some((points, n)) = section else {
+    fn attach(&self, grid: &mut RawGrid, at: usize, field: Field, tuples: usize) -> Result<()> {
+        let Some((points, n)) = self.section else {
             return Ok(());
         };
         if tuples != n {
@@ -474,21 +469,20 @@ impl<'a> Legacy<'a> {
             self.c.pos += bytes;
             return Ok(t.decode(&self.c.data[at..at + bytes], true));
         }
-        let mut values = Vec::with_capacity(self.c.capacity(n as u64));
-        for k in 0..n {
-            let (at, token) = self.c.token(what)?;
-            let v = t.parse(token).ok_or_else(|| {
-                self.c.error_at(
-                    at,
-                    format!(
-                        "{what}: value {} of {n} is '{token}', not {}",
-                        k + 1,
-                        super::vtk_xml::describe(t)
-                    ),
-                )
-            })?;
-            values.push(v);
+        let mut tokens = Vec::with_capacity(self.c.capacity(n as u64));
+        for _ in 0..n {
+            tokens.push(self.c.token(what)?);
         }
-        Ok(Num::from_values(t, values))
+        t.parse_text(tokens.iter().map(|t| t.1)).map_err(|k| {
+            self.c.error_at(
+                tokens[k].0,
+                format!(
+                    "{what}: value {} of {n} is '{}', not {}",
+                    k + 1,
+                    tokens[k].1,
+                    t.describe()
+                ),
+            )
+        })
     }
 }

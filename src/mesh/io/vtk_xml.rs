@@ -49,7 +49,7 @@ pub(super) fn read_xml(path: &Path, bytes: &[u8]) -> Result<RawGrid> {
     let points = r.count(piece, "NumberOfPoints")?;
     let cells = r.count(piece, "NumberOfCells")?;
 
-    let point_array = r.first_array(r.child(piece, "Points")?)?;
+    let point_array = r.child(r.child(piece, "Points")?, "DataArray")?;
     let (coords, components) = r.array(point_array, Some(points))?;
     if components != 3 {
         return Err(r.error(
@@ -138,10 +138,14 @@ struct Appended<'a> {
     at: usize,
 }
 
+/// The appended payload's bytes after the `_` marker and their file
+/// offset.
+type Payload<'a> = (&'a [u8], usize);
+
 /// Splits the file into the XML text and the appended payload, which in
 /// the `raw` encoding is not text: the XML is cut at `<AppendedData …>` and
 /// closed there, so the parser sees the tag and its attributes only.
-fn split_appended<'a>(path: &Path, bytes: &'a [u8]) -> Result<(String, Option<Appended<'a>>)> {
+fn split_appended<'a>(path: &Path, bytes: &'a [u8]) -> Result<(String, Option<Payload<'a>>)> {
     let find = |needle: &[u8], from: usize| {
         bytes[from..]
             .windows(needle.len())
@@ -186,39 +190,7 @@ fn split_appended<'a>(path: &Path, bytes: &'a [u8]) -> Result<(String, Option<Ap
         ));
     }
     let start = at + 1;
-    let encoding = {
-        let tag_text = String::from_utf8_lossy(&bytes[tag..close]);
-        attribute_in(&tag_text, "encoding").unwrap_or_default()
-    };
-    let raw = match encoding.as_str() {
-        "raw" => true,
-        "base64" => false,
-        other => {
-            return Err(Error::malformed(
-                path,
-                format!(
-                    "byte {tag}: AppendedData encoding {other:?} is neither \"raw\" nor \"base64\""
-                ),
-            ))
-        }
-    };
-    Ok((
-        head,
-        Some(Appended {
-            raw,
-            data: &bytes[start..],
-            at: start,
-        }),
-    ))
-}
-
-/// The value of `name="…"` in a tag's text.
-fn attribute_in(tag: &str, name: &str) -> Option<String> {
-    let key = format!("{name}=");
-    let rest = &tag[tag.find(&key)? + key.len()..];
-    let quote = rest.chars().next().filter(|c| *c == '"' || *c == '\'')?;
-    let rest = &rest[1..];
-    Some(rest[..rest.find(quote)?].to_string())
+    Ok((head, Some((&bytes[start..], start))))
 }
 
 /// The file-wide settings every array is read with.
@@ -237,7 +209,7 @@ impl<'a, 'd> Reader<'a, 'd> {
         path: &'a Path,
         doc: &'d Document<'d>,
         root: Node,
-        appended: Option<Appended<'a>>,
+        payload: Option<Payload<'a>>,
     ) -> Result<Self> {
         let mut r = Reader {
             path,
@@ -245,10 +217,26 @@ impl<'a, 'd> Reader<'a, 'd> {
             big_endian: false,
             header: Scalar::U32,
             zlib: false,
-            appended,
+            appended: None,
         };
         if !root.has_tag_name("VTKFile") {
             return Err(r.error(root, "the root element is not <VTKFile>"));
+        }
+        if let Some((data, at)) = payload {
+            let node = r.child(root, "AppendedData")?;
+            let raw = match node.attribute("encoding").unwrap_or("") {
+                "raw" => true,
+                "base64" => false,
+                other => {
+                    return Err(r.error(
+                        node,
+                        format!(
+                            "AppendedData encoding {other:?} is neither \"raw\" nor \"base64\""
+                        ),
+                    ))
+                }
+            };
+            r.appended = Some(Appended { raw, data, at });
         }
         r.big_endian = match root.attribute("byte_order").unwrap_or("LittleEndian") {
             "LittleEndian" => false,
@@ -305,10 +293,6 @@ impl<'a, 'd> Reader<'a, 'd> {
                     format!("<{}> has no <{tag}>", parent.tag_name().name()),
                 )
             })
-    }
-
-    fn first_array<'n>(&self, parent: Node<'n, 'd>) -> Result<Node<'n, 'd>> {
-        self.child(parent, "DataArray")
     }
 
     /// A non-negative count attribute.
@@ -405,32 +389,30 @@ impl<'a, 'd> Reader<'a, 'd> {
     /// An `ascii` array: whitespace-separated numbers, an error naming the
     /// line of the first that does not parse.
     fn ascii(&self, node: Node, scalar: Scalar) -> Result<Num> {
-        let mut values = Vec::new();
+        // Each token with its offset in the document (for the line).
+        let mut tokens = Vec::new();
         for text in node.children().filter(|n| n.is_text()) {
             let body = text.text().unwrap_or("");
-            let base = text.range().start;
             let mut from = 0;
             for token in body.split_ascii_whitespace() {
                 let offset = from + body[from..].find(token).unwrap_or(0);
                 from = offset + token.len();
-                match scalar.parse(token) {
-                    Some(v) => values.push(v),
-                    None => {
-                        return Err(Error::Parse {
-                            path: self.path.to_path_buf(),
-                            line: self.doc.text_pos_at(base + offset).row as usize,
-                            message: format!(
-                                "DataArray '{}': value {} ('{token}') is not {}",
-                                node.attribute("Name").unwrap_or(""),
-                                values.len() + 1,
-                                describe(scalar)
-                            ),
-                        })
-                    }
-                }
+                tokens.push((text.range().start + offset, token));
             }
         }
-        Ok(Num::from_values(scalar, values))
+        scalar
+            .parse_text(tokens.iter().map(|t| t.1))
+            .map_err(|k| Error::Parse {
+                path: self.path.to_path_buf(),
+                line: self.doc.text_pos_at(tokens[k].0).row as usize,
+                message: format!(
+                    "DataArray '{}': value {} ('{}') is not {}",
+                    node.attribute("Name").unwrap_or(""),
+                    k + 1,
+                    tokens[k].1,
+                    scalar.describe()
+                ),
+            })
     }
 
     /// Reads `n` header words from `raw` at word `first`.
@@ -606,15 +588,6 @@ impl<'a, 'd> Reader<'a, 'd> {
             ));
         }
         Ok(bytes)
-    }
-}
-
-/// "an Int32 integer", "a Float64 number".
-pub(super) fn describe(scalar: Scalar) -> String {
-    if scalar.is_float() {
-        format!("a {} number", scalar.name())
-    } else {
-        format!("an {} integer", scalar.name())
     }
 }
 
