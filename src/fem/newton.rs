@@ -37,10 +37,7 @@ impl Simulation {
                 .norm_squared();
             external += (self.loads.f_ext[i] + self.work.f_slip[i]).norm_squared();
         }
-        let scale = reaction
-            .sqrt()
-            .max(external.sqrt())
-            .max(self.body.force_floor);
+        let scale = reaction.sqrt().max(external.sqrt()).max(self.force_floor());
         (free.sqrt(), scale)
     }
 
@@ -63,10 +60,16 @@ impl Simulation {
         largest
     }
 
+    /// The residual (N) below which a step counts as converged whatever
+    /// its load: the round-off of the forces at rest.
+    fn force_floor(&self) -> f64 {
+        self.body.floors.of(self.dynamics.as_ref())
+    }
+
     /// The reported relative residual: 0 for a load-free state at round-off
     /// (there is no load to be relative to).
     fn relative(&self, norm: f64, scale: f64) -> f64 {
-        if scale <= self.body.force_floor && norm <= self.body.force_floor {
+        if scale <= self.force_floor() && norm <= self.force_floor() {
             0.0
         } else {
             norm / scale
@@ -75,7 +78,7 @@ impl Simulation {
 
     /// Whether `norm` is converged against `scale` (or at round-off).
     fn converged(&self, norm: f64, scale: f64) -> bool {
-        norm <= self.settings.rel_tol * scale || norm <= self.body.force_floor
+        norm <= self.settings.rel_tol * scale || norm <= self.force_floor()
     }
 
     /// Solves for static equilibrium with the current constraints and loads.
@@ -128,6 +131,7 @@ impl Simulation {
         self.work.coarse_stale = true;
         self.work.element_tangent_kind = None;
         let mut refinements = 0;
+        let mut trace = Trace::default();
         for it in 0..=self.settings.max_iterations {
             let changed = update(self, it, false);
             if changed {
@@ -140,8 +144,9 @@ impl Simulation {
             stats.rel_residual = self.relative(norm, scale);
             stats.scale = scale;
             if !stats.rel_residual.is_finite() || !violation.is_finite() {
-                return Err(not_converged(context, it, stats.rel_residual));
+                return Err(self.not_converged(context, it, stats.rel_residual, &trace));
             }
+            trace.residual(stats.rel_residual);
             let settled = !changed && violation <= self.body.position_tol;
             if settled
                 && refinements < MAX_REFINEMENTS
@@ -177,18 +182,20 @@ impl Simulation {
             // move's `K·d`, often several times the load, and the forcing
             // alone would leave a remainder of the load's size.
             let remainder = (it == 0).then_some(MAX_FIRST_REMAINDER * scale);
-            let (mut iterations, solved) = self.linear_solve(forcing, remainder);
+            let (mut iterations, mut solved) = self.linear_solve(forcing, remainder);
             if !solved && self.work.tangent_kind == TangentKind::Exact {
                 log::debug!(
                     "{context}: Newton {it}: exact tangent not positive definite; projecting"
                 );
                 self.work.tangent_kind = TangentKind::Projected;
                 self.assemble_tangent();
-                let (more, _) = self.linear_solve(forcing, remainder);
+                let more;
+                (more, solved) = self.linear_solve(forcing, remainder);
                 iterations += more;
             }
             stats.cg_iterations += iterations;
             let (new_norm, new_scale, descended) = self.line_search(norm);
+            trace.step(changed, solved, descended);
             if !descended && self.work.tangent_kind == TangentKind::Exact {
                 // The exact step was no descent direction: project from now on.
                 log::debug!(
@@ -201,10 +208,22 @@ impl Simulation {
                 new_norm / new_scale
             );
         }
-        Err(not_converged(
+        Err(self.not_converged(
             context,
             self.settings.max_iterations,
             stats.rel_residual,
+            &trace,
+        ))
+    }
+
+    /// The error of a solve that stopped at `rel` after `iterations`: what
+    /// stopped it, read from its `trace`, and what to try.
+    fn not_converged(&self, context: &str, iterations: usize, rel: f64, trace: &Trace) -> Error {
+        let cause = trace.cause(rel, self.body.largest_poisson);
+        Error::Solver(format!(
+            "{context}: equilibrium not reached after {iterations} Newton iterations \
+             (relative residual {rel:.3e}, tolerance {:.0e}): {cause}",
+            self.settings.rel_tol
         ))
     }
 
@@ -452,9 +471,178 @@ const LAG_TANGENT_BELOW: f64 = 1e-4;
 /// load scale.
 const MAX_FIRST_REMAINDER: f64 = 1e-2;
 
-fn not_converged(context: &str, iterations: usize, rel: f64) -> Error {
-    Error::Solver(format!(
-        "{context}: equilibrium not reached after {iterations} Newton iterations \
-         (relative residual {rel:.3e})"
-    ))
+/// The Newton iterations a failure's diagnosis looks back on.
+const RECENT: usize = 10;
+
+/// What the iterations of one Newton solve did, for the diagnosis of a
+/// failure.
+#[derive(Debug, Default)]
+struct Trace {
+    /// The relative residual at the start of each iteration.
+    residuals: Vec<f64>,
+    /// Per step taken: (contact set changed, linear solve converged,
+    /// residual decreased).
+    steps: Vec<(bool, bool, bool)>,
+}
+
+/// What stopped a Newton solve.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Cause {
+    /// Non-finite forces or positions.
+    NotFinite,
+    /// Fewer iterations allowed than a diagnosis needs ([`RECENT`]).
+    TooFew(usize),
+    /// The contact set kept changing: (changes, of iterations).
+    Contact(usize, usize),
+    /// The linear solves stopped at their limit: (failures, of recent).
+    LinearSolve(usize, usize),
+    /// The residual stopped falling over the recent iterations: (its
+    /// smallest there, the largest Poisson's ratio when near incompressible).
+    Stalled(f64, Option<f64>),
+    /// The residual fell, too slowly: from the largest to the smallest.
+    Slow(f64, f64),
+}
+
+impl Trace {
+    fn residual(&mut self, rel: f64) {
+        self.residuals.push(rel);
+    }
+
+    fn step(&mut self, contact_changed: bool, solved: bool, descended: bool) {
+        self.steps.push((contact_changed, solved, descended));
+    }
+
+    /// Which [`Cause`] the iterations show, first match in the order of
+    /// the enum: the contact set over the whole solve (the contact solve
+    /// freezes it after a while, which leaves a frozen, often inconsistent
+    /// problem), the linear solves and the residual over the last
+    /// [`RECENT`]; ν counts as near incompressible from 0.49.
+    fn classify(&self, rel: f64, poisson: f64) -> Cause {
+        if !rel.is_finite() {
+            return Cause::NotFinite;
+        }
+        let all = self.steps.len();
+        if all < RECENT {
+            return Cause::TooFew(all);
+        }
+        let changes = self.steps.iter().filter(|s| s.0).count();
+        let recent = &self.steps[all.saturating_sub(RECENT)..];
+        let failed = recent.iter().filter(|s| !s.1).count();
+        let residuals = &self.residuals[self.residuals.len().saturating_sub(RECENT + 1)..];
+        let smallest = |r: &[f64]| r.iter().copied().fold(rel, f64::min);
+        let opening = residuals.first().copied().unwrap_or(rel);
+        if all > 0 && 10 * changes >= 3 * all {
+            Cause::Contact(changes, all)
+        } else if !recent.is_empty() && 2 * failed >= recent.len() {
+            Cause::LinearSolve(failed, recent.len())
+        } else if residuals.len() > RECENT && smallest(residuals) > 0.1 * opening {
+            Cause::Stalled(smallest(residuals), (poisson >= 0.49).then_some(poisson))
+        } else {
+            let largest = self.residuals.iter().copied().fold(rel, f64::max);
+            Cause::Slow(largest, smallest(&self.residuals))
+        }
+    }
+
+    /// The diagnosis in words, with what to try (scenario keys).
+    fn cause(&self, rel: f64, poisson: f64) -> String {
+        match self.classify(rel, poisson) {
+            Cause::NotFinite => "the forces became non-finite (a tet collapsed under a load step \
+                 too large for it); raise time.substeps"
+                .into(),
+            Cause::TooFew(n) => format!(
+                "solver.max_newton_iterations = {n} is fewer than a solve with contact or a \
+                 large load step may need; raise it (default {})",
+                super::simulation::NewtonSettings::default().max_iterations
+            ),
+            Cause::Contact(k, n) => format!(
+                "the contact set did not settle (it changed in {k} of {n} iterations: nodes \
+                 kept switching between touching and free, or sticking and slipping); raise \
+                 time.substeps so the probe moves less a step, or lower probe.friction"
+            ),
+            Cause::LinearSolve(k, n) => format!(
+                "the linear solves stopped at solver.max_linear_iterations before \
+                 converging ({k} of the last {n}); set solver.linear = \"direct\" or raise \
+                 solver.max_linear_iterations"
+            ),
+            Cause::Stalled(at, Some(nu)) => format!(
+                "the residual stopped falling (at best {at:.1e} over the last {RECENT} \
+                 iterations); with ν up to {nu} the volume stiffness is {:.0} times the shear \
+                 stiffness, which the load step cannot follow: raise time.substeps, use \
+                 volumetric = \"locking-free\" where a region does not, or lower poisson_ratio",
+                lambda_over_mu(nu)
+            ),
+            Cause::Stalled(at, None) => format!(
+                "the residual stopped falling (at best {at:.1e} over the last {RECENT} \
+                 iterations): the load step is too large for the Newton solve to follow; raise \
+                 time.substeps"
+            ),
+            Cause::Slow(largest, smallest) => format!(
+                "the residual fell from {largest:.1e} to {smallest:.1e}, too slowly; raise \
+                 solver.max_newton_iterations or time.substeps"
+            ),
+        }
+    }
+}
+
+/// λ/μ at Poisson's ratio `nu`: `2ν / (1 − 2ν)`.
+fn lambda_over_mu(nu: f64) -> f64 {
+    2.0 * nu / (1.0 - 2.0 * nu)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn trace(steps: &[(bool, bool, bool)], residuals: &[f64]) -> Trace {
+        let mut t = Trace::default();
+        for &r in residuals {
+            t.residual(r);
+        }
+        for &(c, s, d) in steps {
+            t.step(c, s, d);
+        }
+        t
+    }
+
+    /// Each cause is named from the iterations, in the order non-finite,
+    /// contact, linear solve, stall, slow.
+    #[test]
+    fn a_failure_names_what_stopped_it() {
+        let ok = (false, true, true);
+        let falling: Vec<f64> = (0..30).map(|k| 0.5f64.powi(k)).collect();
+        let steps = vec![ok; 29];
+        let t = trace(&steps, &falling);
+        assert_eq!(t.classify(falling[29], 0.45), Cause::Slow(1.0, falling[29]));
+        assert_eq!(t.classify(f64::NAN, 0.45), Cause::NotFinite);
+
+        // Contact changes early on count (the set is frozen later).
+        let mut contact = vec![(true, true, true); 10];
+        contact.extend([ok; 20]);
+        assert_eq!(
+            trace(&contact, &falling).classify(0.1, 0.45),
+            Cause::Contact(10, 30)
+        );
+
+        let mut linear = vec![ok; 5];
+        linear.extend([(false, false, true); 10]);
+        assert_eq!(
+            trace(&linear, &falling[..16]).classify(0.1, 0.45),
+            Cause::LinearSolve(10, 10)
+        );
+        assert_eq!(
+            trace(&linear[..4], &falling[..5]).classify(0.1, 0.45),
+            Cause::TooFew(4)
+        );
+
+        let flat: Vec<f64> = (0..20).map(|k| 2.0 - 0.01 * k as f64).collect();
+        let t = trace(&[ok; 19], &flat);
+        let at = flat[19];
+        assert_eq!(t.classify(at, 0.4999), Cause::Stalled(at, Some(0.4999)));
+        assert_eq!(t.classify(at, 0.45), Cause::Stalled(at, None));
+        let text = t.cause(at, 0.4999);
+        assert!(
+            text.contains("4999 times the shear") && text.contains("time.substeps"),
+            "{text}"
+        );
+    }
 }

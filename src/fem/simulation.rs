@@ -26,7 +26,9 @@
 //! net nodal force and `scale` the larger of the reaction forces on the
 //! constrained directions and the external loads — the load level the
 //! residual is measured against. A load-free state (scale → 0) converges
-//! when `‖S r‖` reaches round-off, `1e-15·E·L²` with L the mesh diagonal.
+//! when `‖S r‖` reaches the round-off of the forces at rest, [`Floors`]:
+//! `1e-15·(λ + 2μ)·L²` with L the mesh diagonal, and in a backward-Euler
+//! step that weighted as the step weights the elastic and inertial terms.
 
 use nalgebra::Matrix3;
 use rayon::prelude::*;
@@ -126,6 +128,36 @@ pub struct Dynamics {
     pub alpha: f64,
     /// Stiffness-proportional damping β (s).
     pub beta: f64,
+}
+
+/// The round-off of the forces of a body at rest, below which a residual
+/// counts as zero.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Floors {
+    /// Of the elastic forces (N): `1e-15·(λ + 2μ)·L²` with the largest
+    /// modulus and L the mesh diagonal.
+    pub elastic: f64,
+    /// Of the inertial forces per unit acceleration (t·mm): `1e-15·M·L`
+    /// with M the total mass.
+    pub inertial: f64,
+}
+
+impl Floors {
+    /// The floor of a step's residual (N). Backward Euler scales the
+    /// elastic forces by `1 + β/h` and adds the inertia and mass damping
+    /// of position changes, `M (1/h² + α/h) Δx`: the round-off of both
+    /// grows with them (with β = 1000 s at 60 Hz the elastic forces are
+    /// weighted 60,000 times, and a floor on the static forces alone left
+    /// the load-free frame 0 unconverged).
+    pub fn of(&self, dynamics: Option<&Dynamics>) -> f64 {
+        match dynamics {
+            None => self.elastic,
+            Some(d) => {
+                self.elastic * (1.0 + d.beta / d.dt)
+                    + self.inertial * (1.0 / (d.dt * d.dt) + d.alpha / d.dt)
+            }
+        }
+    }
 }
 
 /// Inverted elements of a state (see [`Simulation::inversion`]).
@@ -257,12 +289,22 @@ pub struct Body {
     pub elements: Vec<RestElement>,
     /// Lumped nodal masses (t).
     pub mass: Vec<f64>,
-    /// Round-off of the forces at rest (N): residuals below it are zero.
-    pub(super) force_floor: f64,
+    /// Round-off of the forces at rest: residuals below it are zero.
+    pub(super) floors: Floors,
+    /// The largest Poisson's ratio of any tet (for the diagnosis of a
+    /// Newton failure).
+    pub(super) largest_poisson: f64,
     /// How close (mm) a constrained node must be to its target.
     pub(super) position_tol: f64,
     /// The nodal volume term of the locking-free materials, if any.
     pub(super) pressure: Option<NodalPressure>,
+}
+
+/// A simulation's state kept to go back to ([`Simulation::snapshot`]).
+#[derive(Clone, Debug)]
+pub struct Snapshot {
+    state: State,
+    corotations: Vec<Corotation>,
 }
 
 /// The deformed state.
@@ -330,8 +372,11 @@ pub(super) struct Workspace {
 }
 
 /// What depends on the materials: the rest elements, the lumped nodal
-/// masses and the force floor (round-off of the forces at rest).
-fn material_data(mesh: &TetMesh, tet_material: &[Material]) -> (Vec<RestElement>, Vec<f64>, f64) {
+/// masses and the floors of the forces at rest (see [`Floors`]).
+fn material_data(
+    mesh: &TetMesh,
+    tet_material: &[Material],
+) -> (Vec<RestElement>, Vec<f64>, Floors) {
     let elements: Vec<RestElement> = (0..mesh.num_tets())
         .into_par_iter()
         .map(|t| RestElement::new(mesh.tet_points(t), &tet_material[t]))
@@ -345,11 +390,12 @@ fn material_data(mesh: &TetMesh, tet_material: &[Material]) -> (Vec<RestElement>
         .iter()
         .map(|m| m.lambda() + 2.0 * m.mu())
         .fold(0.0, f64::max);
-    (
-        elements,
-        lumped_mass(mesh, tet_material),
-        1e-15 * stiffest * size * size,
-    )
+    let mass = lumped_mass(mesh, tet_material);
+    let floors = Floors {
+        elastic: 1e-15 * stiffest * size * size,
+        inertial: 1e-15 * mass.iter().sum::<f64>() * size,
+    };
+    (elements, mass, floors)
 }
 
 /// The matrix pattern of `mesh`, with the patches of its nodal volume term.
@@ -374,7 +420,7 @@ fn pattern(mesh: &TetMesh, pressure: Option<&NodalPressure>) -> Assembly {
 impl Simulation {
     /// Sets up a simulation of `mesh` with one material per tet.
     pub fn new(mesh: &TetMesh, tet_material: &[Material]) -> Simulation {
-        let (elements, mass, force_floor) = material_data(mesh, tet_material);
+        let (elements, mass, floors) = material_data(mesh, tet_material);
         let (n, m) = (mesh.num_vertices(), elements.len());
         let pressure = NodalPressure::new(&mesh.tets, &elements, tet_material, n);
         let assembly = pattern(mesh, pressure.as_ref());
@@ -388,7 +434,8 @@ impl Simulation {
                 tets: mesh.tets.clone(),
                 elements,
                 mass,
-                force_floor,
+                floors,
+                largest_poisson: largest_poisson(tet_material),
                 position_tol: 1e-7 * size,
                 pressure,
             },
@@ -436,8 +483,8 @@ impl Simulation {
     /// elements, the lumped masses and the force floor follow the new
     /// moduli, and the preconditioners are rebuilt at the next solve.
     pub fn set_materials(&mut self, mesh: &TetMesh, tet_material: &[Material]) {
-        (self.body.elements, self.body.mass, self.body.force_floor) =
-            material_data(mesh, tet_material);
+        (self.body.elements, self.body.mass, self.body.floors) = material_data(mesh, tet_material);
+        self.body.largest_poisson = largest_poisson(tet_material);
         let had_pressure = self.body.pressure.is_some();
         self.body.pressure = NodalPressure::new(
             &mesh.tets,
@@ -456,6 +503,24 @@ impl Simulation {
     /// Current positions (mm).
     pub fn positions(&self) -> &[Vec3] {
         &self.state.x
+    }
+
+    /// The deformed state and the rotations that start the next polar
+    /// decompositions: what [`Simulation::restore`] needs to take a step
+    /// again from here.
+    pub fn snapshot(&self) -> Snapshot {
+        Snapshot {
+            state: self.state.clone(),
+            corotations: self.work.corotations.clone(),
+        }
+    }
+
+    /// Goes back to a [`Simulation::snapshot`] of this simulation: the
+    /// same positions, velocities and step start, so that solving the same
+    /// step again gives the same bits.
+    pub fn restore(&mut self, snapshot: &Snapshot) {
+        self.state.clone_from(&snapshot.state);
+        self.work.corotations.clone_from(&snapshot.corotations);
     }
 
     /// Positions to move nodes to before a solve (its start state).
@@ -739,6 +804,11 @@ impl Simulation {
 }
 
 /// Lumped masses: each tet gives a quarter of ρV to each vertex.
+/// The largest Poisson's ratio of `tet_material`.
+fn largest_poisson(tet_material: &[Material]) -> f64 {
+    tet_material.iter().map(|m| m.poisson).fold(0.0, f64::max)
+}
+
 fn lumped_mass(mesh: &TetMesh, tet_material: &[Material]) -> Vec<f64> {
     let mut mass = vec![0.0; mesh.num_vertices()];
     for (t, tet) in mesh.tets.iter().enumerate() {

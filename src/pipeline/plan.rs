@@ -134,27 +134,57 @@ pub fn planned_surface_bytes(setup: &crate::scenario::SurfaceSetup) -> u64 {
 /// Free bytes on the file system that holds `dir` (or its nearest
 /// existing ancestor); `None` where that cannot be asked.
 pub fn free_bytes(dir: &std::path::Path) -> Option<u64> {
+    space(dir).map(|s| s.free)
+}
+
+/// The space of a file system: bytes free to this user, bytes in all.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Space {
+    free: u64,
+    total: u64,
+}
+
+/// [`Space`] of the file system that holds `dir` (or its nearest existing
+/// ancestor).
+fn space(dir: &std::path::Path) -> Option<Space> {
     let mut at = dir;
     loop {
         if at.as_os_str().is_empty() {
             at = std::path::Path::new(".");
         }
         if at.exists() {
-            return free_bytes_at(at);
+            return space_at(at);
         }
         at = at.parent()?;
     }
 }
 
 #[cfg(unix)]
-fn free_bytes_at(path: &std::path::Path) -> Option<u64> {
+fn space_at(path: &std::path::Path) -> Option<Space> {
     let stat = rustix::fs::statvfs(path).ok()?;
-    Some(stat.f_bavail.saturating_mul(stat.f_frsize))
+    Some(Space {
+        free: stat.f_bavail.saturating_mul(stat.f_frsize),
+        total: stat.f_blocks.saturating_mul(stat.f_frsize),
+    })
 }
 
 #[cfg(not(unix))]
-fn free_bytes_at(_: &std::path::Path) -> Option<u64> {
+fn space_at(_: &std::path::Path) -> Option<Space> {
     None
+}
+
+/// A byte count as a reader takes it in: `512 bytes`, `3.4 MB`, `1.25 GB`.
+fn bytes_text(b: u64) -> String {
+    let b = b as f64;
+    if b < 1e3 {
+        format!("{b} bytes")
+    } else if b < 1e6 {
+        format!("{:.1} kB", b / 1e3)
+    } else if b < 1e9 {
+        format!("{:.1} MB", b / 1e6)
+    } else {
+        format!("{:.2} GB", b / 1e9)
+    }
 }
 
 /// Refuses a run whose planned output exceeds [`MAX_PLANNED_BYTES`]
@@ -194,7 +224,7 @@ fn refuse(
         output_dir,
         force,
         rate_key,
-        free_bytes(output_dir),
+        space(output_dir),
     )
 }
 
@@ -205,7 +235,7 @@ fn refuse_within(
     output_dir: &std::path::Path,
     force: bool,
     rate_key: &str,
-    free: Option<u64>,
+    space: Option<Space>,
 ) -> Result<()> {
     let gb = |b: u64| b as f64 / 1e9;
     if planned > MAX_PLANNED_BYTES && !force {
@@ -220,15 +250,26 @@ fn refuse_within(
             ),
         ));
     }
-    if let Some(free) = free {
+    if let Some(Space { total: 0, .. }) = space {
+        // /proc, /sys and the like: no blocks to write to at all.
+        return Err(Error::io(
+            output_dir,
+            std::io::Error::new(
+                std::io::ErrorKind::StorageFull,
+                "it is on a file system that stores no files (a virtual one such as /proc or \
+                 /sys); choose an output folder on a disk",
+            ),
+        ));
+    }
+    if let Some(Space { free, .. }) = space {
         // The previous run's files go before this run writes: their space
         // is this run's too.
         let previous = crate::export::outputs::run_files_bytes(output_dir);
         if planned > free.saturating_add(previous) {
             let freed = if previous > 0 {
                 format!(
-                    " (counting the {:.2} GB of the previous run's files it replaces)",
-                    gb(previous)
+                    " (counting the {} of the previous run's files it replaces)",
+                    bytes_text(previous)
                 )
             } else {
                 String::new()
@@ -238,10 +279,11 @@ fn refuse_within(
                 std::io::Error::new(
                     std::io::ErrorKind::StorageFull,
                     format!(
-                        "the run would write about {:.2} GB but only {:.2} GB are free \
-                         there{freed}",
-                        gb(planned),
-                        gb(free.saturating_add(previous)),
+                        "the run would write about {} but only {} are free there{freed}; \
+                         free some space, choose another output folder, or write fewer \
+                         frames or images",
+                        bytes_text(planned),
+                        bytes_text(free.saturating_add(previous)),
                     ),
                 ),
             ));
@@ -277,16 +319,51 @@ mod tests {
         std::fs::create_dir(out.join("frames")).unwrap();
         std::fs::write(out.join("frames/frame_0001.vtu"), vec![0u8; 3000]).unwrap();
         std::fs::write(out.join("notes.txt"), vec![0u8; 5000]).unwrap();
+        let free = Space {
+            free: 1000,
+            total: 1_000_000,
+        };
         let check =
-            |planned| refuse_within(planned, 2, out, false, "time.frame_rate_hz", Some(1000));
+            |planned| refuse_within(planned, 2, out, false, "time.frame_rate_hz", Some(free));
         check(4000).unwrap();
         let e = check(4001).unwrap_err().to_string();
         assert!(
-            e.contains("only 0.00 GB are free") && e.contains("counting the 0.00 GB"),
+            e.contains("about 4.0 kB but only 4.0 kB are free")
+                && e.contains("counting the 3.0 kB"),
             "{e}"
         );
         std::fs::remove_file(out.join("frames/frame_0001.vtu")).unwrap();
         assert!(check(1001).is_err());
         check(1000).unwrap();
+    }
+
+    /// A virtual file system (no blocks at all) is named as such, not as
+    /// a disk with 0 bytes free; sizes read in the unit that fits.
+    #[test]
+    fn a_folder_on_a_virtual_file_system_is_named() {
+        let none = Space { free: 0, total: 0 };
+        let e = refuse_within(
+            10,
+            2,
+            std::path::Path::new("/proc/x"),
+            false,
+            "k",
+            Some(none),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("/proc/x") && e.contains("stores no files") && !e.contains("free"),
+            "{e}"
+        );
+        if std::path::Path::new("/proc/self").exists() {
+            assert_eq!(
+                space(std::path::Path::new("/proc/x")).map(|s| s.total),
+                Some(0)
+            );
+        }
+        assert_eq!(bytes_text(512), "512 bytes");
+        assert_eq!(bytes_text(3_400_000), "3.4 MB");
+        assert_eq!(bytes_text(1_250_000_000), "1.25 GB");
     }
 }

@@ -4,6 +4,7 @@
 //! equilibrium with contact, the inversion rule — and [`simulate`] steps it
 //! through a scenario's frames.
 
+use std::collections::VecDeque;
 use std::time::Instant;
 
 use crate::error::{Error, Result};
@@ -21,6 +22,10 @@ use crate::scenario::Setup;
 /// carry the skin on at the old speed after the load has stopped, through
 /// and past the probe.
 const MAX_PREDICTION_RATIO: f64 = 1.5;
+
+/// The most times a load step whose solve fails is halved and taken again
+/// (a cut-back): at most 2^MAX_CUTS steps in its place.
+pub const MAX_CUTS: u32 = 4;
 
 /// The frame loop; `emit` receives each finished frame. Returns the solver
 /// timings.
@@ -53,6 +58,7 @@ pub struct Stepper {
     prediction: Prediction,
     inverted_before: usize,
     split_before: bool,
+    cut_before: bool,
     // Nodes held so that no rigid motion is free (quasi-static runs).
     pins: Vec<Pin>,
 }
@@ -94,6 +100,7 @@ impl Stepper {
             prediction: Prediction::default(),
             inverted_before: 0,
             split_before: false,
+            cut_before: false,
             pins,
         }
     }
@@ -184,59 +191,112 @@ impl Stepper {
                 .iter()
                 .copied()
                 .eq((1..=substeps).map(|k| t_prev + (t - t_prev) * k as f64 / substeps as f64));
-        for k in 1..=substeps {
-            let ts = times[k - 1];
-            let t_solved = if k == 1 { t_prev } else { times[k - 2] };
-            if let (Some(d), false) = (sim.dynamics, equal) {
-                // Steps that follow the path are of unequal length.
-                sim.dynamics = Some(Dynamics {
-                    dt: ts - t_solved,
-                    ..d
+        let frame_dynamics = sim.dynamics;
+        // Each load step as (its time, the share of frame 0's press-in lift
+        // left after it, how many times it was halved). A step whose solve
+        // fails is taken again from the state before it as two half steps
+        // (a cut-back), at most MAX_CUTS times over.
+        let mut pending: VecDeque<(f64, f64, u32)> = times
+            .iter()
+            .enumerate()
+            .map(|(k, &ts)| (ts, 1.0 - (k + 1) as f64 / substeps as f64, 0))
+            .collect();
+        let mut solved = (t_prev, 1.0);
+        while let Some((ts, left, cuts)) = pending.pop_front() {
+            let (t_solved, left_solved) = solved;
+            if let Some(d) = frame_dynamics {
+                // Steps that follow the path, and halved ones, are of
+                // unequal length (frame 0's press-in keeps the frame's).
+                let own = frame > 0 && (!equal || cuts > 0);
+                sim.dynamics = Some(if own {
+                    Dynamics {
+                        dt: ts - t_solved,
+                        ..d
+                    }
+                } else {
+                    d
                 });
             }
             let context = format!("frame {frame} (t = {ts:.4} s)");
-            let (mut filters, targets) = s.boundary.constraints(&s.sets, &mesh.positions, ts);
-            for pin in &self.pins {
-                filters[pin.node] = pin.filter;
-            }
-            if sim.dynamics.is_some() {
-                sim.begin_step();
-            }
-            let pose = probe.map(|p| p.pose(ts).lifted(lift * (1.0 - k as f64 / substeps as f64)));
-            self.prediction.start(
-                sim,
-                s.predict,
-                pose,
-                (t_solved, ts),
-                probe.map_or(1.0, |p| p.radius_mm()),
-            );
-            match (probe, &pose) {
-                (Some(probe), Some(pose)) => {
-                    let r = solve_with_contact(
-                        sim,
-                        (&filters, &targets, &self.no_loads),
-                        pose,
-                        probe.mode,
-                        &mut self.contact,
-                        &context,
-                    )?;
-                    m.probe_force_n = r.probe_force.into();
-                    m.contact_nodes = r.contact_nodes;
-                    m.contact_area_mm2 = r.contact_area_mm2;
-                    m.max_penetration_mm = r.max_penetration_mm;
-                    m.newton_iterations += r.newton_iterations;
-                    m.linear_iterations += r.cg_iterations;
-                    m.rel_residual = r.rel_residual;
+            let before = (cuts < MAX_CUTS).then(|| {
+                (
+                    sim.snapshot(),
+                    self.contact.clone(),
+                    self.prediction.clone(),
+                )
+            });
+            let mut solve = || -> Result<()> {
+                let (mut filters, targets) = s.boundary.constraints(&s.sets, &mesh.positions, ts);
+                for pin in &self.pins {
+                    filters[pin.node] = pin.filter;
                 }
-                _ => {
-                    sim.set_constraints(filters, targets);
-                    let st = sim.solve_static(&context)?;
-                    m.newton_iterations += st.iterations;
-                    m.linear_iterations += st.cg_iterations;
-                    m.rel_residual = st.rel_residual;
+                if sim.dynamics.is_some() {
+                    sim.begin_step();
                 }
+                let pose = probe.map(|p| p.pose(ts).lifted(lift * left));
+                self.prediction.start(
+                    sim,
+                    s.predict,
+                    pose,
+                    (t_solved, ts),
+                    probe.map_or(1.0, |p| p.radius_mm()),
+                );
+                match (probe, &pose) {
+                    (Some(probe), Some(pose)) => {
+                        let r = solve_with_contact(
+                            sim,
+                            (&filters, &targets, &self.no_loads),
+                            pose,
+                            probe.mode,
+                            &mut self.contact,
+                            &context,
+                        )?;
+                        m.probe_force_n = r.probe_force.into();
+                        m.contact_nodes = r.contact_nodes;
+                        m.contact_area_mm2 = r.contact_area_mm2;
+                        m.max_penetration_mm = r.max_penetration_mm;
+                        m.newton_iterations += r.newton_iterations;
+                        m.linear_iterations += r.cg_iterations;
+                        m.rel_residual = r.rel_residual;
+                    }
+                    _ => {
+                        sim.set_constraints(filters, targets);
+                        let st = sim.solve_static(&context)?;
+                        m.newton_iterations += st.iterations;
+                        m.linear_iterations += st.cg_iterations;
+                        m.rel_residual = st.rel_residual;
+                    }
+                }
+                sim.end_step();
+                Ok(())
+            };
+            match (solve(), before) {
+                (Ok(()), _) => solved = (ts, left),
+                (Err(Error::Solver(why)), Some((snapshot, contact, prediction))) => {
+                    if !self.cut_before {
+                        log::warn!(
+                            "{why}; the load step is taken again from the state before it as \
+                             two half steps (and so is any later step that fails, up to \
+                             {MAX_CUTS} halvings)"
+                        );
+                        self.cut_before = true;
+                    } else {
+                        log::info!("{why}; the load step is taken again as two half steps");
+                    }
+                    sim.restore(&snapshot);
+                    self.contact = contact;
+                    self.prediction = prediction;
+                    let mid = (0.5 * (t_solved + ts), 0.5 * (left_solved + left));
+                    pending.push_front((ts, left, cuts + 1));
+                    pending.push_front((mid.0, mid.1, cuts + 1));
+                }
+                (Err(Error::Solver(why)), None) => {
+                    return Err(Error::Solver(format!(
+                        "{why} (after halving the load step {MAX_CUTS} times)"
+                    )))
+                }
+                (Err(e), _) => return Err(e),
             }
-            sim.end_step();
         }
         self.t_prev = t;
         self.frame += 1;

@@ -335,17 +335,65 @@ fn read_elements_41(c: &mut Cursor, state: &mut State) -> Result<()> {
     c.size("the smallest element tag")?;
     c.size("the largest element tag")?;
     let mut seen = 0u64;
+    // The block before (its header's offset and count): a count that is
+    // too small leaves its last elements to be read as the next header,
+    // which is then what the error names.
+    let mut previous: Option<(usize, u64)> = None;
     for _ in 0..blocks {
         let at = c.mark();
         let dim = c.int("an element block's entity dimension")?;
         let entity = c.int("an element block's entity tag")?;
         let kind = c.int("an element type")?;
         let n = c.size("the number of elements in a block")?;
-        if dim == 3 {
-            check_volume_type(kind).map_err(|m| c.error_at(at, m))?;
+        let header_error = |c: &Cursor, message: String| {
+            let hint = match previous {
+                Some((p, count)) => format!(
+                    "; if this is an element, the block before it ({}) holds more than the \
+                     {count} elements it declares",
+                    c.site(p).place()
+                ),
+                None => String::new(),
+            };
+            c.error_at(at, format!("element block header: {message}{hint}"))
+        };
+        if c.binary.is_none() {
+            // A header is one line of four numbers; an element line is
+            // longer (its tag and node tags).
+            let (_, rest) = c.rest_of_line();
+            let extra = rest.split_whitespace().count();
+            if extra > 0 {
+                return Err(header_error(
+                    c,
+                    format!("{} values on the line, where a header has 4", 4 + extra),
+                ));
+            }
         }
-        let nodes =
-            nodes_of(kind).ok_or_else(|| c.error_at(at, format!("unknown element type {kind}")))?;
+        if seen.saturating_add(n) > total {
+            return Err(c.error_at(
+                at,
+                format!(
+                    "element block header: {n} elements here and {seen} in the blocks before \
+                     exceed the {total} the section header ({}) announces",
+                    c.site(head).place()
+                ),
+            ));
+        }
+        if dim == 3 {
+            check_volume_type(kind).map_err(|m| header_error(c, m))?;
+        }
+        let nodes = nodes_of(kind)
+            .ok_or_else(|| header_error(c, format!("unknown element type {kind}")))?;
+        if i32::try_from(dim_of(kind)) != Ok(dim) {
+            return Err(header_error(
+                c,
+                format!(
+                    "entity dimension {dim} does not match element type {kind} (dimension {})",
+                    dim_of(kind)
+                ),
+            ));
+        }
+        previous = Some((at, n));
+        let block_at = at;
         let region = *state.volume_region.get(&entity).unwrap_or(&entity);
         for _ in 0..n {
             let at = c.mark();
@@ -355,6 +403,25 @@ fn read_elements_41(c: &mut Cursor, state: &mut State) -> Result<()> {
                 let node = c.size("an element's node tag")?;
                 if let Some(slot) = tet.get_mut(k) {
                     *slot = node;
+                }
+            }
+            if c.binary.is_none() {
+                // One element a line, its tag and `nodes` node tags: a
+                // line short of them, or a longer one, means the block's
+                // count does not match its lines.
+                let spans_lines = c.data[at..c.pos].contains(&b'\n');
+                let (_, rest) = c.rest_of_line();
+                if spans_lines || !rest.trim().is_empty() {
+                    return Err(c.error_at(
+                        at,
+                        format!(
+                            "an element of type {kind} is a line of {} values (its tag and \
+                             {nodes} node tags), this one is not; the block ({}) declares {n} \
+                             elements: is that its number of lines?",
+                            1 + nodes,
+                            c.site(block_at).place()
+                        ),
+                    ));
                 }
             }
             seen += 1;
@@ -393,6 +460,7 @@ fn read_elements_22(c: &mut Cursor, state: &mut State) -> Result<()> {
     let total: u64 = c.parse("the number of elements")?;
     c.start_binary_block();
     let mut seen = 0u64;
+    let mut previous: Option<(usize, u64)> = None;
     while seen < total {
         // Binary data comes in blocks (type, count, tag count) of like
         // elements; text has one element a line with its own type.
@@ -410,11 +478,27 @@ fn read_elements_22(c: &mut Cursor, state: &mut State) -> Result<()> {
             let ntags = c.parse("an element's tag count")?;
             (Some(tag), kind, 1, ntags)
         };
-        let nodes =
-            nodes_of(kind).ok_or_else(|| c.error_at(at, format!("unknown element type {kind}")))?;
+        // In binary data a block's count that is too small leaves its last
+        // elements to be read as the next block's header.
+        let header_error = |c: &Cursor, message: String| {
+            let hint = match previous {
+                Some((p, count)) => format!(
+                    "; if this is an element, the block before it ({}) holds more than the \
+                     {count} elements it declares",
+                    c.site(p).place()
+                ),
+                None => String::new(),
+            };
+            c.error_at(at, format!("{message}{hint}"))
+        };
+        let nodes = nodes_of(kind)
+            .ok_or_else(|| header_error(c, format!("unknown element type {kind}")))?;
         let volume = dim_of(kind) == 3;
         if volume {
-            check_volume_type(kind).map_err(|m| c.error_at(at, m))?;
+            check_volume_type(kind).map_err(|m| header_error(c, m))?;
+        }
+        if c.binary.is_some() {
+            previous = Some((at, count));
         }
         if ntags < 0 {
             return Err(c.error_at(at, format!("negative tag count {ntags}")));
@@ -515,7 +599,13 @@ impl Cursor<'_> {
         if token == end {
             Ok(())
         } else {
-            Err(self.error_at(at, format!("expected {end}, got '{token}'")))
+            Err(self.error_at(
+                at,
+                format!(
+                    "expected {end}, got '{token}': the section holds more than its header \
+                     announces, or a value is missing before this"
+                ),
+            ))
         }
     }
 

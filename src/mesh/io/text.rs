@@ -152,6 +152,14 @@ pub(crate) struct Site {
 }
 
 impl Site {
+    /// Where it is, in words: `line 12`, or `byte 4013` in binary data.
+    pub fn place(&self) -> String {
+        match self.byte {
+            Some(b) => format!("byte {b}"),
+            None => format!("line {}", self.line),
+        }
+    }
+
     /// A parse error here.
     pub fn error(&self, message: impl Into<String>) -> Error {
         let message = message.into();
