@@ -184,6 +184,9 @@ impl MeshArgs {
 
 /// Runs `skinpatch mesh`.
 pub fn run(args: MeshArgs) -> anyhow::Result<()> {
+    if let Some(base) = &args.out {
+        refuse_overwriting_inputs(&args, base)?;
+    }
     let (mesh, poly) = if let Some(input) = &args.input {
         let mesh = io::read_mesh(input)?;
         let mesh = if args.renumber {
@@ -238,6 +241,37 @@ fn numbering_line(mesh: &TetMesh, loaded: bool) -> String {
         line += "  scattered: `--renumber --out BASE` writes it renumbered, which the FEM runs faster on\n";
     }
     line
+}
+
+/// Refuses an `--out BASE` that would write over a file the command reads:
+/// the `--input` mesh (with a TetGen mesh's three files) or the scenario.
+fn refuse_overwriting_inputs(args: &MeshArgs, base: &Path) -> anyhow::Result<()> {
+    let mut inputs: Vec<(&str, PathBuf)> = Vec::new();
+    if let Some(input) = &args.input {
+        inputs.push(("--input mesh", input.clone()));
+        for candidate in [input.with_extension(""), input.clone()] {
+            inputs.extend(io::tetgen_paths(&candidate).map(|p| ("--input mesh", p)));
+        }
+    }
+    if let Some(scenario) = &args.scenario {
+        inputs.push(("--scenario file", scenario.clone()));
+    }
+    let mut outputs: Vec<PathBuf> = io::tetgen_paths(base).into();
+    outputs.extend(["vtu", "poly"].map(|ext| PathBuf::from(format!("{}.{ext}", base.display()))));
+    for output in &outputs {
+        for (what, input) in &inputs {
+            if skinpatch::export::outputs::same_file(output, input) {
+                bail!(
+                    "--out {} would write {}, which is the {what} ({}); choose another BASE \
+                     (nothing was written)",
+                    base.display(),
+                    output.display(),
+                    input.display()
+                );
+            }
+        }
+    }
+    Ok(())
 }
 
 fn write_mesh_files(mesh: &TetMesh, base: &Path, poly: Option<&str>) -> anyhow::Result<String> {

@@ -68,6 +68,31 @@ fn split(input: &Path, output: &Path, tile: usize, texel_um: Option<f64>) -> any
         height_unit_um: 1.0,
         edge: skinpatch::micro::Edge::Wrap,
     };
+    // The tiles and index.toml go into `output`: an input there could be
+    // one of them.
+    let folder = |p: &Path| std::fs::canonicalize(p).ok();
+    if let (Some(dir), Some(parent)) = (
+        folder(output),
+        input
+            .parent()
+            .map(|p| {
+                if p.as_os_str().is_empty() {
+                    Path::new(".")
+                } else {
+                    p
+                }
+            })
+            .and_then(folder),
+    ) {
+        if dir == parent {
+            bail!(
+                "--output {} is the folder of the input map {}; the tiles written there could \
+                 overwrite it: choose another folder",
+                output.display(),
+                input.display()
+            );
+        }
+    }
     let map = read_map(input, &defaults)?;
     if texel_um.is_none() && map.texel_um == unset {
         bail!(

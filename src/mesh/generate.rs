@@ -273,9 +273,16 @@ pub fn generate_scaled(spec: &PatchSpec) -> Result<(TetMesh, f64)> {
     let (mesh, scale) = best.expect("at least one attempt ran");
     if miss(&mesh) > spec.target_tolerance {
         return Err(Error::MeshGeneration(format!(
-            "could not reach {target} ± {:.0}% tets; closest was {}",
+            "could not reach {target} ± {:.0}% tets (mesh.target_tets, mesh.target_tolerance); \
+             closest was {}{}",
             100.0 * spec.target_tolerance,
-            mesh.num_tets()
+            mesh.num_tets(),
+            if (mesh.num_tets() as f64) > target as f64 {
+                ": the patch's layers and TetGen's quality bound (mesh.radius_edge_max) need \
+                 about that many at least"
+            } else {
+                ""
+            }
         )));
     }
     Ok((mesh, scale))

@@ -30,6 +30,7 @@ pub struct RenderSection {
     /// Multisample antialiasing of geometric edges (the patch's and the
     /// probe's silhouettes): 1 (off) or 4 samples a pixel, shading still
     /// once a pixel. Default 4.
+    #[schemars(range(min = 1, max = 4))]
     pub msaa: usize,
     /// Also write `render/difference/frame_NNNN.png`: |dynamic − static|
     /// relative to static, in false colour (black 0, white ≥ 50%). Needs

@@ -505,3 +505,82 @@ fn a_render_refused_for_lack_of_a_gpu_leaves_no_folders() {
     );
     assert!(!out.exists(), "{e}");
 }
+
+/// `skinpatch mesh --renumber --out BASE` onto the mesh it reads, and
+/// `tiles split` into the folder of the map it splits, are refused before
+/// anything is written (the first replaced the mesh with its renumbered
+/// copy; the second could write a tile over its input).
+#[test]
+fn mesh_and_tiles_never_write_over_their_input() {
+    use crate::common::{root, skinpatch, text};
+    let dir = tempfile::tempdir().unwrap();
+    let p = |path: &std::path::Path| path.to_str().unwrap().to_string();
+    let base = dir.path().join("patch");
+    for ext in ["node", "ele", "face"] {
+        std::fs::copy(
+            root().join(format!("meshes/patch_3k.{ext}")),
+            base.with_extension(ext),
+        )
+        .unwrap();
+    }
+    let before: Vec<Vec<u8>> = ["node", "ele", "face"]
+        .iter()
+        .map(|e| std::fs::read(base.with_extension(e)).unwrap())
+        .collect();
+    let node = base.with_extension("node");
+    let o = skinpatch(&[
+        "mesh",
+        "--input",
+        &p(&node),
+        "--renumber",
+        "--out",
+        &p(&base),
+    ]);
+    let e = text(&o.stderr);
+    assert!(!o.status.success(), "{e}");
+    assert!(
+        e.contains(&format!("--out {}", p(&base)))
+            && e.contains("patch.node, which is the --input mesh"),
+        "{e}"
+    );
+    for (k, ext) in ["node", "ele", "face"].iter().enumerate() {
+        assert_eq!(
+            std::fs::read(base.with_extension(ext)).unwrap(),
+            before[k],
+            "{ext}"
+        );
+    }
+    assert!(!dir.path().join("patch.vtu").exists());
+    // Another base beside it is fine.
+    let o = skinpatch(&[
+        "mesh",
+        "--input",
+        &p(&node),
+        "--renumber",
+        "--out",
+        &p(&dir.path().join("renumbered")),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+
+    let map = dir.path().join("map.png");
+    std::fs::copy(root().join("examples/fit/neutral.png"), &map).unwrap();
+    let before = std::fs::read(&map).unwrap();
+    let o = skinpatch(&[
+        "tiles",
+        "split",
+        &p(&map),
+        "-o",
+        &p(dir.path()),
+        "--tile",
+        "16",
+        "--texel-um",
+        "10",
+    ]);
+    let e = text(&o.stderr);
+    assert!(
+        !o.status.success() && e.contains("is the folder of the input map"),
+        "{e}"
+    );
+    assert_eq!(std::fs::read(&map).unwrap(), before);
+    assert!(!dir.path().join("index.toml").exists());
+}
