@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::sync::{Arc, Mutex, OnceLock};
 
 use numpy::{PyArray1, PyArray2, PyArray3};
-use pyo3::exceptions::PyRuntimeError;
+use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use skinpatch::export::FrameMetrics;
@@ -108,11 +108,13 @@ impl Run {
     fn step(
         &mut self,
         py: Python<'_>,
-        probe_target: Option<[f64; 3]>,
-        probe_axis: Option<[f64; 3]>,
+        probe_target: Option<Bound<'_, PyAny>>,
+        probe_axis: Option<Bound<'_, PyAny>>,
     ) -> PyResult<Frame> {
         py.check_signals()?;
         this_process()?;
+        let probe_target = point(py, "probe_target", probe_target)?;
+        let probe_axis = point(py, "probe_axis", probe_axis)?;
         if self.written.is_some() {
             return Err(SkinpatchError::new_err(
                 "the run is finished; start a new Run to go on",
@@ -526,4 +528,31 @@ pub fn heights_um<'py>(
     let unit = map.height_unit_um as f32;
     let data: Vec<f32> = map.data.iter().map(|&h| h * unit).collect();
     arrays::rows(py, data, map.width).map_err(|e| PyRuntimeError::new_err(e.to_string()))
+}
+
+/// A point or direction argument: three real numbers (a tuple, list or
+/// array). Complex values are refused, where numpy would drop their
+/// imaginary parts with only a warning.
+fn point(
+    py: Python<'_>,
+    name: &str,
+    value: Option<Bound<'_, PyAny>>,
+) -> PyResult<Option<[f64; 3]>> {
+    let Some(value) = value.filter(|v| !v.is_none()) else {
+        return Ok(None);
+    };
+    let kind: Option<String> = py
+        .import("numpy")?
+        .call_method1("asarray", (&value,))
+        .and_then(|a| a.getattr("dtype")?.getattr("kind")?.extract())
+        .ok();
+    if kind.as_deref() == Some("c") {
+        return Err(PyValueError::new_err(format!(
+            "{name}: complex values; give three real numbers (mm)"
+        )));
+    }
+    value
+        .extract::<[f64; 3]>()
+        .map(Some)
+        .map_err(|e| PyTypeError::new_err(format!("{name}: three real numbers expected ({e})")))
 }
