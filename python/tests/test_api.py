@@ -300,6 +300,14 @@ def test_a_child_forked_after_work_raises_instead_of_hanging(root):
     assert run.step().index == 1
 
 
+def test_an_empty_output_folder_is_refused(root, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "metrics.csv").write_text("mine\n")
+    with pytest.raises(skinpatch.ScenarioError, match="output.dir.*is empty"):
+        skinpatch.Run(press_small(root), outputs=True, output_dir="")
+    assert (tmp_path / "metrics.csv").read_text() == "mine\n"
+
+
 def test_files_that_are_not_regular_are_refused_not_read(tmp_path):
     # A FIFO blocked Scenario.load and fit forever (their error-message text
     # was read before the checks that refuse it).

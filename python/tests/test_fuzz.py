@@ -31,7 +31,7 @@ def values(rng, tmp, root, writable=False):
         INF,
         -INF,
         "",
-        "x",
+        "x",  # relative: the test runs in its temporary folder
         b"bytes",
         [],
         [1, 2],
@@ -182,7 +182,9 @@ def fuzz_case(rng, tmp, root, scenario, mesh):
     return calls
 
 
-def test_misuse_of_the_api_never_panics(root, tmp_path):
+def test_misuse_of_the_api_never_panics(root, tmp_path, monkeypatch):
+    # Relative paths (an output folder "x") land in the temporary folder.
+    monkeypatch.chdir(tmp_path)
     rng = random.Random(SEED)
     scenario = skinpatch.Scenario.load(
         root / "tests/fixtures/press_small.toml", {"time.frame_rate_hz": 3.0}

@@ -274,6 +274,14 @@ pub(super) struct Finished<R> {
 /// clears and rewrites those, so the input would be lost. Files are
 /// compared by device and inode, so links and symlinks count.
 fn refuse_inputs_in_outputs(outputs: &OutputSetup) -> Result<()> {
+    if outputs.dir.as_os_str().is_empty() {
+        // An empty path is the working directory, whose files named like a
+        // run's (metrics.csv, frames/, mesh.vtu) the run would clear.
+        return Err(Error::parameter(
+            "output.dir",
+            "is empty; name the output folder (\".\" for the working directory)",
+        ));
+    }
     let owned = export::outputs::run_files(&outputs.dir);
     for (key, input) in &outputs.inputs {
         if let Some(out) = owned.iter().find(|o| export::outputs::same_file(o, input)) {

@@ -834,3 +834,24 @@ fn a_killed_run_lists_only_whole_frames() {
     assert!(run().wait().unwrap().success());
     assert_eq!(files(&out), files(&clean));
 }
+
+/// An empty output folder (`output.dir = ""`, or `output_dir=""` from
+/// Python) is refused: it meant the working directory, whose files named
+/// like a run's the run cleared.
+#[test]
+fn an_empty_output_folder_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("metrics.csv"), "mine\n").unwrap();
+    let fixture = root().join("tests/fixtures/press_small.toml");
+    let o = crate::common::skinpatch_in(
+        dir.path(),
+        &["run", fixture.to_str().unwrap(), "--set", "output.dir=\"\""],
+    );
+    let e = text(&o.stderr);
+    assert!(!o.status.success(), "{e}");
+    assert!(e.contains("output.dir") && e.contains("is empty"), "{e}");
+    assert_eq!(
+        std::fs::read_to_string(dir.path().join("metrics.csv")).unwrap(),
+        "mine\n"
+    );
+}
