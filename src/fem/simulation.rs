@@ -803,12 +803,12 @@ impl Simulation {
     }
 }
 
-/// Lumped masses: each tet gives a quarter of ρV to each vertex.
 /// The largest Poisson's ratio of `tet_material`.
 fn largest_poisson(tet_material: &[Material]) -> f64 {
     tet_material.iter().map(|m| m.poisson).fold(0.0, f64::max)
 }
 
+/// Lumped masses: each tet gives a quarter of ρV to each vertex.
 fn lumped_mass(mesh: &TetMesh, tet_material: &[Material]) -> Vec<f64> {
     let mut mass = vec![0.0; mesh.num_vertices()];
     for (t, tet) in mesh.tets.iter().enumerate() {

@@ -166,6 +166,20 @@ fn dim_of(kind: i32) -> usize {
     }
 }
 
+/// What to say after an error at an element block's header when a block
+/// (header offset, declared count) came before it: a count too small
+/// leaves that block's last elements to be read as this header.
+fn short_block_hint(c: &Cursor, previous: Option<(usize, u64)>) -> String {
+    match previous {
+        Some((at, count)) => format!(
+            "; if this is an element, the block before it ({}) holds more than the {count} \
+             elements it declares",
+            c.site(at).place()
+        ),
+        None => String::new(),
+    }
+}
+
 /// Checks an element type of a 3-D block or element: linear tets only.
 fn check_volume_type(kind: i32) -> std::result::Result<(), String> {
     match kind {
@@ -346,14 +360,7 @@ fn read_elements_41(c: &mut Cursor, state: &mut State) -> Result<()> {
         let kind = c.int("an element type")?;
         let n = c.size("the number of elements in a block")?;
         let header_error = |c: &Cursor, message: String| {
-            let hint = match previous {
-                Some((p, count)) => format!(
-                    "; if this is an element, the block before it ({}) holds more than the \
-                     {count} elements it declares",
-                    c.site(p).place()
-                ),
-                None => String::new(),
-            };
+            let hint = short_block_hint(c, previous);
             c.error_at(at, format!("element block header: {message}{hint}"))
         };
         if c.binary.is_none() {
@@ -481,15 +488,7 @@ fn read_elements_22(c: &mut Cursor, state: &mut State) -> Result<()> {
         // In binary data a block's count that is too small leaves its last
         // elements to be read as the next block's header.
         let header_error = |c: &Cursor, message: String| {
-            let hint = match previous {
-                Some((p, count)) => format!(
-                    "; if this is an element, the block before it ({}) holds more than the \
-                     {count} elements it declares",
-                    c.site(p).place()
-                ),
-                None => String::new(),
-            };
-            c.error_at(at, format!("{message}{hint}"))
+            c.error_at(at, format!("{message}{}", short_block_hint(c, previous)))
         };
         let nodes = nodes_of(kind)
             .ok_or_else(|| header_error(c, format!("unknown element type {kind}")))?;
