@@ -6,7 +6,8 @@
 //! for it; the few ends too large for a test run (a 16384² map, 10,000
 //! load steps a frame) are listed with their reason and must pass the
 //! validation. A key added with a range is run at its ends without being
-//! listed anywhere.
+//! listed anywhere. `SKINPATCH_RANGES=text` runs only the keys containing
+//! it; `SKINPATCH_RANGES_PRINT=1` prints each case's scenario.
 
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -363,7 +364,7 @@ fn check(case: &Case, dir: &Path) -> Option<String> {
             .map(|e| format!("refused by the validation ({why}): {e}"));
     }
     let out = dir.join("out");
-    if std::env::var_os("SKINPATCH_RANGES_KEEP").is_some() {
+    if std::env::var_os("SKINPATCH_RANGES_PRINT").is_some() {
         eprintln!(
             "{}:\n{}",
             path.display(),
