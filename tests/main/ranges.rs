@@ -56,7 +56,7 @@ const EXCEPTIONS: &[(&str, f64, Expect)] = &[
         "microstructure.synthesis.mesostructure_generated.extent_mm",
         1000.0,
         Expect::Refused(
-            "synthesis output of 100000 × 100000 texels at 10 µm: each side must be in 1 … 32768",
+            "each side must be in 1 … 32768; the output covers the mesostructure map: use a smaller map",
         ),
     ),
     (

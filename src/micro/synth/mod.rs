@@ -268,9 +268,18 @@ impl SynthInputs<'_> {
             }
         };
         if !(1..=MAX_SIDE).contains(&width) || !(1..=MAX_SIDE).contains(&height) {
+            let change = if self.mesostructure.is_some() {
+                "the output covers the mesostructure map: use a smaller map (its extent) or a \
+                 coarser synthesis.texel_um"
+            } else {
+                "change synthesis.size_px"
+            };
             return Err(Error::parameter(
                 "synthesis",
-                format!("output of {width} × {height} texels at {texel} µm: each side must be in 1 … {MAX_SIDE}"),
+                format!(
+                    "output of {width} × {height} texels at {texel} µm: each side must be in \
+                     1 … {MAX_SIDE}; {change}"
+                ),
             ));
         }
         Ok((width, height))
