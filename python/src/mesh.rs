@@ -195,19 +195,18 @@ fn field(name: &str, value: &Bound<'_, PyAny>, rows: usize, kind: &str) -> PyRes
         return Ok(Field::i32(name, k, values));
     }
     let np = value.py().import("numpy")?;
+    let array = np
+        .call_method1("asarray", (value,))
+        .map_err(|e| bad(format!("not an array ({e})")))?;
     // numpy would cast complex values to real with only a warning.
-    let kind: String = np
-        .call_method1("asarray", (value,))?
-        .getattr("dtype")?
-        .getattr("kind")?
-        .extract()?;
+    let kind: String = array.getattr("dtype")?.getattr("kind")?.extract()?;
     if kind == "c" {
         return Err(bad(
             "complex values; VTU arrays hold real numbers (pass .real or abs())".into(),
         ));
     }
-    let as_f64 = np
-        .call_method1("asarray", (value, "float64"))
+    let as_f64 = array
+        .call_method1("astype", ("float64",))
         .map_err(|e| bad(format!("not a numeric array ({e})")))?;
     let a: PyReadonlyArrayDyn<'_, f64> = as_f64
         .extract()

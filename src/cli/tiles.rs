@@ -70,20 +70,11 @@ fn split(input: &Path, output: &Path, tile: usize, texel_um: Option<f64>) -> any
     };
     // The tiles and index.toml go into `output`: an input there could be
     // one of them.
-    let folder = |p: &Path| std::fs::canonicalize(p).ok();
-    if let (Some(dir), Some(parent)) = (
-        folder(output),
-        input
-            .parent()
-            .map(|p| {
-                if p.as_os_str().is_empty() {
-                    Path::new(".")
-                } else {
-                    p
-                }
-            })
-            .and_then(folder),
-    ) {
+    let parent = input
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    if let (Ok(dir), Ok(parent)) = (std::fs::canonicalize(output), std::fs::canonicalize(parent)) {
         if dir == parent {
             bail!(
                 "--output {} is the folder of the input map {}; the tiles written there could \

@@ -131,12 +131,6 @@ pub fn planned_surface_bytes(setup: &crate::scenario::SurfaceSetup) -> u64 {
     .bytes()
 }
 
-/// Free bytes on the file system that holds `dir` (or its nearest
-/// existing ancestor); `None` where that cannot be asked.
-pub fn free_bytes(dir: &std::path::Path) -> Option<u64> {
-    space(dir).map(|s| s.free)
-}
-
 /// The space of a file system: bytes free to this user, bytes in all.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Space {
@@ -145,7 +139,7 @@ struct Space {
 }
 
 /// [`Space`] of the file system that holds `dir` (or its nearest existing
-/// ancestor).
+/// ancestor); `None` where that cannot be asked.
 fn space(dir: &std::path::Path) -> Option<Space> {
     let mut at = dir;
     loop {
@@ -307,7 +301,7 @@ mod tests {
         assert!((0.7e9..1.6e9).contains(&planned), "{planned}");
         setup.simulation.frames *= 10;
         assert!(planned_bytes(&setup) as f64 > 9.0 * planned);
-        assert!(free_bytes(std::path::Path::new("no/such/folder")).is_some_and(|b| b > 0));
+        assert!(space(std::path::Path::new("no/such/folder")).is_some_and(|s| s.free > 0));
     }
 
     /// The free-space check counts the previous run's files, which the

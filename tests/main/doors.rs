@@ -528,14 +528,10 @@ fn mesh_and_tiles_never_write_over_their_input() {
         .map(|e| std::fs::read(base.with_extension(e)).unwrap())
         .collect();
     let node = base.with_extension("node");
-    let o = skinpatch(&[
-        "mesh",
-        "--input",
-        &p(&node),
-        "--renumber",
-        "--out",
-        &p(&base),
-    ]);
+    let renumber = |out: &std::path::Path| {
+        skinpatch(&["mesh", "--input", &p(&node), "--renumber", "--out", &p(out)])
+    };
+    let o = renumber(&base);
     let e = text(&o.stderr);
     assert!(!o.status.success(), "{e}");
     assert!(
@@ -552,14 +548,7 @@ fn mesh_and_tiles_never_write_over_their_input() {
     }
     assert!(!dir.path().join("patch.vtu").exists());
     // Another base beside it is fine.
-    let o = skinpatch(&[
-        "mesh",
-        "--input",
-        &p(&node),
-        "--renumber",
-        "--out",
-        &p(&dir.path().join("renumbered")),
-    ]);
+    let o = renumber(&dir.path().join("renumbered"));
     assert!(o.status.success(), "{}", text(&o.stderr));
 
     let map = dir.path().join("map.png");
