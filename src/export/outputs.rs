@@ -153,10 +153,18 @@ pub fn run_files_bytes(dir: &Path) -> u64 {
         .sum()
 }
 
+/// The index files of a run, in the reverse of the order a frame commits
+/// to them (files → `volume.csv` → `metrics.csv` → `frames.pvd`).
+const INDEXES_LAST_WRITTEN_FIRST: [&str; 3] = ["frames.pvd", "metrics.csv", "volume.csv"];
+
 /// Removes every earlier run's file from `dir` (see [`run_files`]), and
 /// tiled frame folders left empty; returns how many files.
+///
+/// The indexes go first, in the reverse of their commit order, and the
+/// frames' own files after them: a run killed while it clears leaves no
+/// listed frame without its rows and no row without its files.
 pub fn clear_previous_run(dir: &Path) -> Result<usize> {
-    let files = run_files(dir);
+    let files = clearing_order(dir);
     for path in &files {
         std::fs::remove_file(path).map_err(|e| Error::io(path, e))?;
     }
@@ -170,6 +178,19 @@ pub fn clear_previous_run(dir: &Path) -> Result<usize> {
         }
     }
     Ok(files.len())
+}
+
+/// [`run_files`] in the order [`clear_previous_run`] removes them.
+fn clearing_order(dir: &Path) -> Vec<PathBuf> {
+    let mut files = run_files(dir);
+    let rank = |path: &PathBuf| {
+        INDEXES_LAST_WRITTEN_FIRST
+            .iter()
+            .position(|name| path.parent() == Some(dir) && path.file_name() == Some(name.as_ref()))
+            .unwrap_or(INDEXES_LAST_WRITTEN_FIRST.len())
+    };
+    files.sort_by_key(rank);
+    files
 }
 
 /// Whether `a` and `b` name the same existing file (after following links
@@ -318,5 +339,42 @@ mod tests {
         assert!(d.join("micro/height_mine.tiles/index.toml").exists());
         // A folder that does not exist yet is nothing to clear.
         assert_eq!(clear_previous_run(&d.join("new")).unwrap(), 0);
+    }
+
+    /// A kill while a rerun clears must leave the commit order's promise
+    /// intact: `frames.pvd`, then `metrics.csv`, then `volume.csv` go
+    /// before any frame's files (sorted by path, `frames/` would come
+    /// before `metrics.csv` and `volume.csv` last).
+    #[test]
+    fn clearing_removes_the_indexes_before_the_frames() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        std::fs::create_dir_all(d.join("frames")).unwrap();
+        std::fs::create_dir_all(d.join("strain")).unwrap();
+        for f in [
+            "volume.csv",
+            "summary.json",
+            "metrics.csv",
+            "frames/frame_0000.vtu",
+            "frames.pvd",
+            "strain/axes_0000.png",
+        ] {
+            std::fs::write(d.join(f), "x").unwrap();
+        }
+        let order: Vec<String> = clearing_order(d)
+            .iter()
+            .map(|p| p.strip_prefix(d).unwrap().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(
+            order,
+            [
+                "frames.pvd",
+                "metrics.csv",
+                "volume.csv",
+                "frames/frame_0000.vtu",
+                "strain/axes_0000.png",
+                "summary.json"
+            ]
+        );
     }
 }

@@ -783,10 +783,17 @@ fn a_killed_run_lists_only_whole_frames() {
     let mut rng = crate::common::Rng(0x5eed_0058);
     let mut killed_mid_run = 0;
     for kill in 0..10 {
+        let spawned = std::time::SystemTime::now();
         let mut child = run();
-        // Wait for the first committed frame, then a drawn 0–400 ms.
+        // Wait for this run's first committed frame (not the rows the last
+        // kill left, which this run clears first), then a drawn 0–400 ms.
+        let fresh = || {
+            std::fs::metadata(out.join("metrics.csv"))
+                .and_then(|m| m.modified())
+                .is_ok_and(|t| t >= spawned)
+        };
         let start = std::time::Instant::now();
-        while committed(&out).0.is_empty() {
+        while !fresh() || committed(&out).0.is_empty() {
             assert!(start.elapsed().as_secs() < 120, "no frame within 2 minutes");
             if child.try_wait().unwrap().is_some() {
                 break;
