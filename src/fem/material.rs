@@ -169,6 +169,16 @@ impl Material {
         }
     }
 
+    /// The energy density a tet of this material carries itself: its law
+    /// with [`Material::element_lambda`] (the whole law unless the
+    /// material is locking-free).
+    pub fn element_law(&self) -> Law {
+        Law {
+            lambda: self.element_lambda(),
+            ..self.law()
+        }
+    }
+
     /// Shear modulus μ (MPa).
     pub fn mu(&self) -> f64 {
         self.youngs_mpa / (2.0 * (1.0 + self.poisson))

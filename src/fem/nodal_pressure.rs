@@ -83,6 +83,18 @@ pub struct NodalPressure {
     gamma: Vec<Vec3>,
 }
 
+/// A locking-free tet's part of the nodal volume term.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TetShare {
+    /// `p̄_e` (MPa), the mean pressure of its points: the term adds
+    /// `p̄_e I` to its Cauchy stress (`p̄_e cof F` to the first Piola).
+    pub pressure: f64,
+    /// `Σ_{a∈e} κ_a/8 (J̄_a − 1)²` (N/mm² per rest volume): a quarter of
+    /// each of its points' energy densities, so that `Σ_e V_e ψ_e` over
+    /// the tets is the term's energy `Σ_a V_a κ_a/2 (J̄_a − 1)²`.
+    pub energy_density: f64,
+}
+
 /// `cof(F)`: the columns `f₁×f₂, f₂×f₀, f₀×f₁`, so that `∂ det F/∂F = cof F`
 /// (defined for any F, inverted or flat included).
 fn cofactor(f: &Matrix3<f64>) -> Matrix3<f64> {
@@ -234,6 +246,24 @@ impl NodalPressure {
         x: &[Vec3],
         tet_forces: &mut [[Vec3; 4]],
     ) {
+        self.evaluate(tets, elements, x);
+        let (tet_slot, tet_pressure, cofactor) =
+            (&self.tet_slot, &self.tet_pressure, &self.cofactor);
+        tet_forces.par_iter_mut().enumerate().for_each(|(t, f)| {
+            let k = tet_slot[t];
+            if k != NONE {
+                let k = k as usize;
+                let pc = cofactor[k] * tet_pressure[k];
+                for (fb, g) in f.iter_mut().zip(&elements[t].grads) {
+                    *fb -= pc * g;
+                }
+            }
+        });
+    }
+
+    /// Evaluates the nodal volume ratios, the points' pressures and the
+    /// tets' `p̄_e` at positions `x`.
+    pub fn evaluate(&mut self, tets: &[[usize; 4]], elements: &[RestElement], x: &[Vec3]) {
         let lf = &self.tets;
         let volumes: Vec<f64> = self
             .cofactor
@@ -272,18 +302,31 @@ impl NodalPressure {
                     .sum::<f64>()
                     / 4.0;
             });
-        let (tet_slot, tet_pressure, cofactor) =
-            (&self.tet_slot, &self.tet_pressure, &self.cofactor);
-        tet_forces.par_iter_mut().enumerate().for_each(|(t, f)| {
-            let k = tet_slot[t];
-            if k != NONE {
-                let k = k as usize;
-                let pc = cofactor[k] * tet_pressure[k];
-                for (fb, g) in f.iter_mut().zip(&elements[t].grads) {
-                    *fb -= pc * g;
-                }
-            }
-        });
+    }
+
+    /// Per mesh tet its share of the term at the last evaluation, `None`
+    /// for a tet without a locking-free material: what its stress and
+    /// energy outputs add to its own (reduced) volume term to be the state
+    /// the solver found.
+    pub fn shares(&self) -> Vec<Option<TetShare>> {
+        self.tet_slot
+            .iter()
+            .map(|&k| {
+                (k != NONE).then(|| {
+                    let points = &self.tet_points[k as usize];
+                    TetShare {
+                        pressure: self.tet_pressure[k as usize],
+                        energy_density: points
+                            .iter()
+                            .map(|&a| {
+                                let a = a as usize;
+                                self.bulk[a] / 8.0 * (self.ratio[a] - 1.0).powi(2)
+                            })
+                            .sum(),
+                    }
+                })
+            })
+            .collect()
     }
 
     /// `γ_a` on each node's patch: `Σ_e V_e cof(F_e) g_b / 4` over the

@@ -1,23 +1,31 @@
-//! Stress of the element, for output.
+//! Stress of the element, for output: the state the solver found.
 //!
-//! Corotational (the default): the energy per rest volume is
-//! `ψ = μ ε:ε + λ/2 (tr ε)²` with
-//! the corotated strain `ε = S − I`, `F = R S` (the sign-corrected polar
-//! decomposition the forces use). Its first Piola–Kirchhoff stress is
-//! `P = R s` with `s = 2μ ε + λ tr(ε) I`, and the Cauchy stress
-//! `σ = P Fᵀ / J = R s S Rᵀ / J` (symmetric: `s` is a polynomial in `S`).
-//! Any other energy density ([`crate::fem::hyperelastic`]) gives
-//! `P = U diag(Ψ_i) Vᵀ` from its principal derivatives, and `σ = P Fᵀ / J`
-//! the same way (for the stable Neo-Hookean energy,
-//! `σ = (μ/J)(F Fᵀ − I) + κ(J − 1) I`).
+//! A tet's energy density is its law's `Ψ(σ̂)` of the principal stretches
+//! ([`crate::fem::hyperelastic::Law`]), whose first Piola–Kirchhoff
+//! stress is `P = U diag(Ψ_i) Vᵀ` (`F = U Σ̂ Vᵀ`, the sign-corrected SVD
+//! the forces use) and whose Cauchy stress is `σ = P Fᵀ / J`:
+//!
+//! - corotational (the default): `ψ = μ ε:ε + λ/2 (tr ε)²` with the
+//!   corotated strain `ε = S − I`, `F = R S`, so `σ = R s S Rᵀ / J` with
+//!   `s = 2μ ε + λ tr(ε) I`;
+//! - stable Neo-Hookean: `σ = (μ/J)(F Fᵀ − I) + κ(J − 1) I`.
+//!
+//! A tet of a locking-free material carries only a share of the volume
+//! term itself (its law's λ is [`Material::element_lambda`]); the rest
+//! sits on the nodes ([`crate::fem::nodal_pressure`]), and the tet adds
+//! the pressure `p̄_e` of its points to its stress (`p̄_e I`) and a quarter
+//! of each point's energy density to its own. Summed over the tets with
+//! their rest volumes, the energy densities are the solver's energy, and
+//! the stresses are in balance with the forces it balanced.
 //! Units: N and mm, so stresses and energy densities are N/mm² (MPa,
 //! mJ/mm³).
 
 use nalgebra::Matrix3;
 use rayon::prelude::*;
 
-use super::element::deformation_gradient;
-use crate::fem::{Corotation, Material};
+use crate::fem::hyperelastic::Law;
+use crate::fem::nodal_pressure::{NodalPressure, TetShare};
+use crate::fem::{Corotation, Material, RestElement, Volumetric};
 use crate::mesh::{TetMesh, Vec3};
 
 /// The stress state of one tet.
@@ -31,38 +39,39 @@ pub struct TetStress {
 }
 
 impl TetStress {
-    /// The stress of a tet of `material` under the deformation gradient `f`.
+    /// The stress of a tet of `material` under a deformation gradient `f`
+    /// that the tet shares with its neighbours (a uniform deformation):
+    /// a locking-free material's nodal points then have the tet's own
+    /// volume ratio.
     pub fn of(f: &Matrix3<f64>, material: &Material) -> TetStress {
-        if material.model != crate::fem::Model::Corotational {
-            return TetStress::hyperelastic(f, material);
-        }
+        let share = (material.volumetric == Volumetric::LockingFree).then(|| {
+            let (kappa, j) = (material.nodal_bulk(), f.determinant());
+            TetShare {
+                pressure: kappa * (j - 1.0),
+                energy_density: 0.5 * kappa * (j - 1.0).powi(2),
+            }
+        });
+        TetStress::solved(f, &material.element_law(), share)
+    }
+
+    /// The stress of a tet whose own energy density is `law`, with its
+    /// `share` of the nodal volume term where it has one.
+    pub fn solved(f: &Matrix3<f64>, law: &Law, share: Option<TetShare>) -> TetStress {
         let c = Corotation::of(f);
-        let stretch = c.v * Matrix3::from_diagonal(&c.sigma) * c.v.transpose();
-        let strain = stretch - Matrix3::identity();
-        let (mu, lambda) = (material.mu(), material.lambda());
-        let trace = strain.trace();
-        let s = strain * (2.0 * mu) + Matrix3::identity() * (lambda * trace);
-        let kirchhoff = c.r * s * stretch * c.r.transpose();
+        let p = c.u * Matrix3::from_diagonal(&law.gradient(&c.sigma)) * c.v.transpose();
         let j = c.sigma.product();
+        let mut kirchhoff = p * f.transpose();
+        let mut energy_density = law.energy(&c.sigma);
+        if let Some(share) = share {
+            // P = p̄ cof F, so P Fᵀ = p̄ J I.
+            kirchhoff += Matrix3::identity() * (share.pressure * j);
+            energy_density += share.energy_density;
+        }
         let cauchy = if j > 0.0 { kirchhoff / j } else { kirchhoff };
         TetStress {
             // Symmetric to round-off; made exactly so.
             cauchy: (cauchy + cauchy.transpose()) * 0.5,
-            energy_density: mu * strain.norm_squared() + 0.5 * lambda * trace * trace,
-        }
-    }
-
-    /// The stress of a material whose energy is not the corotational one.
-    fn hyperelastic(f: &Matrix3<f64>, material: &Material) -> TetStress {
-        let c = Corotation::of(f);
-        let law = material.law();
-        let p = c.u * Matrix3::from_diagonal(&law.gradient(&c.sigma)) * c.v.transpose();
-        let kirchhoff = p * f.transpose();
-        let j = c.sigma.product();
-        let cauchy = if j > 0.0 { kirchhoff / j } else { kirchhoff };
-        TetStress {
-            cauchy: (cauchy + cauchy.transpose()) * 0.5,
-            energy_density: law.energy(&c.sigma),
+            energy_density,
         }
     }
 
@@ -93,12 +102,29 @@ impl TetStress {
 }
 
 /// The stress of every tet of `mesh` at positions `x`, with each tet's
-/// material (parallel over tets; each entry depends on its tet only).
+/// material: the state the solver found at `x` — the rest elements and
+/// the nodal volume term built as the solver builds them, so locking-free
+/// tets carry their points' pressure (parallel over tets, each entry
+/// computed in a fixed order).
 pub fn element_stresses(mesh: &TetMesh, x: &[Vec3], materials: &[Material]) -> Vec<TetStress> {
-    mesh.tets
+    let elements: Vec<RestElement> = (0..mesh.num_tets())
+        .into_par_iter()
+        .map(|t| RestElement::new(mesh.tet_points(t), &materials[t]))
+        .collect();
+    let shares = match NodalPressure::new(&mesh.tets, &elements, materials, mesh.num_vertices()) {
+        Some(mut nodal) => {
+            nodal.evaluate(&mesh.tets, &elements, x);
+            nodal.shares()
+        }
+        None => vec![None; mesh.num_tets()],
+    };
+    elements
         .par_iter()
-        .zip(materials)
-        .map(|(tet, m)| TetStress::of(&deformation_gradient(&mesh.positions, x, tet), m))
+        .zip(&mesh.tets)
+        .zip(shares)
+        .map(|((e, tet), share)| {
+            TetStress::solved(&e.deformation_gradient(&tet.map(|v| x[v])), &e.law(), share)
+        })
         .collect()
 }
 
@@ -199,5 +225,47 @@ mod tests {
         };
         assert!((uniaxial.von_mises() - 0.2).abs() < 1e-15);
         assert_eq!(st.components()[3], st.cauchy[(0, 1)]);
+    }
+
+    /// Under a uniform deformation a locking-free tet's own share and its
+    /// nodal share add up to the whole volume term: for the stable
+    /// Neo-Hookean energy, whose volume term is `(λ + μ)/2 (J − 1)²`
+    /// whichever part of λ a tet keeps, exactly the standard tet's stress
+    /// and energy; for the corotational one, to first order in the strain.
+    #[test]
+    fn a_locking_free_tet_adds_its_nodal_share() {
+        use crate::fem::{Model, Volumetric};
+        let f = Matrix3::new(1.1, 0.2, -0.1, 0.05, 0.9, 0.15, -0.2, 0.1, 0.85);
+        for nu in [0.45, 0.49] {
+            let standard =
+                Material::with_volumetric("t", 150.0, nu, 1100.0, Volumetric::Standard).unwrap();
+            let lf = Material {
+                volumetric: Volumetric::LockingFree,
+                ..standard
+            };
+            assert!(lf.nodal_bulk() > 0.0);
+            let (snh, snh_lf) = (
+                standard.with_model(Model::StableNeoHookean),
+                lf.with_model(Model::StableNeoHookean),
+            );
+            let (a, b) = (TetStress::of(&f, &snh), TetStress::of(&f, &snh_lf));
+            assert!(
+                (a.cauchy - b.cauchy).norm() < 1e-12 * a.cauchy.norm(),
+                "ν {nu}"
+            );
+            assert!((a.energy_density - b.energy_density).abs() < 1e-12 * a.energy_density);
+            let small = Matrix3::identity() + (f - Matrix3::identity()) * 1e-5;
+            let (a, b) = (TetStress::of(&small, &standard), TetStress::of(&small, &lf));
+            assert!(
+                (a.cauchy - b.cauchy).norm() < 1e-4 * a.cauchy.norm(),
+                "ν {nu}"
+            );
+            // Without the nodal share the pressure would be that of λ = 2μ.
+            let own = TetStress::solved(&small, &lf.element_law(), None);
+            assert!(
+                (own.mean() - a.mean()).abs() > 0.5 * a.mean().abs(),
+                "ν {nu}"
+            );
+        }
     }
 }

@@ -183,3 +183,141 @@ fn coulomb_tractions_balance_and_stay_in_the_cone() {
         point("contact_force_n") && point("contact_pressure_n_mm2") && point("contact_shear_n_mm2")
     );
 }
+
+/// The press of `solved_state_checks`: patch_3k, both layers of `model`
+/// with `volumetric` and Poisson's ratio `nu`, a frictionless sphere
+/// (R 1.5 mm) pressed 0.5 mm in 10 quasi-static frames, solved to 1e-10.
+fn solved_state_press(model: &str, volumetric: &str, nu: f64) -> String {
+    let mesh = common::root().join("meshes/patch_3k.node");
+    let layer = |name: &str, kpa: f64| {
+        format!(
+            "[material.{name}]\nyoungs_modulus_kpa = {kpa}\npoisson_ratio = {nu}\n\
+             model = \"{model}\"\nvolumetric = \"{volumetric}\"\n"
+        )
+    };
+    format!(
+        "[mesh]\nfile = {mesh:?}\n{}{}\
+         [boundary]\nbottom = \"fixed\"\nsides = \"rollers\"\n\
+         [probe]\nshape = \"sphere\"\nradius_mm = 1.5\n\
+         path_mm = [[0.0, 0.0, 0.0, 1.5], [1.0, 0.0, 0.0, 1.0]]\ncontact = \"frictionless\"\n\
+         [solver]\nrel_tol = 1e-10\n\
+         [time]\nduration_s = 1.0\nframe_rate_hz = 10.0\n\
+         [output]\nmesh_vtu = false\nframes_vtu = false\n",
+        layer("dermis", 150.0),
+        layer("hypodermis", 15.0)
+    )
+}
+
+/// The stress and energy outputs are the state the solver found, for every
+/// material model and volume measure at the Poisson's ratios each accepts
+/// (0.45 and 0.49; 0.499 locking-free), on a quasi-static frictionless
+/// press (`solved_state_press`). From the per-tet Cauchy stresses alone the
+/// test rebuilds each node's elastic force `−Σ_e V_e J_e σ_e F_e⁻ᵀ g_b`:
+///
+/// - summed over the contact nodes it is the probe force, to 1e-6;
+/// - at every free node (not in contact, not on the bottom or the sides)
+///   it vanishes, to 1e-6 of the probe force;
+/// - the strain energy `Σ ψ_e V_e` is the probe's work `∫F dδ`
+///   (trapezoids over the 10 frames, whose own error is about 0.3% for
+///   F ∝ δ^{3/2}) within 2%.
+///
+/// Before the locking-free tets carried their nodal pressure in the
+/// outputs, their stresses implied 17% too little probe force at ν 0.49
+/// and the wrong sign at 0.499 on the Hertz block, and their energy was
+/// 1.16 to 26 times the work.
+#[test]
+fn stress_and_energy_outputs_are_the_solved_state() {
+    use skinpatch::fem::boundary::{NodeSet, NodeSets};
+    use skinpatch::fem::RestElement;
+    let dir = tempfile::tempdir().unwrap();
+    let mut report = String::new();
+    for (model, volumetric, nu) in [
+        ("corotational", "standard", 0.45),
+        ("corotational", "standard", 0.49),
+        ("corotational", "locking-free", 0.45),
+        ("corotational", "locking-free", 0.49),
+        ("corotational", "locking-free", 0.499),
+        ("stable-neo-hookean", "standard", 0.45),
+        ("stable-neo-hookean", "standard", 0.49),
+        ("stable-neo-hookean", "locking-free", 0.45),
+        ("stable-neo-hookean", "locking-free", 0.49),
+        ("stable-neo-hookean", "locking-free", 0.499),
+    ] {
+        let case = format!("{model}, {volumetric}, ν {nu}");
+        let path = dir.path().join("press.toml");
+        std::fs::write(&path, solved_state_press(model, volumetric, nu)).unwrap();
+        let scenario = skinpatch::scenario::Scenario::load(&path).unwrap();
+        let setup = Setup::from_scenario(&scenario, &path).unwrap();
+        let (mesh, materials) = (&setup.mesh, &setup.simulation.tet_material);
+        let sets = NodeSets::of(mesh);
+        let mut supported = vec![false; mesh.num_vertices()];
+        for set in [
+            NodeSet::Bottom,
+            NodeSet::XMin,
+            NodeSet::XMax,
+            NodeSet::YMin,
+            NodeSet::YMax,
+        ] {
+            for &v in sets.get(set) {
+                supported[v] = true;
+            }
+        }
+        let elements: Vec<RestElement> = (0..mesh.num_tets())
+            .map(|t| RestElement::new(mesh.tet_points(t), &materials[t]))
+            .collect();
+        let mut run = skinpatch::pipeline::Run::new(&setup);
+        let (mut work, mut last) = (0.0, (0.0, 0.0));
+        let (mut worst_balance, mut worst_free, mut worst_energy) = (0.0f64, 0.0f64, 0.0f64);
+        for _ in 0..run.scenario_frames() {
+            let frame = run.step().unwrap();
+            let (x, m) = (frame.positions, frame.metrics);
+            let (delta, fz) = (0.5 * m.time_s, m.probe_force_n[2]);
+            work += 0.5 * (fz + last.1) * (delta - last.0);
+            last = (delta, fz);
+            if fz < 1e-4 {
+                continue;
+            }
+            let mut force = vec![nalgebra::Vector3::zeros(); mesh.num_vertices()];
+            for (t, (stress, e)) in frame.stresses().iter().zip(&elements).enumerate() {
+                let tet = mesh.tets[t];
+                let f = e.deformation_gradient(&tet.map(|v| x[v]));
+                let j = f.determinant();
+                let piola = stress.cauchy * j * f.try_inverse().unwrap().transpose();
+                for (&v, g) in tet.iter().zip(&e.grads) {
+                    force[v] -= piola * g * e.volume;
+                }
+            }
+            let mut in_contact = vec![false; mesh.num_vertices()];
+            let mut on_probe = nalgebra::Vector3::zeros();
+            for &v in &frame.contact.nodes {
+                in_contact[v] = true;
+                on_probe += force[v];
+            }
+            let probe = nalgebra::Vector3::from(m.probe_force_n);
+            let balance = (on_probe - probe).norm() / fz;
+            let free = (0..mesh.num_vertices())
+                .filter(|&v| !in_contact[v] && !supported[v])
+                .map(|v| force[v].norm())
+                .fold(0.0, f64::max)
+                / fz;
+            let energy: f64 = frame
+                .stresses()
+                .iter()
+                .zip(&elements)
+                .map(|(s, e)| s.energy_density * e.volume)
+                .sum();
+            worst_balance = worst_balance.max(balance);
+            worst_free = worst_free.max(free);
+            worst_energy = worst_energy.max((energy / work - 1.0).abs());
+        }
+        report += &format!(
+            "{case}: contact tractions {worst_balance:.1e} of F, free nodes {worst_free:.1e} of F, \
+             energy/work within {:.2}%\n",
+            100.0 * worst_energy
+        );
+        assert!(worst_balance < 1e-6, "{report}");
+        assert!(worst_free < 1e-6, "{report}");
+        assert!(worst_energy < 0.02, "{report}");
+    }
+    println!("{report}");
+}
