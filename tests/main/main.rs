@@ -21,6 +21,7 @@ mod mesh_invariants;
 mod mesh_io;
 mod mesh_tools;
 mod micro;
+mod peer;
 mod ranges;
 mod readme;
 mod render;
