@@ -342,6 +342,7 @@ pub fn solve_with_contact(
         ..Default::default()
     };
     finish_report(sim, base_ext, pose, state, &mut report);
+    refuse_penetration(sim.positions(), pose, state, warned, context)?;
     if let Some(depth) = passed_through(sim, pose, state) {
         let p = pose.lowest_point();
         return Err(crate::error::Error::Solver(format!(
@@ -353,6 +354,47 @@ pub fn solve_with_contact(
         )));
     }
     Ok(report)
+}
+
+/// Refuses a solve that ends with surface nodes inside the probe by more
+/// than their tolerance (1% of the mean edge length at the node). A set
+/// that settled cannot leave one (a node that deep is taken into contact),
+/// but a set frozen after [`FREEZE_AFTER`] iterations can; the error names
+/// the penetration, the nodes and what to try, and the load step is cut
+/// back like any failed solve.
+fn refuse_penetration(
+    x: &[Vec3],
+    pose: &ProbePose,
+    state: &ContactState,
+    frozen: bool,
+    context: &str,
+) -> crate::error::Result<()> {
+    let inside: Vec<(usize, f64)> = state
+        .candidates
+        .iter()
+        .map(|&v| (v, -pose.distance(&x[v]).0))
+        .filter(|&(v, depth)| depth > state.tolerance[v])
+        .collect();
+    let Some(&(node, depth)) = inside.iter().max_by(|a, b| a.1.total_cmp(&b.1)) else {
+        return Ok(());
+    };
+    let p = x[node];
+    Err(crate::error::Error::Solver(format!(
+        "{context}: {} surface node(s) are inside the probe by more than their tolerance \
+         (1% of the edge length at the node){}; the deepest, node {node} at ({:.3}, {:.3}, \
+         {:.3}) mm, by {depth:.2e} mm ({:.0} times its tolerance): more load steps \
+         (time.substeps) let the contact set settle",
+        inside.len(),
+        if frozen {
+            format!(" after the contact set was frozen at Newton iteration {FREEZE_AFTER}")
+        } else {
+            String::new()
+        },
+        p.x,
+        p.y,
+        p.z,
+        depth / state.tolerance[node],
+    )))
 }
 
 /// Whether the probe has slipped through the skin between the surface
@@ -702,5 +744,46 @@ fn finish_report(
         report.max_penetration_ratio = report
             .max_penetration_ratio
             .max(pen / state.tolerance[v] * 0.01);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fem::probe::ProbeShape;
+
+    /// A node left inside the probe by more than its tolerance (as a
+    /// frozen contact set can leave one) fails the solve, naming the node,
+    /// its depth and the remedy; one within its tolerance does not.
+    #[test]
+    fn a_node_inside_the_probe_fails_the_solve() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes/patch_3k.node");
+        let mesh = crate::mesh::io::read_mesh(&path).unwrap();
+        let state = ContactState::new(&mesh, &[]);
+        let node = state.candidates[state.candidates.len() / 2];
+        let mut x = mesh.positions.clone();
+        let (radius, top) = (1.0, x[node]);
+        let pose = |sink: f64| ProbePose {
+            shape: ProbeShape::Sphere { radius_mm: radius },
+            centre: top + Vec3::z() * (radius - sink),
+            axis: Vec3::x(),
+        };
+        let tol = state.tolerance(node);
+        assert!(refuse_penetration(&x, &pose(0.5 * tol), &state, false, "frame 3").is_ok());
+        let e = refuse_penetration(&x, &pose(3.0 * tol), &state, true, "frame 3")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("frame 3: 1 surface node(s) are inside the probe"),
+            "{e}"
+        );
+        assert!(e.contains(&format!("node {node} at")), "{e}");
+        assert!(
+            e.contains("(3 times its tolerance)") && e.contains("frozen"),
+            "{e}"
+        );
+        assert!(e.contains("time.substeps"), "{e}");
+        x[node].z += 10.0;
+        assert!(refuse_penetration(&x, &pose(3.0 * tol), &state, true, "frame 3").is_ok());
     }
 }
