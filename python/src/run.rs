@@ -322,6 +322,8 @@ impl Frame {
         d.set_item("folded_vertices", m.folded_vertices)?;
         d.set_item("inverted_tets", m.inverted_tets)?;
         d.set_item("min_volume_ratio", m.min_volume_ratio)?;
+        d.set_item("energy_balance", m.energy_balance)?;
+        d.set_item("free_node_force_ratio", m.free_node_force_ratio)?;
         d.set_item("step_wall_s", m.step_wall_s)?;
         Ok(d)
     }

@@ -51,13 +51,24 @@ pub struct FrameMetrics {
     pub linear_iterations: usize,
     /// Final relative residual.
     pub rel_residual: f64,
+    /// `(W − E)/W`: the work `W` the probe and the supports did on the
+    /// patch since the start (N·mm, over the load steps, at the nodes they
+    /// hold) less the elastic energy `E` stored in it, relative to the
+    /// work; 0 before any work, NaN in a dynamic run (whose damping and
+    /// inertia it does not count).
+    pub energy_balance: f64,
+    /// The largest net force on a node neither held nor in contact,
+    /// relative to the probe force (to the largest held force without a
+    /// probe force).
+    pub free_node_force_ratio: f64,
     /// Wall-clock time of the frame (s); the only non-deterministic column.
     pub step_wall_s: f64,
 }
 
 const HEADER: &str = "frame,time_s,probe_force_x_n,probe_force_y_n,probe_force_z_n,\
 contact_nodes,contact_area_mm2,max_penetration_mm,newton_iterations,linear_iterations,rel_residual,\
-rs_min,rs_max,rt_min,rt_max,folded_vertices,inverted_tets,min_volume_ratio,step_wall_s";
+rs_min,rs_max,rt_min,rt_max,folded_vertices,inverted_tets,min_volume_ratio,energy_balance,\
+free_node_force_ratio,step_wall_s";
 
 /// A real number as every `metrics.csv` writes it: the shortest digits
 /// that read back to the same bits, in plain decimal from 1e-4 up to 1e16
@@ -88,7 +99,7 @@ impl MetricsRow for FrameMetrics {
         let m = self;
         let [fx, fy, fz] = m.probe_force_n;
         format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.6}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.6}\n",
             m.frame,
             csv_number(m.time_s),
             csv_number(fx),
@@ -107,6 +118,8 @@ impl MetricsRow for FrameMetrics {
             m.folded_vertices,
             m.inverted_tets,
             csv_number(m.min_volume_ratio),
+            csv_number(m.energy_balance),
+            csv_number(m.free_node_force_ratio),
             m.step_wall_s
         )
     }

@@ -607,6 +607,50 @@ impl Simulation {
         }
     }
 
+    /// The elastic energy at the current positions (N·mm): the tets' own
+    /// and the nodal volume term's, summed in a fixed order.
+    pub fn elastic_energy(&mut self) -> f64 {
+        let (x, tets, elements) = (&self.state.x, &self.body.tets, &self.body.elements);
+        let per_tet: Vec<f64> = elements
+            .par_iter()
+            .zip(tets)
+            .map(|(e, t)| e.energy(&t.map(|v| x[v])))
+            .collect();
+        let nodal = self.body.pressure.as_mut().map_or(0.0, |p| {
+            p.evaluate(tets, elements, x);
+            p.energy()
+        });
+        per_tet.iter().sum::<f64>() + nodal
+    }
+
+    /// Per node the force its constraints apply to it at the last force
+    /// evaluation (N): minus the internal force where a support or the
+    /// probe holds the node, zero at a free node (whose force is the
+    /// residual, not a load).
+    pub fn held_forces(&self) -> Vec<Vec3> {
+        self.loads
+            .filters
+            .iter()
+            .zip(&self.work.f_int)
+            .map(|(filter, f)| match filter {
+                Filter::Free => Vec3::zeros(),
+                _ => -f,
+            })
+            .collect()
+    }
+
+    /// The largest net force on a free node at the last force evaluation
+    /// (N): what equilibrium leaves there.
+    pub fn largest_free_force(&self) -> f64 {
+        self.loads
+            .filters
+            .iter()
+            .zip(&self.work.f_int)
+            .filter(|(filter, _)| matches!(filter, Filter::Free))
+            .map(|(_, f)| f.norm())
+            .fold(0.0, f64::max)
+    }
+
     /// Evaluates rotations and internal forces at the current positions.
     pub fn evaluate_forces(&mut self) {
         let start = std::time::Instant::now();

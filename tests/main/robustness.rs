@@ -862,3 +862,46 @@ fn an_empty_output_folder_is_refused() {
         "mine\n"
     );
 }
+
+/// A run checks itself per frame (`metrics.csv`): solved to the default
+/// tolerance, press_small's work and stored energy agree within 2% and no
+/// free node keeps 1e-6 of the probe force; solved to a loose
+/// `solver.rel_tol` (0.3) its first contact frame leaves 2% of the probe
+/// force on a free node, which the column shows and a warning names, with
+/// the key to change.
+#[test]
+fn a_run_checks_its_balance_per_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let fixture = root().join("tests/fixtures/press_small.toml");
+    let run = |out: &str, set: &[&str]| {
+        let out = dir.path().join(out);
+        let mut args = vec![
+            "run",
+            fixture.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(set);
+        let o = crate::common::skinpatch(&args);
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        let metrics = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+        (metrics, text(&o.stderr))
+    };
+    let (metrics, log) = run("tight", &[]);
+    let balance = column(&metrics, "energy_balance");
+    let free = column(&metrics, "free_node_force_ratio");
+    assert_eq!(balance.len(), 7);
+    assert!(balance.iter().all(|b| b.abs() < 0.02), "{balance:?}");
+    assert!(balance[1..].iter().all(|&b| b != 0.0), "{balance:?}");
+    assert!(free.iter().all(|&f| f < 1e-6), "{free:?}");
+    assert!(!log.contains("carries"), "{log}");
+    let (metrics, log) = run("loose", &["--set", "solver.rel_tol=0.3"]);
+    let free = column(&metrics, "free_node_force_ratio");
+    assert!(free[1] > 1e-2, "{free:?}");
+    assert!(
+        log.contains("frame 1: a node that nothing holds carries")
+            && log.contains("free_node_force_ratio")
+            && log.contains("solver.rel_tol"),
+        "{log}"
+    );
+}

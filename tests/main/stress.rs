@@ -219,7 +219,11 @@ fn solved_state_press(model: &str, volumetric: &str, nu: f64) -> String {
 ///   it vanishes, to 1e-6 of the probe force;
 /// - the strain energy `Σ ψ_e V_e` is the probe's work `∫F dδ`
 ///   (trapezoids over the 10 frames, whose own error is about 0.3% for
-///   F ∝ δ^{3/2}) within 2%.
+///   F ∝ δ^{3/2}) within 2%;
+/// - the run's own checks in `metrics.csv` say the same: its
+///   `free_node_force_ratio` is at most 1e-6 and at least half the one
+///   rebuilt here, and its `energy_balance` is `1 − Σψ V/W` within 1% (its
+///   trapezoids follow each held node, these the probe).
 ///
 /// Before the locking-free tets carried their nodal pressure in the
 /// outputs, their stresses implied 17% too little probe force at ν 0.49
@@ -309,6 +313,17 @@ fn stress_and_energy_outputs_are_the_solved_state() {
             worst_balance = worst_balance.max(balance);
             worst_free = worst_free.max(free);
             worst_energy = worst_energy.max((energy / work - 1.0).abs());
+            // The run's own checks agree.
+            assert!(m.free_node_force_ratio <= 1e-6, "{case}: {m:?}");
+            assert!(
+                m.free_node_force_ratio >= 0.5 * free,
+                "{case}: {m:?} vs {free}"
+            );
+            assert!(
+                (m.energy_balance - (1.0 - energy / work)).abs() < 1e-2,
+                "{case}: {m:?} vs {}",
+                1.0 - energy / work
+            );
         }
         report += &format!(
             "{case}: contact tractions {worst_balance:.1e} of F, free nodes {worst_free:.1e} of F, \
