@@ -513,9 +513,9 @@ impl Trace {
     }
 
     /// Which [`Cause`] the iterations show, first match in the order of
-    /// the enum: the contact set over the whole solve (the contact solve
-    /// freezes it after a while, which leaves a frozen, often inconsistent
-    /// problem), the linear solves and the residual over the last
+    /// the enum: the contact set over the whole solve (after a while the
+    /// contact solve only lets it grow, which changes it less often), the
+    /// linear solves and the residual over the last
     /// [`RECENT`]; ν counts as near incompressible from 0.49.
     fn classify(&self, rel: f64, poisson: f64) -> Cause {
         if !rel.is_finite() {
@@ -615,7 +615,7 @@ mod tests {
         assert_eq!(t.classify(falling[29], 0.45), Cause::Slow(1.0, falling[29]));
         assert_eq!(t.classify(f64::NAN, 0.45), Cause::NotFinite);
 
-        // Contact changes early on count (the set is frozen later).
+        // Contact changes early on count (the set only grows later).
         let mut contact = vec![(true, true, true); 10];
         contact.extend([ok; 20]);
         assert_eq!(
