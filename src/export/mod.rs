@@ -53,9 +53,9 @@ pub struct FrameMetrics {
     pub rel_residual: f64,
     /// `(W − E)/W`: the work `W` the probe and the supports did on the
     /// patch since the start (N·mm, over the load steps, at the nodes they
-    /// hold) less the elastic energy `E` stored in it, relative to the
-    /// work; 0 before any work, NaN in a dynamic run (whose damping and
-    /// inertia it does not count).
+    /// hold; in a dynamic run, with inertia and damping, the work against
+    /// the elastic forces at every node) less the elastic energy `E`
+    /// stored in it, relative to the work; 0 before any work.
     pub energy_balance: f64,
     /// The largest net force on a node neither held nor in contact,
     /// relative to the probe force (to the largest held force without a

@@ -559,8 +559,8 @@ fn update_active_set(
 }
 
 /// Takes into contact every candidate node inside the probe by more than
-/// `activate_below` times its tolerance, each in the state its mode starts it in;
-/// returns how many.
+/// `activate_below` times its tolerance, each in the state its mode starts
+/// it in; returns how many.
 fn activate(
     sim: &super::simulation::Simulation,
     frame: &Frame,
@@ -766,8 +766,8 @@ mod tests {
     use crate::fem::probe::ProbeShape;
 
     /// A node left inside the probe by more than its tolerance fails the
-    /// solve, naming the node,
-    /// its depth and the remedy; one within its tolerance does not.
+    /// solve, naming the node, its depth and the remedy; one within its
+    /// tolerance does not.
     #[test]
     fn a_node_inside_the_probe_fails_the_solve() {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes/patch_3k.node");

@@ -61,7 +61,8 @@ impl Simulation {
     }
 
     /// The residual (N) below which a step counts as converged whatever
-    /// its load: the round-off of the forces at rest ([`super::simulation::Floors`]).
+    /// its load: the round-off of the forces at rest
+    /// ([`super::simulation::Floors`]).
     pub fn force_floor(&self) -> f64 {
         self.body.floors.of(self.dynamics.as_ref())
     }

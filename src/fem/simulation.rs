@@ -623,11 +623,16 @@ impl Simulation {
         per_tet.iter().sum::<f64>() + nodal
     }
 
-    /// Per node the force its constraints apply to it at the last force
-    /// evaluation (N): minus the internal force where a support or the
-    /// probe holds the node, zero at a free node (whose force is the
-    /// residual, not a load).
+    /// Per node the force that works against the elastic forces at the
+    /// last force evaluation (N). Quasi-static: what the supports and the
+    /// probe apply, minus the internal force where one holds the node and
+    /// zero at a free node (whose force is the residual, not a load). In a
+    /// backward-Euler step, minus the elastic force at every node: what
+    /// the supports, the probe, inertia and damping apply together.
     pub fn held_forces(&self) -> Vec<Vec3> {
+        if self.dynamics.is_some() {
+            return self.work.f_elastic.iter().map(|f| -f).collect();
+        }
         self.loads
             .filters
             .iter()

@@ -67,15 +67,15 @@ pub struct Stepper {
 }
 
 /// The work done on the patch by what holds it (the supports and the
-/// probe), summed over the load steps, for the energy balance of
-/// `metrics.csv`.
+/// probe; in a dynamic run also inertia and damping), summed over the load
+/// steps, for the energy balance of `metrics.csv`.
 #[derive(Clone, Debug)]
 struct Ledger {
     /// Positions and held forces after the last load step.
     x: Vec<Vec3>,
     held: Vec<Vec3>,
-    /// The work since the start, less any energy a change of materials
-    /// made (N·mm).
+    /// The work since the start, plus the energy a change of materials
+    /// added (N·mm).
     work: f64,
     /// Load steps that did work.
     loaded_steps: usize,
@@ -419,9 +419,7 @@ impl Stepper {
         };
         let work = self.ledger.work;
         let reach = sim.position_tol() * 1e7;
-        m.energy_balance = if sim.dynamics.is_some() {
-            f64::NAN
-        } else if work.abs() > floor * reach {
+        m.energy_balance = if work.abs() > floor * reach {
             (work - sim.elastic_energy()) / work
         } else {
             0.0
