@@ -371,16 +371,22 @@ pub(super) struct Workspace {
     pub(super) element_tangent_kind: Option<TangentKind>,
 }
 
+/// The rest data of every tet of `mesh` with its material, as a
+/// simulation builds it.
+pub fn rest_elements(mesh: &TetMesh, tet_material: &[Material]) -> Vec<RestElement> {
+    (0..mesh.num_tets())
+        .into_par_iter()
+        .map(|t| RestElement::new(mesh.tet_points(t), &tet_material[t]))
+        .collect()
+}
+
 /// What depends on the materials: the rest elements, the lumped nodal
 /// masses and the floors of the forces at rest (see [`Floors`]).
 fn material_data(
     mesh: &TetMesh,
     tet_material: &[Material],
 ) -> (Vec<RestElement>, Vec<f64>, Floors) {
-    let elements: Vec<RestElement> = (0..mesh.num_tets())
-        .into_par_iter()
-        .map(|t| RestElement::new(mesh.tet_points(t), &tet_material[t]))
-        .collect();
+    let elements = rest_elements(mesh, tet_material);
     let (lo, hi) = mesh.bounds();
     let size = (hi - lo).norm();
     // The largest modulus an element has: λ + 2μ (uniaxial strain),

@@ -62,8 +62,10 @@ pub struct Stepper {
     // Nodes held so that no rigid motion is free (quasi-static runs).
     pins: Vec<Pin>,
     ledger: Ledger,
-    /// Whether the energy balance and the free-node force were warned about.
-    warned: (bool, bool),
+    /// Whether the energy balance was warned about.
+    balance_warned: bool,
+    /// Whether the free-node force was warned about.
+    free_force_warned: bool,
 }
 
 /// The work done on the patch by what holds it (the supports and the
@@ -79,11 +81,16 @@ struct Ledger {
     work: f64,
     /// Load steps that did work.
     loaded_steps: usize,
+    /// The mesh diagonal (mm): work below the force floor over it is noise.
+    reach: f64,
 }
 
 impl Ledger {
-    fn new(x: &[Vec3]) -> Ledger {
+    fn new(mesh: &crate::mesh::TetMesh) -> Ledger {
+        let (lo, hi) = mesh.bounds();
+        let x = &mesh.positions;
         Ledger {
+            reach: (hi - lo).norm(),
             x: x.to_vec(),
             held: vec![Vec3::zeros(); x.len()],
             work: 0.0,
@@ -149,8 +156,9 @@ impl Stepper {
             split_before: false,
             cut_before: false,
             pins,
-            ledger: Ledger::new(&mesh.positions),
-            warned: (false, false),
+            ledger: Ledger::new(mesh),
+            balance_warned: false,
+            free_force_warned: false,
         }
     }
 
@@ -418,18 +426,17 @@ impl Stepper {
             0.0
         };
         let work = self.ledger.work;
-        let reach = sim.position_tol() * 1e7;
-        m.energy_balance = if work.abs() > floor * reach {
+        m.energy_balance = if work.abs() > floor * self.ledger.reach {
             (work - sim.elastic_energy()) / work
         } else {
             0.0
         };
         let frame = m.frame;
-        if !self.warned.0
+        if !self.balance_warned
             && self.ledger.loaded_steps >= BALANCE_AFTER_STEPS
             && m.energy_balance.abs() > BALANCE_TOLERANCE
         {
-            self.warned.0 = true;
+            self.balance_warned = true;
             log::warn!(
                 "frame {frame}: the work done on the patch and the energy stored in it differ by \
                  {:.1}% of the work (energy_balance in metrics.csv; tolerance {:.0}%): the \
@@ -439,8 +446,8 @@ impl Stepper {
                 100.0 * BALANCE_TOLERANCE
             );
         }
-        if !self.warned.1 && m.free_node_force_ratio > FREE_FORCE_TOLERANCE {
-            self.warned.1 = true;
+        if !self.free_force_warned && m.free_node_force_ratio > FREE_FORCE_TOLERANCE {
+            self.free_force_warned = true;
             log::warn!(
                 "frame {frame}: a node that nothing holds carries {:.2e} of the probe force \
                  (free_node_force_ratio in metrics.csv; tolerance {FREE_FORCE_TOLERANCE:e}): \

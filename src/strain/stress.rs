@@ -25,7 +25,7 @@ use rayon::prelude::*;
 
 use crate::fem::hyperelastic::Law;
 use crate::fem::nodal_pressure::{NodalPressure, TetShare};
-use crate::fem::{Corotation, Material, RestElement, Volumetric};
+use crate::fem::{Corotation, Material, Volumetric};
 use crate::mesh::{TetMesh, Vec3};
 
 /// The stress state of one tet.
@@ -107,10 +107,7 @@ impl TetStress {
 /// tets carry their points' pressure (parallel over tets, each entry
 /// computed in a fixed order).
 pub fn element_stresses(mesh: &TetMesh, x: &[Vec3], materials: &[Material]) -> Vec<TetStress> {
-    let elements: Vec<RestElement> = (0..mesh.num_tets())
-        .into_par_iter()
-        .map(|t| RestElement::new(mesh.tet_points(t), &materials[t]))
-        .collect();
+    let elements = crate::fem::simulation::rest_elements(mesh, materials);
     let shares = match NodalPressure::new(&mesh.tets, &elements, materials, mesh.num_vertices()) {
         Some(mut nodal) => {
             nodal.evaluate(&mesh.tets, &elements, x);

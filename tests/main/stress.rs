@@ -232,7 +232,6 @@ fn solved_state_press(model: &str, volumetric: &str, nu: f64) -> String {
 #[test]
 fn stress_and_energy_outputs_are_the_solved_state() {
     use skinpatch::fem::boundary::{NodeSet, NodeSets};
-    use skinpatch::fem::RestElement;
     let dir = tempfile::tempdir().unwrap();
     let mut report = String::new();
     for (model, volumetric, nu) in [
@@ -266,9 +265,7 @@ fn stress_and_energy_outputs_are_the_solved_state() {
                 supported[v] = true;
             }
         }
-        let elements: Vec<RestElement> = (0..mesh.num_tets())
-            .map(|t| RestElement::new(mesh.tet_points(t), &materials[t]))
-            .collect();
+        let elements = skinpatch::fem::simulation::rest_elements(mesh, materials);
         let mut run = skinpatch::pipeline::Run::new(&setup);
         let (mut work, mut last) = (0.0, (0.0, 0.0));
         let (mut worst_balance, mut worst_free, mut worst_energy) = (0.0f64, 0.0f64, 0.0f64);
