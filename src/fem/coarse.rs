@@ -19,10 +19,11 @@
 //! matrix (it is rebuilt once per solve of a frame): a preconditioner only
 //! has to be close, not exact.
 
-use nalgebra::{DMatrix, DVector, Matrix3, Matrix3x6};
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix3x6, Vector6};
 use rayon::prelude::*;
 
 use super::assembly::Assembly;
+use super::nodal_pressure::NodalPressure;
 use super::solve::Filter;
 use crate::mesh::Vec3;
 
@@ -113,10 +114,17 @@ impl Coarse {
     }
 
     /// Rebuilds `P` for the positions `x` and the filters, and `A_c = Pᵀ K P`
-    /// from the assembled matrix, and factorises it. Returns whether the
-    /// factorisation succeeded (a coarse mode that the filters remove
+    /// from the assembled matrix and, where the matrix does not hold it,
+    /// the nodal volume term's coupling, and factorises it. Returns whether
+    /// the factorisation succeeded (a coarse mode that the filters remove
     /// entirely gets a unit diagonal).
-    pub fn refresh(&mut self, asm: &Assembly, filters: &[Filter], x: &[Vec3]) -> bool {
+    pub fn refresh(
+        &mut self,
+        asm: &Assembly,
+        nodal: Option<&NodalPressure>,
+        filters: &[Filter],
+        x: &[Vec3],
+    ) -> bool {
         let centroids: Vec<Vec3> = self
             .members
             .iter()
@@ -180,6 +188,9 @@ impl Coarse {
                 }
             }
         }
+        if let Some(nodal) = nodal {
+            self.add_coupling(nodal, &mut a);
+        }
         // Symmetrise (K is symmetric; round-off is not), and give modes the
         // filters removed a unit diagonal. A tiny shift keeps nearly
         // dependent modes of thin aggregates factorisable.
@@ -197,6 +208,37 @@ impl Coarse {
         }
         self.factor = nalgebra::Cholesky::new(a);
         self.factor.is_some()
+    }
+
+    /// Adds `Pᵀ (Σ_a c_a γ_a γ_aᵀ) P = Σ_a c_a w_a w_aᵀ` with `w_a = Pᵀ γ_a`
+    /// to the coarse matrix `a`: each `w_a` is non-zero only on the few
+    /// aggregates its patch touches. The `w_a` in parallel, their sum in
+    /// point order.
+    fn add_coupling(&self, nodal: &NodalPressure, a: &mut DMatrix<f64>) {
+        let terms: Vec<_> = nodal.coupling_terms().collect();
+        let restricted: Vec<(f64, Vec<(usize, Vector6<f64>)>)> = terms
+            .par_iter()
+            .map(|&(weight, patch, gamma)| {
+                let mut w: Vec<(usize, Vector6<f64>)> = Vec::new();
+                for (&j, g) in patch.iter().zip(gamma) {
+                    let (group, part) = (self.aggregate[j], self.blocks[j].transpose() * g);
+                    match w.iter_mut().find(|(h, _)| *h == group) {
+                        Some((_, sum)) => *sum += part,
+                        None => w.push((group, part)),
+                    }
+                }
+                (weight, w)
+            })
+            .collect();
+        for (weight, w) in &restricted {
+            for (ga, wa) in w {
+                for (gb, wb) in w {
+                    let outer = wa * wb.transpose() * *weight;
+                    let mut view = a.fixed_view_mut::<6, 6>(6 * ga, 6 * gb);
+                    view += outer;
+                }
+            }
+        }
     }
 
     /// `z ← z + P A_c⁻¹ Pᵀ r` (nothing before a successful refresh). The
@@ -296,7 +338,7 @@ mod tests {
                 }
             })
             .collect();
-        assert!(coarse.refresh(&asm, &filters, &positions));
+        assert!(coarse.refresh(&asm, None, &filters, &positions));
         let m = 6 * coarse.num_aggregates();
         let y: Vec<f64> = (0..m).map(|k| ((k * 5 + 1) as f64).sin()).collect();
         let mut py = vec![0.0; 3 * positions.len()];

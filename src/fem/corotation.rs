@@ -39,7 +39,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use super::hyperelastic::{Law, Model};
+use super::hyperelastic::{Law, Model, VolumeLimit};
 use super::material::Material;
 use crate::mesh::Vec3;
 
@@ -62,6 +62,9 @@ pub struct RestElement {
     pub lambda: f64,
     /// The energy density (corotational linear unless the material says).
     pub model: Model,
+    /// The stiffening of its volume term below a volume ratio (a
+    /// locking-free tet's; see [`Law::limit`]).
+    pub limit: VolumeLimit,
     /// Shape-function gradients `g_a` (1/mm).
     pub grads: [Vector3<f64>; 4],
     /// Rest positions (mm).
@@ -89,6 +92,7 @@ impl RestElement {
             mu,
             lambda,
             model: material.model,
+            limit: material.element_limit(),
         }
     }
 
@@ -109,6 +113,7 @@ impl RestElement {
             model: self.model,
             mu: self.mu,
             lambda: self.lambda,
+            limit: self.limit,
         }
     }
 
@@ -123,7 +128,7 @@ impl RestElement {
     /// `r` (a law other than the corotational one takes them from `F`, and
     /// `r` is not used).
     pub fn forces(&self, x: &[Vec3; 4], r: &Matrix3<f64>) -> [Vec3; 4] {
-        if self.model != Model::Corotational {
+        if self.model != Model::Corotational || self.limit.is_on() {
             return self.forces_from(&Corotation::of(&self.deformation_gradient(x)));
         }
         let rt = r.transpose();
@@ -147,7 +152,7 @@ impl RestElement {
     pub fn forces_from(&self, rot: &Corotation) -> [Vec3; 4] {
         let s = rot.sigma;
         let psi = match self.model {
-            Model::Corotational => {
+            Model::Corotational if !self.limit.is_on() => {
                 let trace_term = self.lambda * (s.sum() - 3.0);
                 s.map(|si| 2.0 * self.mu * (si - 1.0) + trace_term) * self.volume
             }
@@ -210,7 +215,7 @@ impl RestElement {
     /// Tangent data at the configuration whose rotation data is `rot`.
     #[inline]
     pub fn tangent(&self, rot: &Corotation, kind: TangentKind) -> Tangent {
-        if self.model != Model::Corotational {
+        if self.model != Model::Corotational || self.limit.is_on() {
             return self.law_tangent(rot, kind);
         }
         let (mu, lambda, vol) = (self.mu, self.lambda, self.volume);

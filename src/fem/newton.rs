@@ -247,9 +247,9 @@ impl Simulation {
         if self.work.prescribed.iter().all(|&d| d == 0.0) {
             return;
         }
-        self.work
-            .assembly
-            .multiply(&self.work.prescribed, &mut self.work.kd);
+        let mut kd = std::mem::take(&mut self.work.kd);
+        self.multiply_tangent(&self.work.prescribed, &mut kd);
+        self.work.kd = kd;
         let kd = |k: &[f64], i: usize| Vec3::new(k[3 * i], k[3 * i + 1], k[3 * i + 2]);
         for (i, f) in self.loads.filters.iter().enumerate() {
             let s = f.apply(&kd(&self.work.kd, i));
@@ -324,9 +324,13 @@ impl Simulation {
         }
         if self.settings.linear == LinearSolver::TwoLevel && self.work.coarse_stale {
             let start = std::time::Instant::now();
-            self.work
-                .coarse
-                .refresh(&self.work.assembly, &self.loads.filters, &self.state.x);
+            let nodal = self.body.pressure.as_ref().filter(|_| !self.work.patched);
+            self.work.coarse.refresh(
+                &self.work.assembly,
+                nodal,
+                &self.loads.filters,
+                &self.state.x,
+            );
             self.work.coarse_stale = false;
             self.timings.factor_s += start.elapsed().as_secs_f64();
         }
@@ -350,6 +354,7 @@ impl Simulation {
                 asm: &self.work.assembly,
                 filters: &self.loads.filters,
                 couplings: &self.work.couplings,
+                nodal: self.body.pressure.as_ref().filter(|_| !self.work.patched),
             },
             &self.work.rhs,
             &mut self.work.dx,

@@ -369,6 +369,11 @@ pub(super) struct Workspace {
     /// contact term, and its kind (`None`: none yet in this solve).
     pub(super) element_tangent: Vec<f64>,
     pub(super) element_tangent_kind: Option<TangentKind>,
+    /// Whether `assembly`'s matrix holds the nodal volume term's coupling
+    /// (its pattern then holds every patch): only for the solvers that
+    /// factorise it. The iterative ones apply the coupling as a product
+    /// ([`Simulation::nodal_coupling`]) on the tets' own pattern.
+    pub(super) patched: bool,
 }
 
 /// The rest data of every tet of `mesh` with its material, as a
@@ -404,15 +409,16 @@ fn material_data(
     (elements, mass, floors)
 }
 
-/// The matrix pattern of `mesh`, with the patches of its nodal volume term.
-fn pattern(mesh: &TetMesh, pressure: Option<&NodalPressure>) -> Assembly {
+/// The matrix pattern of `tets` over `num_nodes` nodes, with the patches
+/// of `pressure`'s nodal volume term when the matrix is to hold its
+/// coupling.
+fn pattern(num_nodes: usize, tets: &[[usize; 4]], pressure: Option<&NodalPressure>) -> Assembly {
     let assembly = match pressure {
-        Some(p) => Assembly::with_patches(mesh.num_vertices(), &mesh.tets, &p.patches()),
-        None => Assembly::new(mesh.num_vertices(), &mesh.tets),
+        Some(p) => Assembly::with_patches(num_nodes, tets, &p.patches()),
+        None => Assembly::new(num_nodes, tets),
     };
     log::debug!(
-        "stiffness pattern: {} nodes, {} blocks{}",
-        mesh.num_vertices(),
+        "stiffness pattern: {num_nodes} nodes, {} blocks{}",
         assembly.matrix.nnz() / 9,
         if pressure.is_some() {
             " (with the nodal volume term's patches)"
@@ -429,7 +435,7 @@ impl Simulation {
         let (elements, mass, floors) = material_data(mesh, tet_material);
         let (n, m) = (mesh.num_vertices(), elements.len());
         let pressure = NodalPressure::new(&mesh.tets, &elements, tet_material, n);
-        let assembly = pattern(mesh, pressure.as_ref());
+        let assembly = pattern(n, &mesh.tets, None);
         let (lo, hi) = mesh.bounds();
         let size = (hi - lo).norm();
         Simulation {
@@ -461,6 +467,7 @@ impl Simulation {
             work: Workspace {
                 f_elastic: vec![Vec3::zeros(); n],
                 assembly,
+                patched: false,
                 corotations: vec![Corotation::of(&Matrix3::identity()); m],
                 x_start: Vec::new(),
                 tet_forces: vec![[Vec3::zeros(); 4]; m],
@@ -499,7 +506,8 @@ impl Simulation {
             mesh.num_vertices(),
         );
         if had_pressure || self.body.pressure.is_some() {
-            self.work.assembly = pattern(mesh, self.body.pressure.as_ref());
+            self.work.assembly = pattern(mesh.num_vertices(), &mesh.tets, None);
+            self.work.patched = false;
             self.work.element_tangent_kind = None;
         }
         self.work.factor = Factor::default();
@@ -767,6 +775,19 @@ impl Simulation {
         if let (Some(p), TangentKind::Exact) = (&self.body.pressure, kind) {
             p.add_geometric_blocks(elements, k, &mut self.work.tet_blocks);
         }
+        let patched = self.body.pressure.is_some()
+            && matches!(
+                self.settings.linear,
+                LinearSolver::Direct | LinearSolver::FactoredCg
+            );
+        if patched != self.work.patched {
+            let n = self.state.x.len();
+            let pressure = self.body.pressure.as_ref().filter(|_| patched);
+            self.work.assembly = pattern(n, &self.body.tets, pressure);
+            self.work.patched = patched;
+            self.work.element_tangent_kind = None;
+            self.work.factor = Factor::default();
+        }
         let blocks = &self.work.tet_blocks;
         self.work.assembly.assemble_stiffness(|t, a, b| {
             if a <= b {
@@ -776,12 +797,16 @@ impl Simulation {
             }
         });
         if let Some(p) = self.body.pressure.as_mut() {
-            p.add_coupling(
-                &self.body.tets,
-                &self.body.elements,
-                &mut self.work.assembly,
-                k,
-            );
+            if patched {
+                p.add_coupling(
+                    &self.body.tets,
+                    &self.body.elements,
+                    &mut self.work.assembly,
+                    k,
+                );
+            } else {
+                p.update_coupling(&self.body.tets, &self.body.elements, k);
+            }
         }
         if let Some(d) = self.dynamics {
             let c = 1.0 / (d.dt * d.dt) + d.alpha / d.dt;
@@ -795,6 +820,21 @@ impl Simulation {
         self.work.element_tangent_kind = Some(kind);
         self.add_contact_tangent();
         self.timings.assembly_s += start.elapsed().as_secs_f64();
+    }
+
+    /// The nodal volume term's coupling where the matrix does not hold it:
+    /// what the linear solve applies besides the matrix.
+    pub(super) fn nodal_coupling(&self) -> Option<&NodalPressure> {
+        self.body.pressure.as_ref().filter(|_| !self.work.patched)
+    }
+
+    /// `y = K x` with the Newton matrix of the last assembly, the nodal
+    /// coupling included.
+    pub fn multiply_tangent(&self, x: &[f64], y: &mut [f64]) {
+        self.work.assembly.multiply(x, y);
+        if let Some(p) = self.nodal_coupling() {
+            p.add_product(x, y);
+        }
     }
 
     /// The matrix of the last [`Simulation::assemble_tangent`] in this solve

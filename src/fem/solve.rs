@@ -19,6 +19,7 @@ use rayon::prelude::*;
 
 use super::assembly::Assembly;
 use super::coarse::Coarse;
+use super::nodal_pressure::NodalPressure;
 
 /// Per-node projector onto the free directions.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -180,19 +181,39 @@ pub struct Operator<'a> {
     pub filters: &'a [Filter],
     /// Non-symmetric row couplings (empty: the operator is symmetric).
     pub couplings: &'a [Coupling],
+    /// The nodal volume term's coupling where the matrix does not hold it
+    /// (applied as its product, [`NodalPressure::add_product`]).
+    pub nodal: Option<&'a NodalPressure>,
+}
+
+impl Operator<'_> {
+    /// `y = K x`, the nodal coupling included.
+    pub fn multiply(&self, x: &[f64], y: &mut [f64]) {
+        self.asm.multiply(x, y);
+        if let Some(nodal) = self.nodal {
+            nodal.add_product(x, y);
+        }
+    }
+
+    /// Node `i`'s diagonal block of `K`, the nodal coupling included.
+    pub fn diagonal_block(&self, i: usize) -> Matrix3<f64> {
+        let block = self.asm.diagonal_block(i);
+        match self.nodal {
+            Some(nodal) => block + nodal.diagonal_block(i),
+            None => block,
+        }
+    }
 }
 
 /// `y = (S K S + I − S) x`, minus the couplings' `G δλ_i`;
 /// `constrained` lists the nodes whose filter is not free.
 fn apply_operator(op: Operator, constrained: &[usize], x: &[f64], sx: &mut [f64], y: &mut [f64]) {
     let Operator {
-        asm,
-        filters,
-        couplings,
+        filters, couplings, ..
     } = op;
     sx.copy_from_slice(x);
     filter_nodes(filters, constrained, sx);
-    asm.multiply(sx, y);
+    op.multiply(sx, y);
     let changes: Vec<Vector3<f64>> = couplings
         .iter()
         .map(|c| {
@@ -247,6 +268,7 @@ pub fn solve(
         asm,
         filters,
         couplings,
+        ..
     } = op;
     let n = b.len();
     for v in [&mut ws.r, &mut ws.z, &mut ws.p, &mut ws.q] {
@@ -263,7 +285,7 @@ pub fn solve(
             .into_par_iter()
             .map(|i| {
                 let s = filters[i].matrix();
-                let d = s * asm.diagonal_block(i) * s + (Matrix3::identity() - s);
+                let d = s * op.diagonal_block(i) * s + (Matrix3::identity() - s);
                 d.try_inverse().unwrap_or_else(Matrix3::identity)
             })
             .collect();
@@ -527,6 +549,7 @@ mod tests {
                 asm: &asm,
                 filters: &filters,
                 couplings,
+                nodal: None,
             };
             for with_factor in [false, true] {
                 let mut x = vec![0.0; 15];
@@ -575,7 +598,7 @@ mod tests {
             .collect();
         let mut coarse = Coarse::new(&positions);
         assert!(coarse.num_aggregates() > 1);
-        assert!(coarse.refresh(&asm, &filters, &positions));
+        assert!(coarse.refresh(&asm, None, &filters, &positions));
         let settings = CgSettings {
             rel_tol: 1e-10,
             max_iterations: 2000,
@@ -584,6 +607,7 @@ mod tests {
             asm: &asm,
             filters: &filters,
             couplings: &[],
+            nodal: None,
         };
         let mut ws = CgWorkspace::default();
         let mut x_jacobi = vec![0.0; b.len()];
