@@ -720,7 +720,12 @@ mod tests {
         let d: Vec<f64> = (0..3 * n)
             .map(|i| ((i * 7919) % 13) as f64 / 13.0 - 0.5)
             .collect();
-        let filters = vec![Filter::Free; n];
+        // The bottom held, so that the coarse matrix is definite.
+        let filters: Vec<Filter> = mesh
+            .positions
+            .iter()
+            .map(|p| if p.z == 0.0 { Filter::Fixed } else { Filter::Free })
+            .collect();
         let mut seen = Vec::new();
         for linear in [LinearSolver::Direct, LinearSolver::TwoLevel] {
             sim.settings.linear = linear;
