@@ -905,3 +905,44 @@ fn a_run_checks_its_balance_per_frame() {
         "{log}"
     );
 }
+
+/// The main job's FEM (examples/press.toml without its maps and renders):
+/// skin and fat at ν = 0.49 with the locking-free tet keep every tet above
+/// 0.8 of its volume in every frame, and each layer its volume to 1%.
+/// Without the locking-free tet's volume limit the smallest ratio here is
+/// 0.57 (docs/VERIFICATION.md, "Tets that keep their volume").
+#[test]
+fn the_main_job_keeps_every_tet_above_four_fifths_of_its_volume() {
+    let example = std::fs::read_to_string(root().join("examples/press.toml")).unwrap();
+    assert!(example.contains("poisson_ratio = 0.49") && example.contains("locking-free"));
+    let mesh = root().join("meshes/patch_25k.node");
+    let fem_only = example
+        .split("[microstructure]")
+        .next()
+        .unwrap()
+        .replace("../meshes/patch_25k.node", &mesh.display().to_string().replace('\\', "/"))
+        .replace("strain_images = true", "strain_images = false");
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("press_fem.toml");
+    std::fs::write(&path, fem_only).unwrap();
+    let out = dir.path().join("out");
+    let o = common::skinpatch(&[
+        "run",
+        "-q",
+        path.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let metrics = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    let ratios = column(&metrics, "min_volume_ratio");
+    assert_eq!(ratios.len(), 61);
+    let smallest = ratios.iter().copied().fold(f64::INFINITY, f64::min);
+    assert!(smallest >= 0.8, "smallest volume ratio {smallest}");
+    let volume = std::fs::read_to_string(out.join("volume.csv")).unwrap();
+    for layer in ["dermis", "hypodermis"] {
+        let change = column(&volume, &format!("{layer}_volume_change"));
+        let worst = change.iter().copied().fold(0.0f64, |m, c| m.max(c.abs()));
+        assert!(worst < 0.01, "{layer}: volume change {worst}");
+    }
+}
