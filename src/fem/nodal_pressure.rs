@@ -515,7 +515,11 @@ impl NodalPressure {
     pub fn coupling_terms(&self) -> impl Iterator<Item = (f64, &[usize], &[Vec3])> + '_ {
         (0..self.points.len()).map(|a| {
             let range = self.patch_start[a]..self.patch_start[a + 1];
-            (self.weight(a), &self.patch[range.clone()], &self.gamma[range])
+            (
+                self.weight(a),
+                &self.patch[range.clone()],
+                &self.gamma[range],
+            )
         })
     }
 
@@ -566,9 +570,9 @@ fn split_rows<'a, T>(starts: &[usize], mut values: &'a mut [T]) -> Vec<&'a mut [
 mod tests {
     use super::*;
     use crate::fem::assembly::tests::cube_mesh;
+    use crate::fem::coarse::Coarse;
     use crate::fem::corotation::TangentKind;
     use crate::fem::hyperelastic::Model;
-    use crate::fem::coarse::Coarse;
     use crate::fem::simulation::{LinearSolver, Simulation};
     use crate::fem::solve::Filter;
     use crate::mesh::{Region, TetMesh};
@@ -724,7 +728,13 @@ mod tests {
         let filters: Vec<Filter> = mesh
             .positions
             .iter()
-            .map(|p| if p.z == 0.0 { Filter::Fixed } else { Filter::Free })
+            .map(|p| {
+                if p.z == 0.0 {
+                    Filter::Fixed
+                } else {
+                    Filter::Free
+                }
+            })
             .collect();
         let mut seen = Vec::new();
         for linear in [LinearSolver::Direct, LinearSolver::TwoLevel] {
@@ -749,14 +759,21 @@ mod tests {
             seen.push((kd, diagonal, z, sim.work.assembly.matrix.nnz()));
         }
         let (assembled, product) = (&seen[0], &seen[1]);
-        assert!(product.3 < assembled.3, "the product keeps the tets' own pattern");
+        assert!(
+            product.3 < assembled.3,
+            "the product keeps the tets' own pattern"
+        );
         let close = |a: &[f64], b: &[f64]| {
             let scale = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             a.iter().zip(b).all(|(x, y)| (x - y).abs() <= 1e-12 * scale)
         };
         assert!(close(&assembled.0, &product.0), "K d");
-        let flat = |m: &[Matrix3<f64>]| m.iter().flat_map(|b| b.iter().copied()).collect::<Vec<_>>();
-        assert!(close(&flat(&assembled.1), &flat(&product.1)), "diagonal blocks");
+        let flat =
+            |m: &[Matrix3<f64>]| m.iter().flat_map(|b| b.iter().copied()).collect::<Vec<_>>();
+        assert!(
+            close(&flat(&assembled.1), &flat(&product.1)),
+            "diagonal blocks"
+        );
         assert!(close(&assembled.2, &product.2), "coarse correction");
     }
 }

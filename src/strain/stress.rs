@@ -257,8 +257,15 @@ mod tests {
             let j = squeezed.determinant();
             let limit = snh_lf.element_limit();
             let added = limit.terms(j).0;
-            let (a, b) = (TetStress::of(&squeezed, &snh), TetStress::of(&squeezed, &snh_lf));
-            assert_eq!(j < limit.ratio, nu == 0.49, "ν {nu}: J {j}, limit {limit:?}");
+            let (a, b) = (
+                TetStress::of(&squeezed, &snh),
+                TetStress::of(&squeezed, &snh_lf),
+            );
+            assert_eq!(
+                j < limit.ratio,
+                nu == 0.49,
+                "ν {nu}: J {j}, limit {limit:?}"
+            );
             assert!(
                 (b.energy_density - a.energy_density - added).abs() < 1e-12 * a.energy_density,
                 "ν {nu}"
