@@ -32,6 +32,10 @@ use crate::mesh::Vec3;
 /// milliseconds.
 pub const NODES_PER_AGGREGATE: usize = 96;
 
+/// A vector restricted to the coarse space, by aggregate: the few
+/// aggregates it touches with their six entries.
+type Restricted = Vec<(usize, Vector6<f64>)>;
+
 /// The aggregates and, once built, the factorised coarse matrix.
 #[derive(Clone, Debug, Default)]
 pub struct Coarse {
@@ -216,10 +220,10 @@ impl Coarse {
     /// point order.
     fn add_coupling(&self, nodal: &NodalPressure, a: &mut DMatrix<f64>) {
         let terms: Vec<_> = nodal.coupling_terms().collect();
-        let restricted: Vec<(f64, Vec<(usize, Vector6<f64>)>)> = terms
+        let restricted: Vec<(f64, Restricted)> = terms
             .par_iter()
             .map(|&(weight, patch, gamma)| {
-                let mut w: Vec<(usize, Vector6<f64>)> = Vec::new();
+                let mut w: Restricted = Vec::new();
                 for (&j, g) in patch.iter().zip(gamma) {
                     let (group, part) = (self.aggregate[j], self.blocks[j].transpose() * g);
                     match w.iter_mut().find(|(h, _)| *h == group) {
