@@ -830,7 +830,7 @@ impl Simulation {
 
     /// `y = K x` with the Newton matrix of the last assembly, the nodal
     /// coupling included.
-    pub fn multiply_tangent(&self, x: &[f64], y: &mut [f64]) {
+    pub(super) fn multiply_tangent(&self, x: &[f64], y: &mut [f64]) {
         self.work.assembly.multiply(x, y);
         if let Some(p) = self.nodal_coupling() {
             p.add_product(x, y);
