@@ -716,7 +716,8 @@ mod tests {
 
     /// The iterative solvers apply the coupling as a product on the tets'
     /// own pattern; the factorising ones assemble it. Both give the same
-    /// `K d`, the same diagonal blocks and the same coarse correction.
+    /// `K d`, the same diagonal blocks and the same coarse correction, and
+    /// the public stiffness matrix holds the coupling either way.
     #[test]
     fn the_coupling_applied_as_a_product_is_the_assembled_one() {
         let (mut sim, mesh) = deformed(Model::StableNeoHookean, 0.49);
@@ -775,5 +776,11 @@ mod tests {
             "diagonal blocks"
         );
         assert!(close(&assembled.2, &product.2), "coarse correction");
+        // `Simulation::stiffness` is the whole tangent under any solver.
+        assert_eq!(sim.settings.linear, LinearSolver::TwoLevel);
+        sim.stiffness(TangentKind::Exact);
+        let mut kd = vec![0.0; 3 * n];
+        sim.work.assembly.multiply(&d, &mut kd);
+        assert!(close(&assembled.0, &kd), "the stiffness matrix");
     }
 }
