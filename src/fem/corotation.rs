@@ -39,11 +39,11 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use super::hyperelastic::{Law, Model};
-use super::material::Material;
+use super::hyperelastic::{Law, Model, VolumeLimit};
+use super::material::{Material, LIMIT_STIFFNESS};
 use crate::mesh::Vec3;
 
-/// Precomputed rest data of one tet: 296 bytes, so that the elements of a
+/// Precomputed rest data of one tet: 304 bytes, so that the elements of a
 /// 25k-tet patch (7 MB) stay in the processor's last-level cache while
 /// forces and tangents are evaluated; the rest stiffness blocks
 /// ([`RestElement::k0`], 1.2 kB a tet) are computed where they are needed,
@@ -62,6 +62,10 @@ pub struct RestElement {
     pub lambda: f64,
     /// The energy density (corotational linear unless the material says).
     pub model: Model,
+    /// The volume ratio below which its volume term stiffens (a
+    /// locking-free tet's, [`VolumeLimit`] with stiffness
+    /// [`LIMIT_STIFFNESS`]` μ`); zero for none.
+    pub limit_ratio: f64,
     /// Shape-function gradients `g_a` (1/mm).
     pub grads: [Vector3<f64>; 4],
     /// Rest positions (mm).
@@ -89,6 +93,7 @@ impl RestElement {
             mu,
             lambda,
             model: material.model,
+            limit_ratio: material.element_limit().ratio,
         }
     }
 
@@ -109,6 +114,19 @@ impl RestElement {
             model: self.model,
             mu: self.mu,
             lambda: self.lambda,
+            limit: self.limit(),
+        }
+    }
+
+    /// Its volume limit.
+    pub fn limit(&self) -> VolumeLimit {
+        if self.limit_ratio > 0.0 {
+            VolumeLimit {
+                stiffness: LIMIT_STIFFNESS * self.mu,
+                ratio: self.limit_ratio,
+            }
+        } else {
+            VolumeLimit::default()
         }
     }
 
@@ -123,7 +141,7 @@ impl RestElement {
     /// `r` (a law other than the corotational one takes them from `F`, and
     /// `r` is not used).
     pub fn forces(&self, x: &[Vec3; 4], r: &Matrix3<f64>) -> [Vec3; 4] {
-        if self.model != Model::Corotational {
+        if self.model != Model::Corotational || self.limit_ratio != 0.0 {
             return self.forces_from(&Corotation::of(&self.deformation_gradient(x)));
         }
         let rt = r.transpose();
@@ -147,7 +165,7 @@ impl RestElement {
     pub fn forces_from(&self, rot: &Corotation) -> [Vec3; 4] {
         let s = rot.sigma;
         let psi = match self.model {
-            Model::Corotational => {
+            Model::Corotational if self.limit_ratio == 0.0 => {
                 let trace_term = self.lambda * (s.sum() - 3.0);
                 s.map(|si| 2.0 * self.mu * (si - 1.0) + trace_term) * self.volume
             }
@@ -210,7 +228,7 @@ impl RestElement {
     /// Tangent data at the configuration whose rotation data is `rot`.
     #[inline]
     pub fn tangent(&self, rot: &Corotation, kind: TangentKind) -> Tangent {
-        if self.model != Model::Corotational {
+        if self.model != Model::Corotational || self.limit_ratio != 0.0 {
             return self.law_tangent(rot, kind);
         }
         let (mu, lambda, vol) = (self.mu, self.lambda, self.volume);
@@ -267,6 +285,14 @@ impl RestElement {
     /// `μ + cσ̂_k` turns negative) or dilated by a fifth (its flip one), and
     /// the Newton loop then falls back to the projection as it does for the
     /// corotational element's twist modes.
+    ///
+    /// Both leave out the volume limit's share of the twist eigenvalues
+    /// ([`Law::limit_twist`]): with its stiffness of a thousand μ it makes
+    /// the matrix of a squeezed tet nearly singular in its twist modes, and
+    /// on a coarse drag (patch_3k, dermis 75 kPa, a node turning from stick
+    /// to slip beside such a tet) the exact step overshot fifty-fold and
+    /// Newton stalled at a step length of 1/32. Without it the limit's tets
+    /// converge a little slower, and the drag runs through.
     #[cold]
     #[inline(never)]
     fn law_tangent(&self, rot: &Corotation, kind: TangentKind) -> Tangent {
@@ -282,7 +308,9 @@ impl RestElement {
         let modes = PAIRS.map(|(i, j)| {
             (
                 clamp(law.flip(&s, i, j)),
-                law.twist(&s, i, j).map_or(0.0, clamp),
+                law.twist(&s, i, j)
+                    .map(|t| t - law.limit_twist(&s, i, j))
+                    .map_or(0.0, clamp),
             )
         });
         self.tangent_of_modes(rot, a, modes)

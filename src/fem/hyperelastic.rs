@@ -61,6 +61,41 @@ pub struct Law {
     pub mu: f64,
     /// Lamé λ.
     pub lambda: f64,
+    /// A stiffening of the volume term below a volume ratio (none for
+    /// a standard element).
+    pub limit: VolumeLimit,
+}
+
+/// A one-sided volume term `b(J) = k/3 (J_t − J)³` below the volume ratio
+/// `J_t`, zero above: a locking-free tet's guard against the volume modes
+/// the nodal term cannot see ([`super::material::Material::element_limit`]).
+/// Its pressure `k (J_t − J)²` starts at zero with zero slope, so the
+/// energy stays twice differentiable and a tet above `J_t` feels nothing.
+/// `b` depends on `J = σ̂₁σ̂₂σ̂₃` alone, so it adds `b'π_i` to `Ψ_i`,
+/// `b''π_iπ_j` (and `b'σ̂_k` off the diagonal) to the scaling Hessian, `−b'σ̂_k`
+/// to the flip and `b'σ̂_k` to the twist eigenvalues.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct VolumeLimit {
+    /// `k` (MPa); zero turns the term off.
+    pub stiffness: f64,
+    /// `J_t`, the volume ratio below which the term acts.
+    pub ratio: f64,
+}
+
+impl VolumeLimit {
+    /// `(b, b', b'')` at the volume ratio `j`.
+    pub fn terms(&self, j: f64) -> (f64, f64, f64) {
+        if self.stiffness == 0.0 || j >= self.ratio {
+            return (0.0, 0.0, 0.0);
+        }
+        let (k, d) = (self.stiffness, self.ratio - j);
+        (k / 3.0 * d * d * d, -k * d * d, 2.0 * k * d)
+    }
+
+    /// Whether the term is on.
+    pub fn is_on(&self) -> bool {
+        self.stiffness != 0.0
+    }
 }
 
 /// The third index of the pair (i, j).
@@ -69,8 +104,14 @@ fn third(i: usize, j: usize) -> usize {
 }
 
 impl Law {
-    /// `Ψ(σ̂)` (N/mm², energy per rest volume).
+    /// `Ψ(σ̂)` (N/mm², energy per rest volume), the volume limit included
+    /// (as in every method below).
     pub fn energy(&self, s: &Vector3<f64>) -> f64 {
+        self.limit.terms(s.product()).0 + self.energy_base(s)
+    }
+
+    /// The model's own part, without the volume limit.
+    fn energy_base(&self, s: &Vector3<f64>) -> f64 {
         let (mu, lambda) = (self.mu, self.lambda);
         match self.model {
             Model::Corotational => {
@@ -89,6 +130,12 @@ impl Law {
     /// `Ψ_i = ∂Ψ/∂σ̂_i`: the principal values of the first Piola stress
     /// `P = U diag(Ψ_i) Vᵀ`.
     pub fn gradient(&self, s: &Vector3<f64>) -> Vector3<f64> {
+        let b1 = self.limit.terms(s.product()).1;
+        self.gradient_base(s) + others(s) * b1
+    }
+
+    /// The model's own part, without the volume limit.
+    fn gradient_base(&self, s: &Vector3<f64>) -> Vector3<f64> {
         let (mu, lambda) = (self.mu, self.lambda);
         match self.model {
             Model::Corotational => {
@@ -105,6 +152,16 @@ impl Law {
 
     /// `∂²Ψ/∂σ̂_i∂σ̂_j`, the Hessian of the scaling modes.
     pub fn scaling_hessian(&self, s: &Vector3<f64>) -> Matrix3<f64> {
+        let (_, b1, b2) = self.limit.terms(s.product());
+        let pi = others(s);
+        self.scaling_hessian_base(s)
+            + Matrix3::from_fn(|i, j| {
+                b2 * pi[i] * pi[j] + if i == j { 0.0 } else { b1 * s[third(i, j)] }
+            })
+    }
+
+    /// The model's own part, without the volume limit.
+    fn scaling_hessian_base(&self, s: &Vector3<f64>) -> Matrix3<f64> {
         let (mu, lambda) = (self.mu, self.lambda);
         match self.model {
             Model::Corotational => Matrix3::identity() * (2.0 * mu) + Matrix3::repeat(lambda),
@@ -126,6 +183,12 @@ impl Law {
     /// `(Ψ_i − Ψ_j)/(σ̂_i − σ̂_j)`, the eigenvalue of the flip mode of the
     /// pair (its limit where the two stretches are equal).
     pub fn flip(&self, s: &Vector3<f64>, i: usize, j: usize) -> f64 {
+        let b1 = self.limit.terms(s.product()).1;
+        self.flip_base(s, i, j) - b1 * s[third(i, j)]
+    }
+
+    /// The model's own part, without the volume limit.
+    fn flip_base(&self, s: &Vector3<f64>, i: usize, j: usize) -> f64 {
         match self.model {
             Model::Corotational => 2.0 * self.mu,
             Model::StableNeoHookean => {
@@ -146,10 +209,21 @@ impl Law {
                 (denom > 1e-8).then(|| (g[i] + g[j]) / denom)
             }
             Model::StableNeoHookean => {
-                let c = (self.lambda + self.mu) * (s.product() - 1.0) - self.mu;
+                let b1 = self.limit.terms(s.product()).1;
+                let c = (self.lambda + self.mu) * (s.product() - 1.0) - self.mu + b1;
                 Some(self.mu + c * s[third(i, j)])
             }
         }
+    }
+}
+
+impl Law {
+    /// The volume limit's share `b'(J)·σ̂_k` of the twist eigenvalue of the
+    /// pair (i, j), `k` the third index: never positive, as `b' ≤ 0`.
+    /// Elements leave it out of their Newton matrix
+    /// ([`super::corotation::RestElement::tangent`]).
+    pub fn limit_twist(&self, s: &Vector3<f64>, i: usize, j: usize) -> f64 {
+        self.limit.terms(s.product()).1 * s[third(i, j)]
     }
 }
 
@@ -178,12 +252,25 @@ mod tests {
             model,
             mu: 0.05,
             lambda: 0.4,
+            limit: VolumeLimit::default(),
         })
     }
 
-    const STRETCHES: [[f64; 3]; 5] = [
+    /// The laws with a volume limit that half the stretches below cross.
+    fn limited_laws() -> [Law; 2] {
+        laws().map(|law| Law {
+            limit: VolumeLimit {
+                stiffness: 50.0,
+                ratio: 0.9,
+            },
+            ..law
+        })
+    }
+
+    const STRETCHES: [[f64; 3]; 6] = [
         [1.0, 1.0, 1.0],
         [1.3, 0.9, 0.8],
+        [1.2, 0.85, 0.85],
         [0.5, 0.45, 0.2],
         [1.1, 0.7, -0.3],
         [2.0, 1.0, 1.0],
@@ -194,7 +281,7 @@ mod tests {
     #[test]
     fn derivatives_match_finite_differences() {
         let h = 1e-6;
-        for law in laws() {
+        for law in laws().into_iter().chain(limited_laws()) {
             for s in STRETCHES {
                 let s = Vector3::from(s);
                 let g = law.gradient(&s);
@@ -227,7 +314,7 @@ mod tests {
     /// for, wherever those ratios can be formed.
     #[test]
     fn flip_and_twist_are_the_gradient_ratios() {
-        for law in laws() {
+        for law in laws().into_iter().chain(limited_laws()) {
             for s in STRETCHES {
                 let s = Vector3::from(s);
                 let g = law.gradient(&s);

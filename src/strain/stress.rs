@@ -229,10 +229,13 @@ mod tests {
     /// Neo-Hookean energy, whose volume term is `(λ + μ)/2 (J − 1)²`
     /// whichever part of λ a tet keeps, exactly the standard tet's stress
     /// and energy; for the corotational one, to first order in the strain.
+    /// Below its volume limit the locking-free tet adds the limit's energy.
     #[test]
     fn a_locking_free_tet_adds_its_nodal_share() {
         use crate::fem::{Model, Volumetric};
-        let f = Matrix3::new(1.1, 0.2, -0.1, 0.05, 0.9, 0.15, -0.2, 0.1, 0.85);
+        // J = 0.94, above the limit of both ν.
+        let f = Matrix3::new(1.1, 0.2, -0.1, 0.05, 0.95, 0.15, -0.2, 0.1, 0.95);
+        let squeezed = Matrix3::new(1.1, 0.2, -0.1, 0.05, 0.9, 0.15, -0.2, 0.1, 0.85);
         for nu in [0.45, 0.49] {
             let standard =
                 Material::with_volumetric("t", 150.0, nu, 1100.0, Volumetric::Standard).unwrap();
@@ -251,7 +254,23 @@ mod tests {
                 "ν {nu}"
             );
             assert!((a.energy_density - b.energy_density).abs() < 1e-12 * a.energy_density);
-            let small = Matrix3::identity() + (f - Matrix3::identity()) * 1e-5;
+            let j = squeezed.determinant();
+            let limit = snh_lf.element_limit();
+            let added = limit.terms(j).0;
+            let (a, b) = (
+                TetStress::of(&squeezed, &snh),
+                TetStress::of(&squeezed, &snh_lf),
+            );
+            assert_eq!(
+                j < limit.ratio,
+                nu == 0.49,
+                "ν {nu}: J {j}, limit {limit:?}"
+            );
+            assert!(
+                (b.energy_density - a.energy_density - added).abs() < 1e-12 * a.energy_density,
+                "ν {nu}"
+            );
+            let small = Matrix3::identity() + (squeezed - Matrix3::identity()) * 1e-5;
             let (a, b) = (TetStress::of(&small, &standard), TetStress::of(&small, &lf));
             assert!(
                 (a.cauchy - b.cauchy).norm() < 1e-4 * a.cauchy.norm(),
