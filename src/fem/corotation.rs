@@ -285,14 +285,6 @@ impl RestElement {
     /// `μ + cσ̂_k` turns negative) or dilated by a fifth (its flip one), and
     /// the Newton loop then falls back to the projection as it does for the
     /// corotational element's twist modes.
-    ///
-    /// Both leave out the volume limit's share of the twist eigenvalues
-    /// ([`Law::limit_twist`]): with its stiffness of a thousand μ it makes
-    /// the matrix of a squeezed tet nearly singular in its twist modes, and
-    /// on a coarse drag (patch_3k, dermis 75 kPa, a node turning from stick
-    /// to slip beside such a tet) the exact step overshot fifty-fold and
-    /// Newton stalled at a step length of 1/32. Without it the limit's tets
-    /// converge a little slower, and the drag runs through.
     #[cold]
     #[inline(never)]
     fn law_tangent(&self, rot: &Corotation, kind: TangentKind) -> Tangent {
@@ -308,9 +300,7 @@ impl RestElement {
         let modes = PAIRS.map(|(i, j)| {
             (
                 clamp(law.flip(&s, i, j)),
-                law.twist(&s, i, j)
-                    .map(|t| t - law.limit_twist(&s, i, j))
-                    .map_or(0.0, clamp),
+                law.twist(&s, i, j).map_or(0.0, clamp),
             )
         });
         self.tangent_of_modes(rot, a, modes)

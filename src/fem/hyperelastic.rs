@@ -217,16 +217,6 @@ impl Law {
     }
 }
 
-impl Law {
-    /// The volume limit's share `b'(J)·σ̂_k` of the twist eigenvalue of the
-    /// pair (i, j), `k` the third index: never positive, as `b' ≤ 0`.
-    /// Elements leave it out of their Newton matrix
-    /// ([`super::corotation::RestElement::tangent`]).
-    pub fn limit_twist(&self, s: &Vector3<f64>, i: usize, j: usize) -> f64 {
-        self.limit.terms(s.product()).1 * s[third(i, j)]
-    }
-}
-
 /// `π_i`, the product of the stretches other than `σ̂_i` (J/σ̂_i without the
 /// division, so it holds at σ̂_i = 0).
 fn others(s: &Vector3<f64>) -> Vector3<f64> {

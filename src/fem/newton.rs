@@ -130,6 +130,7 @@ impl Simulation {
         let mut stats = NewtonStats::default();
         self.work.tangent_kind = TangentKind::Exact;
         self.work.coarse_stale = true;
+        self.work.friction_lagged = false;
         self.work.element_tangent_kind = None;
         let mut refinements = 0;
         let mut trace = Trace::default();
@@ -195,7 +196,7 @@ impl Simulation {
                 iterations += more;
             }
             stats.cg_iterations += iterations;
-            let (new_norm, new_scale, descended) = self.line_search(norm);
+            let (new_norm, new_scale, descended, length) = self.line_search(norm);
             trace.step(changed, solved, descended);
             if !descended && self.work.tangent_kind == TangentKind::Exact {
                 // The exact step was no descent direction: project from now on.
@@ -203,6 +204,17 @@ impl Simulation {
                     "{context}: Newton {it}: no descent with the exact tangent; projecting"
                 );
                 self.work.tangent_kind = TangentKind::Projected;
+            }
+            if length <= SHORT_STEP && !self.work.couplings.is_empty() {
+                // The friction couplings made the step overshoot: a sliding
+                // node's friction follows a normal reaction that a squeezed
+                // tet makes very stiff. Without them the friction is
+                // lagged by an iteration, which converges more slowly but
+                // surely.
+                log::debug!(
+                    "{context}: Newton {it}: step cut to {length}; friction lagged from now on"
+                );
+                self.work.friction_lagged = true;
             }
             log::debug!(
                 "{context}: Newton {it}: {iterations} linear iterations, residual {:.3e} ({new_norm:.3e} N of {new_scale:.3e} N), constraints {violation:.2e} mm",
@@ -417,9 +429,9 @@ impl Simulation {
     /// directions, descent after a failed full step is measured from the
     /// moved state (`alpha = 0`), and a full step below that is taken.
     /// Without descent the trial with the smallest residual is kept (the
-    /// Newton loop decides). Returns the new (‖S r‖, scale) and whether the
-    /// residual decreased.
-    fn line_search(&mut self, old_norm: f64) -> (f64, f64, bool) {
+    /// Newton loop decides). Returns the new (‖S r‖, scale), whether the
+    /// residual decreased and the step length taken.
+    fn line_search(&mut self, old_norm: f64) -> (f64, f64, bool, f64) {
         self.work.x_start.clone_from(&self.state.x);
         let moves = self.work.prescribed.iter().any(|&d| d != 0.0);
         let mut reference = old_norm;
@@ -430,7 +442,7 @@ impl Simulation {
             self.evaluate_forces();
             let (norm, scale) = self.residual();
             if norm.is_finite() && norm < reference {
-                return (norm, scale, true);
+                return (norm, scale, true, alpha);
             }
             if norm.is_finite() && best.is_none_or(|(n, _)| norm < n) {
                 best = Some((norm, alpha));
@@ -448,7 +460,7 @@ impl Simulation {
                         self.set_trial(1.0);
                         self.evaluate_forces();
                         let (norm, scale) = self.residual();
-                        return (norm, scale, true);
+                        return (norm, scale, true, 1.0);
                     }
                     if best.is_none_or(|(n, _)| moved < n) {
                         best = Some((moved, 0.0));
@@ -465,9 +477,14 @@ impl Simulation {
         self.set_trial(alpha);
         self.evaluate_forces();
         let (norm, scale) = self.residual();
-        (norm, scale, false)
+        (norm, scale, false, alpha)
     }
 }
+
+/// Step length at or below which a Newton step counts as cut short: the
+/// friction couplings are then left out of the matrix for the rest of the
+/// solve.
+const SHORT_STEP: f64 = 0.125;
 
 /// Relative residual below which a Newton iteration reuses the last
 /// element tangent of its solve.

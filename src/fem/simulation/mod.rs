@@ -361,6 +361,10 @@ pub(super) struct Workspace {
     pub(super) factor: Factor,
     /// The friction couplings of the current Newton matrix.
     pub(super) couplings: Vec<Coupling>,
+    /// Whether the Newton matrix leaves the friction couplings out for
+    /// the rest of the solve (after a step cut short, see
+    /// [`Simulation::solve_with`]).
+    pub(super) friction_lagged: bool,
     pub(super) dx: Vec<f64>,
     pub(super) rhs: Vec<f64>,
     pub(super) r_free: Vec<f64>,
@@ -461,6 +465,7 @@ impl Simulation {
                 coarse_stale: true,
                 factor: Factor::default(),
                 couplings: Vec::new(),
+                friction_lagged: false,
                 dx: vec![0.0; 3 * n],
                 rhs: vec![0.0; 3 * n],
                 r_free: vec![0.0; 3 * n],

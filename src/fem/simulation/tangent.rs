@@ -167,6 +167,9 @@ impl Simulation {
             let reaction = -(self.work.f_int[i] + self.loads.f_ext[i]);
             if let Some((k, g)) = load.linearisation(&self.state.x[i], &reaction) {
                 self.work.assembly.add_to_diagonal_block(i, &k);
+                if self.work.friction_lagged {
+                    continue;
+                }
                 // The reaction changes with the elements' stiffness alone,
                 // not with the terms added on this node's diagonal.
                 let own = self
