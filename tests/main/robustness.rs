@@ -362,11 +362,12 @@ fn a_load_free_step_converges_at_once_for_any_damping() {
 }
 
 /// The documented extreme of ν with the locking-free element converges at
-/// the default tolerance where the full load step alone does not: a 1.5 mm
-/// press of patch_3k (its last frame stalled at a relative residual of
-/// 1.2), and a 1 mm press and drag with friction 0.8 (its contact set kept
-/// changing). The failed step is taken again as two half steps; the press
-/// ends where eight load steps a frame take it.
+/// the default tolerance: a 1.5 mm press of patch_3k, and a 1 mm press and
+/// drag with friction 0.8, where the full load step alone does not (its
+/// contact set kept changing) and is taken again as two half steps. The
+/// press ends where eight load steps a frame take it. (Before the volume
+/// limit the press needed a cut-back too: its last frame stalled at a
+/// relative residual of 1.2 with single tets collapsing.)
 #[test]
 fn a_nearly_incompressible_press_converges_at_the_default_tolerance() {
     let dir = tempfile::tempdir().unwrap();
@@ -399,7 +400,7 @@ fn a_nearly_incompressible_press_converges_at_the_default_tolerance() {
         let o = run_scenario(dir.path(), &body, &out);
         let stderr = text(&o.stderr);
         assert!(o.status.success(), "{name}: {stderr}");
-        if !name.contains("8 steps") {
+        if name == "drag" {
             assert!(stderr.contains("as two half steps"), "{name}: {stderr}");
         }
         let metrics = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
