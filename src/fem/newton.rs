@@ -106,6 +106,11 @@ impl Simulation {
     /// ones with that move's coupling
     /// (`S K S y = S (r − K d)`), so a target that moves every iteration —
     /// a contact node re-projected onto a curved probe — costs no extra solve.
+    /// A step the line search cuts to 1/8 or less leaves the
+    /// friction couplings (`G` of [`super::simulation::SlipLoad`]) out of
+    /// the matrix for the rest of the solve: the friction then follows the
+    /// reaction an iteration late, which converges linearly but surely where
+    /// a stiff normal reaction made the coupled step overshoot.
     ///
     /// The whole loop runs on a thread of rayon's pool (the caller's
     /// thread waits): the element pass, the assembly and every vector
