@@ -237,7 +237,11 @@ impl Simulation {
     /// The error of a solve that stopped at `rel` after `iterations`: what
     /// stopped it, read from its `trace`, and what to try.
     fn not_converged(&self, context: &str, iterations: usize, rel: f64, trace: &Trace) -> Error {
-        let cause = trace.cause(rel, self.body.largest_poisson);
+        let cause = trace.cause(
+            rel,
+            self.body.largest_poisson,
+            self.body.largest_standard_poisson,
+        );
         Error::Solver(format!(
             "{context}: equilibrium not reached after {iterations} Newton iterations \
              (relative residual {rel:.3e}, tolerance {:.0e}): {cause}",
@@ -491,6 +495,10 @@ impl Simulation {
 /// solve.
 const SHORT_STEP: f64 = 0.125;
 
+/// The ν of a standard tet from which a stalled solve suggests the
+/// locking-free volume measure (docs/SCENARIO.md recommends it from 0.48).
+const MIN_LOCKING_FREE_ADVICE: f64 = 0.48;
+
 /// Relative residual below which a Newton iteration reuses the last
 /// element tangent of its solve.
 const LAG_TANGENT_BELOW: f64 = 1e-4;
@@ -571,8 +579,11 @@ impl Trace {
         }
     }
 
-    /// The diagnosis in words, with what to try (scenario keys).
-    fn cause(&self, rel: f64, poisson: f64) -> String {
+    /// The diagnosis in words, with what to try (scenario keys); `standard`
+    /// is the largest ν of the tets with the standard volume measure (the
+    /// locking-free one is suggested only while some nearly incompressible
+    /// region lacks it).
+    fn cause(&self, rel: f64, poisson: f64, standard: f64) -> String {
         match self.classify(rel, poisson) {
             Cause::NotFinite => "the forces became non-finite (a tet collapsed under a load step \
                  too large for it); raise time.substeps"
@@ -595,9 +606,14 @@ impl Trace {
             Cause::Stalled(at, Some(nu)) => format!(
                 "the residual stopped falling (at best {at:.1e} over the last {RECENT} \
                  iterations); with ν up to {nu} the volume stiffness is {:.0} times the shear \
-                 stiffness, which the load step cannot follow: raise time.substeps, use \
-                 volumetric = \"locking-free\" where a region does not, or lower poisson_ratio",
-                lambda_over_mu(nu)
+                 stiffness, which the load step cannot follow: raise time.substeps, {}or lower \
+                 poisson_ratio",
+                lambda_over_mu(nu),
+                if standard >= MIN_LOCKING_FREE_ADVICE {
+                    "use volumetric = \"locking-free\" where a region with ν ≥ 0.48 does not, "
+                } else {
+                    ""
+                }
             ),
             Cause::Stalled(at, None) => format!(
                 "the residual stopped falling (at best {at:.1e} over the last {RECENT} \
@@ -667,9 +683,18 @@ mod tests {
         let at = flat[19];
         assert_eq!(t.classify(at, 0.4999), Cause::Stalled(at, Some(0.4999)));
         assert_eq!(t.classify(at, 0.45), Cause::Stalled(at, None));
-        let text = t.cause(at, 0.4999);
+        let text = t.cause(at, 0.4999, 0.4999);
         assert!(
-            text.contains("4999 times the shear") && text.contains("time.substeps"),
+            text.contains("4999 times the shear")
+                && text.contains("time.substeps")
+                && text.contains("locking-free"),
+            "{text}"
+        );
+        // Every nearly incompressible region already locking-free: not
+        // suggested again.
+        let text = t.cause(at, 0.4999, 0.45);
+        assert!(
+            text.contains("4999 times the shear") && !text.contains("locking-free"),
             "{text}"
         );
     }

@@ -297,6 +297,9 @@ pub struct Body {
     /// The largest Poisson's ratio of any tet (for the diagnosis of a
     /// Newton failure).
     pub(super) largest_poisson: f64,
+    /// The largest Poisson's ratio of a tet with the standard volume
+    /// measure (the same diagnosis suggests the locking-free one).
+    pub(super) largest_standard_poisson: f64,
     /// How close (mm) a constrained node must be to its target.
     pub(super) position_tol: f64,
     /// The nodal volume term of the locking-free materials, if any.
@@ -434,7 +437,8 @@ impl Simulation {
                 elements,
                 mass,
                 floors,
-                largest_poisson: largest_poisson(tet_material),
+                largest_poisson: largest_poisson(tet_material.iter()),
+                largest_standard_poisson: largest_poisson(standard(tet_material)),
                 position_tol: 1e-7 * size,
                 pressure,
             },
@@ -485,7 +489,8 @@ impl Simulation {
     /// moduli, and the preconditioners are rebuilt at the next solve.
     pub fn set_materials(&mut self, mesh: &TetMesh, tet_material: &[Material]) {
         (self.body.elements, self.body.mass, self.body.floors) = material_data(mesh, tet_material);
-        self.body.largest_poisson = largest_poisson(tet_material);
+        self.body.largest_poisson = largest_poisson(tet_material.iter());
+        self.body.largest_standard_poisson = largest_poisson(standard(tet_material));
         let had_pressure = self.body.pressure.is_some();
         self.body.pressure = NodalPressure::new(
             &mesh.tets,
@@ -747,9 +752,16 @@ impl Simulation {
     }
 }
 
-/// The largest Poisson's ratio of `tet_material`.
-fn largest_poisson(tet_material: &[Material]) -> f64 {
-    tet_material.iter().map(|m| m.poisson).fold(0.0, f64::max)
+/// The largest Poisson's ratio of `materials` (0 for none).
+fn largest_poisson<'a>(materials: impl Iterator<Item = &'a Material>) -> f64 {
+    materials.map(|m| m.poisson).fold(0.0, f64::max)
+}
+
+/// The materials of `tet_material` with the standard volume measure.
+fn standard(tet_material: &[Material]) -> impl Iterator<Item = &Material> {
+    tet_material
+        .iter()
+        .filter(|m| m.volumetric == super::material::Volumetric::Standard)
 }
 
 /// Lumped masses: each tet gives a quarter of ρV to each vertex.
