@@ -846,13 +846,13 @@ fn a_contact_set_that_keeps_changing_leaves_no_node_inside_the_probe() {
 /// squeezed tet").
 #[test]
 fn a_step_cut_short_lags_the_friction() {
-    use skinpatch::scenario::{MaterialSection, Scenario, Setup};
+    use skinpatch::scenario::{Scenario, Setup};
     let path = common::root().join("examples/press.toml");
     let mut scenario = Scenario::load(&path).unwrap();
     scenario
         .material
         .entry("dermis".into())
-        .or_insert_with(MaterialSection::default)
+        .or_default()
         .youngs_modulus_kpa = Some(75.0);
     scenario.mesh.file = Some(common::root().join("meshes/patch_3k.node"));
     scenario.render = None;
