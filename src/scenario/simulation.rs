@@ -42,7 +42,8 @@ pub struct MaterialSection {
     /// Density (kg/m³).
     #[schemars(extend("default" = DENSITY_KG_M3), range(min = DENSITY_RANGE.0, max = DENSITY_RANGE.1))]
     pub density_kg_m3: Option<f64>,
-    /// Energy density: `corotational` (default) or `stable-neo-hookean`.
+    /// Energy density: `corotational` (default), `stable-neo-hookean` or
+    /// `neo-hookean` (its volume term in ln J).
     pub model: Option<crate::fem::Model>,
     /// Volume measure: `standard` (default: each tet's own) or
     /// `locking-free` (nodal averages, for ν near 0.5).

@@ -8,7 +8,9 @@
 //! - corotational (the default): `ψ = μ ε:ε + λ/2 (tr ε)²` with the
 //!   corotated strain `ε = S − I`, `F = R S`, so `σ = R s S Rᵀ / J` with
 //!   `s = 2μ ε + λ tr(ε) I`;
-//! - stable Neo-Hookean: `σ = (μ/J)(F Fᵀ − I) + κ(J − 1) I`.
+//! - stable Neo-Hookean: `σ = (μ/J) F Fᵀ + (κ(J − 1) − μ) I`;
+//! - Neo-Hookean (logarithmic volume term): `σ = (μ/J)(F Fᵀ − I) +
+//!   (λ ln J / J) I`.
 //!
 //! A tet of a locking-free material carries only a share of the volume
 //! term itself (its law's λ is [`Material::element_lambda`]); the rest
@@ -166,6 +168,48 @@ mod tests {
 
     fn material() -> Material {
         Material::from_scenario_units("test", 150.0, 0.45, 1100.0).unwrap()
+    }
+
+    /// The Neo-Hookean stress with the logarithmic volume term against the
+    /// same closed forms: simple shear gives `σ = μ(F Fᵀ − I)`; uniaxial
+    /// stretch `s` with the lateral stretch `t` that zeroes the lateral
+    /// stress, `μ(t² − 1) + λ ln(s t²) = 0` (bisection), gives
+    /// `σ_xx = μ(s² − t²)/J`, the rest 0.
+    #[test]
+    fn log_neo_hookean_matches_its_closed_forms() {
+        let m = material().with_model(crate::fem::Model::NeoHookean);
+        let (mu, lambda) = (m.mu(), m.lambda());
+        for gamma in [0.1, 0.5, 1.0] {
+            let f = Matrix3::new(1.0, gamma, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0);
+            let expected = (f * f.transpose() - Matrix3::identity()) * mu;
+            let st = TetStress::of(&f, &m);
+            assert!((st.cauchy - expected).norm() <= 1e-12 * expected.norm());
+            let psi = 0.5 * mu * gamma * gamma;
+            assert!((st.energy_density - psi).abs() <= 1e-12 * psi);
+        }
+        for s in [0.6, 0.9, 1.2, 2.0] {
+            let lateral = |t: f64| mu * (t * t - 1.0) + lambda * (s * t * t).ln();
+            let (mut lo, mut hi) = (0.1, 3.0);
+            for _ in 0..200 {
+                let mid = 0.5 * (lo + hi);
+                if lateral(mid) > 0.0 {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
+            }
+            let t = 0.5 * (lo + hi);
+            let f = Matrix3::from_diagonal(&nalgebra::Vector3::new(s, t, t));
+            let j = s * t * t;
+            let sxx = mu * (s * s - t * t) / j;
+            let st = TetStress::of(&f, &m);
+            let expected = Matrix3::from_diagonal(&nalgebra::Vector3::new(sxx, 0.0, 0.0));
+            assert!(
+                (st.cauchy - expected).norm() <= 1e-10 * sxx.abs(),
+                "stretch {s}: {} vs {expected}",
+                st.cauchy
+            );
+        }
     }
 
     /// `P` is the derivative of the energy density: `σ J F⁻ᵀ` against
