@@ -28,7 +28,11 @@ fn tight(sim: &mut Simulation) {
 /// ends with F = A, for each energy density and volume measure (the
 /// locking-free one at ν = 0.48 and 0.4999).
 fn patch_test(a: Matrix3<f64>) {
-    for model in [Model::Corotational, Model::StableNeoHookean] {
+    for model in [
+        Model::Corotational,
+        Model::StableNeoHookean,
+        Model::NeoHookean,
+    ] {
         for (volumetric, nu) in [
             (Volumetric::Standard, 0.45),
             (Volumetric::LockingFree, 0.48),

@@ -177,6 +177,28 @@ fn neo_hookean_element_tangent() {
     assert_element_tangent_is_force_derivative(&e, mild, TangentKind::Projected);
 }
 
+/// The Neo-Hookean element with the logarithmic volume term: at rest the
+/// corotational rest stiffness, stretched or compressed its exact tangent
+/// the force derivative (it is not defined inverted).
+#[test]
+fn log_neo_hookean_element_tangent() {
+    let e = RestElement::new(
+        rest_tet(),
+        &material().with_model(super::super::hyperelastic::Model::NeoHookean),
+    );
+    let t = e.tangent(&Corotation::of(&Matrix3::identity()), TangentKind::Exact);
+    for a in 0..4 {
+        for b in 0..4 {
+            assert!((t.block(a, b) - e.k0(a, b)).norm() < 1e-14 * e.k0(a, b).norm().max(1e-3));
+        }
+    }
+    let stretched = Matrix3::new(1.3, 0.1, 0.0, 0.05, 1.1, 0.1, 0.0, -0.1, 1.2);
+    let compressed = Matrix3::new(0.5, 0.1, 0.0, 0.0, 0.6, 0.1, 0.1, 0.0, 0.4);
+    for f in [stretched, compressed] {
+        assert_element_tangent_is_force_derivative(&e, f, TangentKind::Exact);
+    }
+}
+
 #[test]
 fn forces_are_minus_the_energy_gradient() {
     for e in [element(), neo_hookean()] {
