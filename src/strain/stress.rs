@@ -131,18 +131,17 @@ pub fn element_stresses(mesh: &TetMesh, x: &[Vec3], materials: &[Material]) -> V
 mod tests {
     use super::*;
 
-    /// The stable Neo-Hookean stress against its closed forms: simple shear
-    /// `F = I + γ e_x e_yᵀ` (J = 1) gives `σ = μ(F Fᵀ − I)`; uniaxial stretch
-    /// `s` with the free lateral stretch `t` that zeroes the lateral stress
-    /// (`s t² = 1 + μ(1 − 1/s)/κ`) gives `σ_xx = μ(s² − t²)/J`, the rest 0.
-    #[test]
-    fn neo_hookean_matches_its_closed_forms() {
-        let m = material().with_model(crate::fem::Model::StableNeoHookean);
-        let (mu, kappa) = (m.mu(), m.lambda() + m.mu());
+    /// Checks a Neo-Hookean material's stress against the closed forms both
+    /// energies share: simple shear `F = I + γ e_x e_yᵀ` (J = 1) gives
+    /// `σ = μ(F Fᵀ − I)` and `ψ = μγ²/2`; uniaxial stretch `s` with the
+    /// lateral stretch `t = lateral(s)` that zeroes the lateral stress gives
+    /// `σ_xx = μ(s² − t²)/J`, the rest 0 (to `tol` of σ_xx).
+    fn assert_neo_hookean_closed_forms(m: &Material, lateral: impl Fn(f64) -> f64, tol: f64) {
+        let mu = m.mu();
         for gamma in [0.1, 0.5, 1.0] {
             let f = Matrix3::new(1.0, gamma, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0);
             let expected = (f * f.transpose() - Matrix3::identity()) * mu;
-            let st = TetStress::of(&f, &m);
+            let st = TetStress::of(&f, m);
             assert!(
                 (st.cauchy - expected).norm() <= 1e-12 * expected.norm(),
                 "γ {gamma}: {} vs {expected}",
@@ -152,18 +151,27 @@ mod tests {
             assert!((st.energy_density - psi).abs() <= 1e-12 * psi);
         }
         for s in [0.6, 0.9, 1.2, 2.0] {
-            let t = ((1.0 + mu * (1.0 - 1.0 / s) / kappa) / s).sqrt();
+            let t = lateral(s);
             let f = Matrix3::from_diagonal(&nalgebra::Vector3::new(s, t, t));
-            let j = s * t * t;
-            let sxx = mu * (s * s - t * t) / j;
-            let st = TetStress::of(&f, &m);
+            let sxx = mu * (s * s - t * t) / (s * t * t);
+            let st = TetStress::of(&f, m);
             let expected = Matrix3::from_diagonal(&nalgebra::Vector3::new(sxx, 0.0, 0.0));
             assert!(
-                (st.cauchy - expected).norm() <= 1e-12 * sxx.abs(),
+                (st.cauchy - expected).norm() <= tol * sxx.abs(),
                 "stretch {s}: {} vs {expected}",
                 st.cauchy
             );
         }
+    }
+
+    /// The stable Neo-Hookean stress against the closed forms; its free
+    /// lateral stretch solves `s t² = 1 + μ(1 − 1/s)/κ`.
+    #[test]
+    fn neo_hookean_matches_its_closed_forms() {
+        let m = material().with_model(crate::fem::Model::StableNeoHookean);
+        let (mu, kappa) = (m.mu(), m.lambda() + m.mu());
+        let lateral = |s: f64| ((1.0 + mu * (1.0 - 1.0 / s) / kappa) / s).sqrt();
+        assert_neo_hookean_closed_forms(&m, lateral, 1e-12);
     }
 
     fn material() -> Material {
@@ -171,45 +179,26 @@ mod tests {
     }
 
     /// The Neo-Hookean stress with the logarithmic volume term against the
-    /// same closed forms: simple shear gives `σ = μ(F Fᵀ − I)`; uniaxial
-    /// stretch `s` with the lateral stretch `t` that zeroes the lateral
-    /// stress, `μ(t² − 1) + λ ln(s t²) = 0` (bisection), gives
-    /// `σ_xx = μ(s² − t²)/J`, the rest 0.
+    /// same closed forms; its free lateral stretch solves
+    /// `μ(t² − 1) + λ ln(s t²) = 0` (bisection).
     #[test]
     fn log_neo_hookean_matches_its_closed_forms() {
         let m = material().with_model(crate::fem::Model::NeoHookean);
         let (mu, lambda) = (m.mu(), m.lambda());
-        for gamma in [0.1, 0.5, 1.0] {
-            let f = Matrix3::new(1.0, gamma, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0);
-            let expected = (f * f.transpose() - Matrix3::identity()) * mu;
-            let st = TetStress::of(&f, &m);
-            assert!((st.cauchy - expected).norm() <= 1e-12 * expected.norm());
-            let psi = 0.5 * mu * gamma * gamma;
-            assert!((st.energy_density - psi).abs() <= 1e-12 * psi);
-        }
-        for s in [0.6, 0.9, 1.2, 2.0] {
-            let lateral = |t: f64| mu * (t * t - 1.0) + lambda * (s * t * t).ln();
+        let lateral = |s: f64| {
+            let stress = |t: f64| mu * (t * t - 1.0) + lambda * (s * t * t).ln();
             let (mut lo, mut hi) = (0.1, 3.0);
             for _ in 0..200 {
                 let mid = 0.5 * (lo + hi);
-                if lateral(mid) > 0.0 {
+                if stress(mid) > 0.0 {
                     hi = mid;
                 } else {
                     lo = mid;
                 }
             }
-            let t = 0.5 * (lo + hi);
-            let f = Matrix3::from_diagonal(&nalgebra::Vector3::new(s, t, t));
-            let j = s * t * t;
-            let sxx = mu * (s * s - t * t) / j;
-            let st = TetStress::of(&f, &m);
-            let expected = Matrix3::from_diagonal(&nalgebra::Vector3::new(sxx, 0.0, 0.0));
-            assert!(
-                (st.cauchy - expected).norm() <= 1e-10 * sxx.abs(),
-                "stretch {s}: {} vs {expected}",
-                st.cauchy
-            );
-        }
+            0.5 * (lo + hi)
+        };
+        assert_neo_hookean_closed_forms(&m, lateral, 1e-10);
     }
 
     /// `P` is the derivative of the energy density: `σ J F⁻ᵀ` against
