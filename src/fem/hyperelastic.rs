@@ -23,8 +23,8 @@
 //!   for Finite Element Analysis", the form FEBio's `neo-Hookean` material
 //!   uses): `Ψ = μ/2 (I_C − 3) − μ ln J + λ/2 (ln J)²`. The same small-strain
 //!   limit; stiffer in compression (its pressure `λ ln J / J` grows without
-//!   bound as J → 0) and undefined for J ≤ 0, where its forces are not
-//!   finite and the solver takes the load step again in halves.
+//!   bound as J → 0) and undefined for J ≤ 0: a step that inverts a tet
+//!   has non-finite forces, and its Newton solve fails.
 //!
 //! Both Neo-Hookean energies are `μ/2 (I_C − 3) + U(J)`. With `π_i = J/σ̂_i`
 //! (the product of the other two stretches), `c = U'(J)` and `c' = U''(J)`
