@@ -119,28 +119,26 @@ fn third(i: usize, j: usize) -> usize {
 
 impl Law {
     /// A Neo-Hookean energy's volume term `U(J)` and its first two
-    /// derivatives `(U, c = U', c' = U'')`; `None` for the corotational one.
-    fn volume_term(&self, j: f64) -> Option<(f64, f64, f64)> {
+    /// derivatives `(U, c = U', c' = U'')`: the logarithmic one for
+    /// [`Model::NeoHookean`], the stable one otherwise (called for the two
+    /// Neo-Hookean models only).
+    fn volume_term(&self, j: f64) -> (f64, f64, f64) {
         let (mu, lambda) = (self.mu, self.lambda);
-        match self.model {
-            Model::Corotational => None,
-            Model::StableNeoHookean => {
-                let kappa = lambda + mu;
-                Some((
-                    -mu * (j - 1.0) + 0.5 * kappa * (j - 1.0).powi(2),
-                    kappa * (j - 1.0) - mu,
-                    kappa,
-                ))
-            }
-            Model::NeoHookean => {
-                // NaN for J ≤ 0, which the solver treats as a failed step.
-                let l = j.ln();
-                Some((
-                    -mu * l + 0.5 * lambda * l * l,
-                    (lambda * l - mu) / j,
-                    (lambda * (1.0 - l) + mu) / (j * j),
-                ))
-            }
+        if self.model == Model::NeoHookean {
+            // NaN for J ≤ 0, which the solver treats as a failed step.
+            let l = j.ln();
+            (
+                -mu * l + 0.5 * lambda * l * l,
+                (lambda * l - mu) / j,
+                (lambda * (1.0 - l) + mu) / (j * j),
+            )
+        } else {
+            let kappa = lambda + mu;
+            (
+                -mu * (j - 1.0) + 0.5 * kappa * (j - 1.0).powi(2),
+                kappa * (j - 1.0) - mu,
+                kappa,
+            )
         }
     }
 
@@ -160,7 +158,7 @@ impl Law {
                 mu * dev + 0.5 * lambda * tr * tr
             }
             Model::StableNeoHookean | Model::NeoHookean => {
-                let (u, _, _) = self.volume_term(s.product()).unwrap_or_default();
+                let (u, _, _) = self.volume_term(s.product());
                 0.5 * mu * (s.norm_squared() - 3.0) + u
             }
         }
@@ -182,7 +180,7 @@ impl Law {
                 s.map(|si| 2.0 * mu * (si - 1.0) + trace_term)
             }
             Model::StableNeoHookean | Model::NeoHookean => {
-                let (_, c, _) = self.volume_term(s.product()).unwrap_or_default();
+                let (_, c, _) = self.volume_term(s.product());
                 let pi = others(s);
                 Vector3::from_fn(|i, _| mu * s[i] + c * pi[i])
             }
@@ -205,7 +203,7 @@ impl Law {
         match self.model {
             Model::Corotational => Matrix3::identity() * (2.0 * mu) + Matrix3::repeat(lambda),
             Model::StableNeoHookean | Model::NeoHookean => {
-                let (_, c, c2) = self.volume_term(s.product()).unwrap_or_default();
+                let (_, c, c2) = self.volume_term(s.product());
                 let pi = others(s);
                 Matrix3::from_fn(|i, j| {
                     if i == j {
@@ -230,7 +228,7 @@ impl Law {
         match self.model {
             Model::Corotational => 2.0 * self.mu,
             Model::StableNeoHookean | Model::NeoHookean => {
-                let (_, c, _) = self.volume_term(s.product()).unwrap_or_default();
+                let (_, c, _) = self.volume_term(s.product());
                 self.mu - c * s[third(i, j)]
             }
         }
@@ -248,7 +246,7 @@ impl Law {
             }
             Model::StableNeoHookean | Model::NeoHookean => {
                 let b1 = self.limit.terms(s.product()).1;
-                let (_, c, _) = self.volume_term(s.product()).unwrap_or_default();
+                let (_, c, _) = self.volume_term(s.product());
                 Some(self.mu + (c + b1) * s[third(i, j)])
             }
         }

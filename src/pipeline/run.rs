@@ -566,17 +566,16 @@ fn warn_compressed(
         if v.tets_below > 0 && !*warned {
             *warned = true;
             let remedy = match model_of(k) {
-                Some(crate::fem::Model::StableNeoHookean | crate::fem::Model::NeoHookean) => {
-                    format!(
-                        "a Poisson's ratio closer to 0.5 in [material.{}] resists this \
-                     (poisson_ratio, with volumetric = \"locking-free\" above 0.49), as does a \
-                     gentler press",
-                        v.name
-                    )
-                }
-                _ => format!(
+                Some(crate::fem::Model::Corotational) | None => format!(
                     "model = \"stable-neo-hookean\" in [material.{}] resists this \
                      (docs/SCENARIO.md, `model`)",
+                    v.name
+                ),
+                // A Neo-Hookean energy already.
+                Some(_) => format!(
+                    "a Poisson's ratio closer to 0.5 in [material.{}] resists this \
+                     (poisson_ratio, with volumetric = \"locking-free\" above 0.49), as does a \
+                     gentler press",
                     v.name
                 ),
             };
